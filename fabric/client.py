@@ -1,0 +1,211 @@
+"""Thin typed client: one method per endpoint, typed exceptions, explicit timeouts, subscriptions.
+
+    with Client.connect(SessionSettings(cell="cell1")) as fab:
+        print(fab.position())
+        for pose in fab.subscribe("station", "pose"):
+            ...
+
+Every call is a Zenoh ``get`` on the endpoint's key with the endpoint's
+timeout (or the one given). An error reply raises the matching
+:class:`~fabric.errors.FabricError` subclass; no reply raises
+:class:`~fabric.errors.ServiceUnavailable`.
+"""
+from __future__ import annotations
+
+import queue
+import time
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator
+
+import zenoh
+
+from fabric import codec
+from fabric import schemas as s
+from fabric.config import SessionSettings, zenoh_config
+from fabric.errors import DecodeError, FabricError, ServiceUnavailable, error_from_code
+from fabric.keys import ENDPOINTS, SERVICES, TOPICS, Keys, parse_alive
+
+__all__ = ["Client", "Subscription"]
+
+
+class Subscription:
+    """Decoded messages of one topic; the Zenoh callback only enqueues bytes."""
+
+    def __init__(self, session: zenoh.Session, key: str, msg_type: type, maxsize: int = 100_000) -> None:
+        self.msg_type = msg_type
+        self.dropped = 0
+        self._q: queue.Queue[bytes] = queue.Queue(maxsize)
+        self._sub = session.declare_subscriber(key, self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        try:
+            self._q.put_nowait(sample.payload.to_bytes())
+        except queue.Full:
+            self.dropped += 1  # counted; the consumer can see it fell behind
+
+    def get(self, timeout: float | None = None) -> Any:
+        """The next message (decoded and validated); ``queue.Empty`` after ``timeout``."""
+        return codec.decode(self._q.get(timeout=timeout), self.msg_type)
+
+    def __iter__(self) -> Iterator[Any]:
+        while True:
+            yield self.get()
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+class Client:
+    """Typed access to one cell's services over a Zenoh session."""
+
+    def __init__(self, session: zenoh.Session, cell: str) -> None:
+        self.session = session
+        self.keys = Keys(cell)
+
+    @classmethod
+    @contextmanager
+    def connect(cls, settings: SessionSettings) -> Iterator["Client"]:
+        """Open a session from ``settings`` and close it on exit."""
+        session = zenoh.open(zenoh_config(settings))
+        try:
+            yield cls(session, settings.cell)
+        finally:
+            session.close()
+
+    # --- generic -----------------------------------------------------------
+
+    def call(self, service: str, command: str, request: Any = None, timeout: float | None = None) -> Any:
+        ep = ENDPOINTS[(service, command)]
+        req = request if request is not None else ep.request()
+        if not isinstance(req, ep.request):
+            raise TypeError(f"{service}/{command} takes {ep.request.TYPE}, not {type(req).__name__}")
+        return self.call_raw(service, command, codec.encode(req), ep.reply, timeout or ep.timeout_s)
+
+    def call_raw(self, service: str, command: str, payload: bytes, reply_type: type, timeout: float) -> Any:
+        key = self.keys.cmd(service, command)
+        return self._get_one(key, payload, reply_type, timeout, f"{service}/{command}")
+
+    def _get_one(self, key: str, payload: bytes | None, reply_type: type, timeout: float, what: str) -> Any:
+        for reply in self.session.get(key, payload=payload, timeout=timeout):
+            if reply.ok is not None:
+                return codec.decode(reply.ok.payload.to_bytes(), reply_type)
+            raise _error_of(reply.err.payload.to_bytes())
+        raise ServiceUnavailable(f"no reply from {what} within {timeout:g} s (is the service running?)",
+                                 key=key, timeout_s=timeout)
+
+    def subscribe(self, service: str, topic: str) -> Subscription:
+        return Subscription(self.session, self.keys.topic(service, topic), TOPICS[(service, topic)])
+
+    def alive(self, timeout: float = 1.0) -> dict[str, bool]:
+        """Which services hold a liveliness token now (answers without the supervisor)."""
+        found = set()
+        for reply in self.session.liveliness().get(self.keys.alive_all(), timeout=timeout):
+            if reply.ok is not None:
+                found.add(parse_alive(str(reply.ok.key_expr))[1])
+        return {name: name in found for name in SERVICES}
+
+    def wait_alive(self, services: tuple[str, ...] = SERVICES, deadline_s: float = 30.0) -> None:
+        """Block until every service is alive, or raise ServiceUnavailable naming the missing ones."""
+        end = time.monotonic() + deadline_s
+        with _liveliness_queue(self.session, self.keys.alive_all()) as events:
+            alive = {k for k, v in self.alive(timeout=0.5).items() if v}
+            while not set(services) <= alive:
+                left = end - time.monotonic()
+                if left <= 0:
+                    missing = sorted(set(services) - alive)
+                    raise ServiceUnavailable(f"not alive after {deadline_s:g} s: {', '.join(missing)}", missing=missing)
+                try:
+                    kind, name = events.get(timeout=left)
+                except queue.Empty:
+                    continue
+                (alive.add if kind == "put" else alive.discard)(name)
+
+    def artifact(self, service: str, artifact_id: str, timeout: float = 60.0) -> s.Artifact:
+        return self._get_one(self.keys.artifact(service, artifact_id), None, s.Artifact, timeout,
+                             f"{service} artifact {artifact_id}")
+
+    def wait_job(self, service: str, job_id: str, timeout: float = 600.0,
+                 on_progress: Callable[[s.JobStatus], None] | None = None) -> s.JobStatus:
+        """Follow a job (snapshot, then the progress stream) until it ends; raise its error if it failed."""
+        sub = self.subscribe(service, "progress")
+        try:
+            end = time.monotonic() + timeout
+            st = self.call(service, "job", s.JobQuery(job_id=job_id))
+            while st.state in ("queued", "running"):
+                if on_progress:
+                    on_progress(st)
+                left = end - time.monotonic()
+                if left <= 0:
+                    raise ServiceUnavailable(f"{service} job {job_id} still {st.state} after {timeout:g} s")
+                try:
+                    msg = sub.get(timeout=min(left, 2.0))
+                except queue.Empty:  # a missed final message: ask once more (snapshot)
+                    st = self.call(service, "job", s.JobQuery(job_id=job_id))
+                    continue
+                if msg.job_id == job_id:
+                    st = msg
+            if st.state == "failed" and st.error:
+                raise error_from_code(st.error.get("code", "internal"), st.error.get("message", ""),
+                                      st.error.get("details"))
+            return st
+        finally:
+            sub.close()
+
+    # --- station: the paper's commands ------------------------------------------
+
+    def position(self) -> s.Pose: return self.call("station", "position")
+    def home(self) -> s.Ack: return self.call("station", "home")
+    def load(self, program_id: str, job_id: str = "") -> s.TimeInfo:
+        return self.call("station", "load", s.LoadRequest(program_id=program_id, job_id=job_id))
+    def start(self, rtf: float = 1.0) -> s.Ack: return self.call("station", "start", s.StartRequest(rtf=rtf))
+    def pause(self) -> s.Ack: return self.call("station", "pause")
+    def resume(self, rtf: float = 1.0) -> s.Ack: return self.call("station", "resume", s.StartRequest(rtf=rtf))
+    def stop(self) -> s.Ack: return self.call("station", "stop")
+    def collisions(self) -> s.CollisionReport: return self.call("station", "collisions")
+    def calibrate(self) -> s.CalibrationReport: return self.call("station", "calibrate")
+    def ready(self) -> s.ReadyReport: return self.call("station", "ready")
+    def time(self) -> s.TimeInfo: return self.call("station", "time")
+    def state(self) -> s.StationState: return self.call("station", "state")
+    def events(self, since_seq: int = 0, limit: int = 10000) -> s.EventList:
+        return self.call("station", "events", s.EventsQuery(since_seq=since_seq, limit=limit))
+    def overrides(self, **values: float | None) -> s.StationState:
+        return self.call("station", "overrides", s.Overrides(**values))
+    def mesh(self, fmt: str = "stl") -> s.Artifact: return self.call("station", "mesh", s.MeshRequest(fmt=fmt))
+
+    # --- pipeline --------------------------------------------------------------
+
+    def slice(self, request: s.SliceRequest) -> s.JobAccepted: return self.call("slicer", "slice", request)
+    def backends(self) -> s.Backends: return self.call("slicer", "backends")
+    def plan(self, request: s.PlanRequest) -> s.JobAccepted: return self.call("planner", "plan", request)
+    def plan_summary(self, program_id: str) -> s.PlanSummary:
+        return self.call("planner", "summary", s.ArtifactQuery(artifact_id=program_id))
+    def export(self, program_id: str, fmt: str, module_targets: int = 5000) -> s.Artifact:
+        return self.call("planner", "export", s.ExportRequest(program_id=program_id, fmt=fmt, module_targets=module_targets))
+    def check(self, request: s.CollisionRequest) -> s.CollisionReport: return self.call("collision", "check", request)
+    def status(self) -> s.FabricStatus: return self.call("supervisor", "status")
+    def submit(self, request: s.JobSubmit) -> s.JobAccepted: return self.call("supervisor", "submit", request)
+    def job(self, job_id: str) -> s.JobStatus: return self.call("supervisor", "job", s.JobQuery(job_id=job_id))
+    def jobs(self) -> s.JobList: return self.call("supervisor", "jobs")
+
+
+def _error_of(payload: bytes) -> FabricError:
+    try:
+        err = codec.decode(payload, s.ErrorReply)
+    except DecodeError:
+        return DecodeError(f"undecodable error reply: {payload[:80]!r}")
+    return error_from_code(err.code, err.message, err.details)
+
+
+@contextmanager
+def _liveliness_queue(session: zenoh.Session, key: str) -> Iterator["queue.Queue[tuple[str, str]]"]:
+    events: queue.Queue[tuple[str, str]] = queue.Queue()
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        kind = "put" if sample.kind == zenoh.SampleKind.PUT else "delete"
+        events.put((kind, parse_alive(str(sample.key_expr))[1]))
+
+    sub = session.liveliness().declare_subscriber(key, on_sample)
+    try:
+        yield events
+    finally:
+        sub.undeclare()

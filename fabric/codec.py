@@ -1,0 +1,101 @@
+"""The one msgpack codec: schema instances <-> bytes, with packed ndarrays.
+
+Wire format (documented in docs/protocol.md): a msgpack map holding the
+message's fields plus ``"_t"`` (type name) and ``"_v"`` (schema version).
+An ``np.ndarray`` field travels as the map ``{"nd": true, "dtype": "<f8",
+"shape": [n, 3], "data": <bin, C order>}`` so bulk data is never a list of
+floats and any msgpack + numpy reader can rebuild it with ``np.frombuffer``.
+"""
+from __future__ import annotations
+
+from typing import Any, TypeVar
+
+import msgpack
+import numpy as np
+
+from fabric.errors import DecodeError
+from fabric.schemas.base import REGISTRY, to_plain, validate_into
+
+__all__ = ["encode", "decode", "decode_any", "pack", "unpack", "MAX_ARRAY_BYTES"]
+
+T = TypeVar("T")
+MAX_ARRAY_BYTES = 1 << 30          # refuse absurd arrays before allocating
+_ALLOWED_DTYPES = {"<f8", "<f4", "<i8", "<i4", "<i2", "|i1", "|u1", "<u2", "<u4", "<u8", "|b1"}
+
+
+def _default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        arr = np.ascontiguousarray(obj)
+        if arr.dtype.byteorder == ">":
+            arr = arr.astype(arr.dtype.newbyteorder("<"))
+        return {"nd": True, "dtype": arr.dtype.str, "shape": list(arr.shape), "data": arr.tobytes()}
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"cannot encode {type(obj).__name__}")
+
+
+def _hook(obj: dict) -> Any:
+    if obj.get("nd") is True and "data" in obj:
+        return _unpack_array(obj)
+    return obj
+
+
+def _unpack_array(obj: dict) -> np.ndarray:
+    dtype, shape, data = obj.get("dtype"), obj.get("shape"), obj.get("data")
+    if dtype not in _ALLOWED_DTYPES or not isinstance(data, bytes):
+        raise DecodeError(f"bad packed array: dtype {dtype!r}", dtype=str(dtype))
+    if not isinstance(shape, list) or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in shape):
+        raise DecodeError(f"bad packed array shape {shape!r}")
+    dt = np.dtype(dtype)
+    count = int(np.prod(shape, dtype=np.int64)) if shape else 1
+    if count * dt.itemsize != len(data) or len(data) > MAX_ARRAY_BYTES:
+        raise DecodeError(f"packed array of shape {shape} and dtype {dtype} does not match {len(data)} bytes")
+    return np.frombuffer(data, dtype=dt).reshape(shape)
+
+
+def pack(value: Any) -> bytes:
+    """Encode plain values (with ndarrays) as msgpack."""
+    return msgpack.packb(value, default=_default, use_bin_type=True)
+
+
+def unpack(data: bytes) -> Any:
+    """Decode msgpack bytes into plain values (packed arrays rebuilt); DecodeError on garbage."""
+    try:
+        return msgpack.unpackb(data, object_hook=_hook, raw=False, strict_map_key=False,
+                               max_bin_len=MAX_ARRAY_BYTES, max_str_len=1 << 26)
+    except DecodeError:
+        raise
+    except (msgpack.ExtraData, msgpack.FormatError, msgpack.StackError, ValueError, TypeError) as exc:
+        raise DecodeError(f"payload is not valid msgpack: {exc}", reason=type(exc).__name__) from exc
+
+
+def encode(msg: Any) -> bytes:
+    """Encode a schema instance with its type tag and version."""
+    body = to_plain(msg)
+    body["_t"], body["_v"] = msg.TYPE, msg.VERSION
+    return pack(body)
+
+
+def decode(data: bytes, expected: type[T]) -> T:
+    """Decode ``data`` as a message of type ``expected``, validating every field."""
+    body = unpack(data)
+    if not isinstance(body, dict):
+        raise DecodeError(f"payload is a {type(body).__name__}, expected a {expected.TYPE} map",  # type: ignore[attr-defined]
+                          expected=expected.TYPE)  # type: ignore[attr-defined]
+    tname, version = body.get("_t"), body.get("_v")
+    if tname != expected.TYPE:  # type: ignore[attr-defined]
+        raise DecodeError(f"payload is a {tname!r} message, expected {expected.TYPE}",  # type: ignore[attr-defined]
+                          got=str(tname), expected=expected.TYPE)  # type: ignore[attr-defined]
+    if not isinstance(version, int) or isinstance(version, bool) or not 1 <= version <= expected.VERSION:  # type: ignore[attr-defined]
+        raise DecodeError(f"{tname} version {version!r} is not supported (this side speaks up to "
+                          f"v{expected.VERSION})", got=version, supported=expected.VERSION)  # type: ignore[attr-defined]
+    return validate_into(expected, body)
+
+
+def decode_any(data: bytes) -> Any:
+    """Decode a message whose type is read from its ``_t`` tag."""
+    body = unpack(data)
+    if not isinstance(body, dict) or body.get("_t") not in REGISTRY:
+        raise DecodeError("payload has no known message type tag")
+    return decode(data, REGISTRY[body["_t"]])
+

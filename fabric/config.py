@@ -1,0 +1,84 @@
+"""One helper that turns a config file and ``--mode/--connect/--listen`` flags into a ``zenoh.Config``.
+
+Default (one host): every process is a *peer* that connects to the fabric hub
+at ``tcp/127.0.0.1:7447`` with multicast scouting off. ``fabric-cli up`` (or
+``fabric-cli router``) hosts that hub as a Zenoh session in router mode, so no
+separate router binary is needed. For several hosts, point ``--connect`` at a
+router on another machine (see deploy/).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from dataclasses import dataclass, field
+
+import zenoh
+
+__all__ = ["SessionSettings", "DEFAULT_HUB", "add_session_args", "settings_from_args", "zenoh_config"]
+
+DEFAULT_HUB = os.environ.get("FABRIC_HUB", "tcp/127.0.0.1:7447")
+MODES = ("peer", "client", "router")
+
+
+@dataclass
+class SessionSettings:
+    """What a process needs to join the fabric."""
+    mode: str = "peer"
+    connect: list[str] = field(default_factory=lambda: [DEFAULT_HUB])
+    listen: list[str] = field(default_factory=list)
+    config_file: str | None = None
+    multicast: bool = False
+    cell: str = "cell1"
+
+    def to_args(self) -> list[str]:
+        """The same settings as command-line flags (for launching child processes)."""
+        args = ["--mode", self.mode, "--cell", self.cell]
+        for ep in self.connect:
+            args += ["--connect", ep]
+        for ep in self.listen:
+            args += ["--listen", ep]
+        if self.config_file:
+            args += ["--config", self.config_file]
+        if self.multicast:
+            args += ["--multicast"]
+        return args
+
+
+def add_session_args(parser: argparse.ArgumentParser) -> None:
+    """The flags every fabric program accepts."""
+    g = parser.add_argument_group("fabric session")
+    g.add_argument("--config", dest="zconfig", metavar="FILE", help="Zenoh JSON5 config file (flags override it)")
+    g.add_argument("--mode", choices=MODES, default=None, help="Zenoh mode (default: peer)")
+    g.add_argument("--connect", action="append", metavar="ENDPOINT", help=f"endpoint to connect to (default {DEFAULT_HUB})")
+    g.add_argument("--listen", action="append", metavar="ENDPOINT", help="endpoint to listen on")
+    g.add_argument("--multicast", action="store_true", help="enable multicast scouting (off by default)")
+    g.add_argument("--cell", default=os.environ.get("FABRIC_CELL", "cell1"), help="cell name: the key prefix am/<cell>/")
+
+
+def settings_from_args(ns: argparse.Namespace) -> SessionSettings:
+    st = SessionSettings(cell=ns.cell)
+    st.mode = ns.mode or "peer"
+    if ns.connect:
+        st.connect = list(ns.connect)
+    if ns.listen:
+        st.listen = list(ns.listen)
+    st.config_file = ns.zconfig
+    st.multicast = bool(ns.multicast)
+    return st
+
+
+def zenoh_config(st: SessionSettings) -> zenoh.Config:
+    """Build the ``zenoh.Config`` (file first, then flags on top)."""
+    conf = zenoh.Config.from_file(st.config_file) if st.config_file else zenoh.Config()
+    conf.insert_json5("mode", json.dumps(st.mode))
+    conf.insert_json5("scouting/multicast/enabled", json.dumps(st.multicast))
+    connect = [ep for ep in st.connect if ep not in st.listen]
+    if connect:
+        conf.insert_json5("connect/endpoints", json.dumps(connect))
+    if st.listen:
+        conf.insert_json5("listen/endpoints", json.dumps(st.listen))
+    elif st.mode != "router":
+        # a peer that listens nowhere cannot be reached directly: ephemeral loopback port
+        conf.insert_json5("listen/endpoints", json.dumps(["tcp/127.0.0.1:0"]))
+    return conf

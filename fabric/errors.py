@@ -1,0 +1,164 @@
+"""Typed errors shared by every service, the client and the CLI.
+
+Exception tree (the ``code`` travels in error replies; the client raises the
+class that matches it)::
+
+    FabricError                      code "internal"
+    ├── BadRequest                   "bad_request"     malformed or invalid input
+    │   ├── DecodeError              "decode"          payload is not a valid message
+    │   ├── ValidationError          "validation"      a field has a wrong type/range
+    │   ├── GcodeError               "gcode"           names file and line
+    │   ├── MeshError                "mesh"            broken or unusable model
+    │   ├── ProfileError             "profile"         unknown key or bad value
+    │   ├── ConfigError              "config"          cell / service configuration
+    │   └── PlacementError           "placement"       part does not fit plate/volume
+    ├── UnreachableError             "unreachable"     IK failed: names the G-code line
+    ├── CollisionError               "collision"       a move would collide
+    ├── StateError                   "state"           command not valid in this state
+    ├── NotFound                     "not_found"       unknown job / artifact / robot
+    ├── SlicerError                  "slicer"          an external slicer failed
+    ├── ServiceUnavailable           "unavailable"     no service answered in time
+    └── InternalError                "internal"        unexpected failure (bug)
+
+Every error carries ``details``: a dict of plain values (file, line, joint,
+limit, field, ...) that a caller can act on.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = [
+    "FabricError", "BadRequest", "DecodeError", "ValidationError", "GcodeError",
+    "MeshError", "ProfileError", "ConfigError", "PlacementError", "UnreachableError",
+    "CollisionError", "StateError", "NotFound", "SlicerError", "ServiceUnavailable",
+    "InternalError", "error_from_code",
+]
+
+
+class FabricError(Exception):
+    """Base of all fabric errors: a stable ``code``, a message and ``details``."""
+
+    code = "internal"
+
+    def __init__(self, message: str, **details: Any) -> None:
+        super().__init__(message)
+        self.message = message
+        self.details: dict[str, Any] = details
+
+    def __str__(self) -> str:
+        return self.message
+
+    def to_wire(self) -> dict[str, Any]:
+        """The error as a plain dict: what ``reply_err`` carries."""
+        return {"code": self.code, "message": self.message, "details": _plain(self.details)}
+
+
+class BadRequest(FabricError):
+    code = "bad_request"
+
+
+class DecodeError(BadRequest):
+    code = "decode"
+
+
+class ValidationError(BadRequest):
+    """A field is missing, of the wrong type or out of range; ``details['field']`` names it."""
+
+    code = "validation"
+
+
+class GcodeError(BadRequest):
+    """G-code that cannot be interpreted; ``details`` has ``line`` (1-based) and ``text``."""
+
+    code = "gcode"
+
+    def __init__(self, message: str, line: int | None = None, **details: Any) -> None:
+        where = f"line {line}: " if line is not None else ""
+        super().__init__(f"{where}{message}", line=line, **details)
+
+
+class MeshError(BadRequest):
+    code = "mesh"
+
+
+class ProfileError(BadRequest):
+    code = "profile"
+
+
+class ConfigError(BadRequest):
+    code = "config"
+
+
+class PlacementError(BadRequest):
+    code = "placement"
+
+
+class UnreachableError(FabricError):
+    """A target the robot cannot reach; ``details`` has ``gcode_line`` and ``reason``."""
+
+    code = "unreachable"
+
+
+class CollisionError(FabricError):
+    code = "collision"
+
+
+class StateError(FabricError):
+    """A command that is not valid now; ``details`` has ``state`` and ``command``."""
+
+    code = "state"
+
+
+class NotFound(FabricError):
+    code = "not_found"
+
+
+class SlicerError(FabricError):
+    code = "slicer"
+
+
+class ServiceUnavailable(FabricError):
+    code = "unavailable"
+
+
+class InternalError(FabricError):
+    code = "internal"
+
+
+_BY_CODE: dict[str, type[FabricError]] = {}
+
+
+def _register(cls: type[FabricError]) -> None:
+    _BY_CODE[cls.code] = cls
+    for sub in cls.__subclasses__():
+        _register(sub)
+
+
+_register(FabricError)
+_BY_CODE["internal"] = InternalError
+
+
+def error_from_code(code: str, message: str, details: dict[str, Any] | None = None) -> FabricError:
+    """Rebuild the typed exception for an error reply (unknown codes become InternalError)."""
+    cls = _BY_CODE.get(code, InternalError)
+    err = cls.__new__(cls)
+    FabricError.__init__(err, message, **(details or {}))
+    return err
+
+
+def _plain(value: Any) -> Any:
+    """Coerce details to msgpack-friendly plain values (numpy scalars, tuples, paths)."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if value is None or isinstance(value, (bool, int, float, str, bytes)):
+        return value
+    if hasattr(value, "item") and callable(value.item):  # numpy scalar
+        try:
+            return value.item()
+        except (ValueError, TypeError):
+            pass
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    return str(value)

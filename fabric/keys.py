@@ -1,0 +1,135 @@
+"""Every key expression of the fabric, declared once: builders, parsers and the endpoint table.
+
+Layout (``<cell>`` lets several cells share one Zenoh fabric)::
+
+    am/<cell>/alive/<service>                 liveliness token of each service
+    am/<cell>/<service>/cmd/<command>         queryable per command (ENDPOINTS)
+    am/<cell>/<service>/artifact/<sha256>     content-addressed results (G-code, programs)
+    am/<cell>/station/{pose,extrusion,state,temps,events}   station telemetry
+    am/<cell>/<service>/progress              job progress (slicer, planner, supervisor)
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from fabric import schemas as s
+
+__all__ = ["ROOT", "SERVICES", "TOPICS", "Endpoint", "ENDPOINTS", "Keys", "valid_cell", "parse_alive"]
+
+ROOT = "am"
+SERVICES = ("station", "slicer", "planner", "collision", "supervisor")
+_CELL_RE = re.compile(r"^[A-Za-z0-9_\-]{1,64}$")
+
+# Telemetry topics: (service, topic) -> payload type.
+TOPICS: dict[tuple[str, str], type] = {
+    ("station", "pose"): s.Pose,
+    ("station", "extrusion"): s.Extrusion,
+    ("station", "state"): s.StationState,
+    ("station", "temps"): s.Temps,
+    ("station", "events"): s.Event,
+    ("slicer", "progress"): s.JobStatus,
+    ("planner", "progress"): s.JobStatus,
+    ("supervisor", "progress"): s.JobStatus,
+}
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """One queryable: who serves it, what it takes and returns, how long a caller waits."""
+    service: str
+    command: str
+    request: type
+    reply: type
+    timeout_s: float = 5.0
+    doc: str = ""
+
+
+def _ep(service: str, command: str, req: type, rep: type, timeout_s: float = 5.0, doc: str = "") -> Endpoint:
+    return Endpoint(service, command, req, rep, timeout_s, doc)
+
+
+_TABLE = [
+    # station: the paper's commands
+    _ep("station", "position", s.Empty, s.Pose, doc="TCP pose and joints now"),
+    _ep("station", "home", s.Empty, s.Ack, 30.0, "collision-checked joint move to home"),
+    _ep("station", "load", s.LoadRequest, s.TimeInfo, 60.0, "load a planned program by id"),
+    _ep("station", "start", s.StartRequest, s.Ack, doc="run the loaded program"),
+    _ep("station", "pause", s.Empty, s.Ack, doc="controlled pause: extruder off, retract, lift"),
+    _ep("station", "resume", s.StartRequest, s.Ack, doc="return to the paused spot and go on"),
+    _ep("station", "stop", s.Empty, s.Ack, doc="abort safely, keep the deposit record"),
+    _ep("station", "collisions", s.Empty, s.CollisionReport, 120.0, "sweep the loaded program"),
+    _ep("station", "calibrate", s.Empty, s.CalibrationReport, 30.0, "probe the plate, fit the work object"),
+    _ep("station", "ready", s.Empty, s.ReadyReport, 10.0, "checklist with pass/fail per item"),
+    _ep("station", "time", s.Empty, s.TimeInfo, doc="elapsed, total and remaining simulated time"),
+    _ep("station", "state", s.Empty, s.StationState, doc="state snapshot"),
+    _ep("station", "events", s.EventsQuery, s.EventList, doc="event history since a sequence number"),
+    _ep("station", "overrides", s.Overrides, s.StationState, doc="speed/flow/temperature overrides"),
+    _ep("station", "mesh", s.MeshRequest, s.Artifact, 60.0, "as-printed part as STL or GLB"),
+    # slicer
+    _ep("slicer", "slice", s.SliceRequest, s.JobAccepted, 10.0, "start slicing a model (a job)"),
+    _ep("slicer", "job", s.JobQuery, s.JobStatus, doc="a slicing job's status"),
+    _ep("slicer", "backends", s.Empty, s.Backends, doc="installed back-ends and profiles"),
+    # planner
+    _ep("planner", "plan", s.PlanRequest, s.JobAccepted, 30.0, "start planning G-code (a job)"),
+    _ep("planner", "job", s.JobQuery, s.JobStatus, doc="a planning job's status"),
+    _ep("planner", "summary", s.ArtifactQuery, s.PlanSummary, doc="summary of a planned program"),
+    _ep("planner", "export", s.ExportRequest, s.Artifact, 300.0, "RAPID / KRL / URScript / CSV"),
+    # collision
+    _ep("collision", "check", s.CollisionRequest, s.CollisionReport, 300.0, "sweep a program or a move"),
+    # supervisor
+    _ep("supervisor", "status", s.Empty, s.FabricStatus, doc="services alive and the current job"),
+    _ep("supervisor", "submit", s.JobSubmit, s.JobAccepted, 30.0, "slice -> plan -> check -> load"),
+    _ep("supervisor", "job", s.JobQuery, s.JobStatus, doc="a pipeline job's status"),
+    _ep("supervisor", "jobs", s.Empty, s.JobList, doc="job history"),
+]
+ENDPOINTS: dict[tuple[str, str], Endpoint] = {(e.service, e.command): e for e in _TABLE}
+
+
+def valid_cell(cell: str) -> str:
+    if not _CELL_RE.match(cell):
+        raise ValueError(f"cell name {cell!r} must match {_CELL_RE.pattern}")
+    return cell
+
+
+class Keys:
+    """Key builders for one cell."""
+
+    def __init__(self, cell: str) -> None:
+        self.cell = valid_cell(cell)
+        self.prefix = f"{ROOT}/{cell}"
+
+    def alive(self, service: str) -> str:
+        return f"{self.prefix}/alive/{service}"
+
+    def alive_all(self) -> str:
+        return f"{self.prefix}/alive/*"
+
+    def cmd(self, service: str, command: str) -> str:
+        return f"{self.prefix}/{service}/cmd/{command}"
+
+    def topic(self, service: str, topic: str) -> str:
+        if (service, topic) not in TOPICS:
+            raise KeyError(f"no topic {service}/{topic}")
+        return f"{self.prefix}/{service}/{topic}"
+
+    def artifact(self, service: str, artifact_id: str) -> str:
+        return f"{self.prefix}/{service}/artifact/{artifact_id}"
+
+    def artifact_all(self, service: str) -> str:
+        return f"{self.prefix}/{service}/artifact/*"
+
+    def parse_artifact(self, key: str) -> str:
+        """The artifact id of an artifact key (the last chunk after ``/artifact/``)."""
+        head, sep, tail = key.rpartition("/artifact/")
+        if not sep or "/" in tail:
+            raise ValueError(f"not an artifact key: {key}")
+        return tail
+
+
+def parse_alive(key: str) -> tuple[str, str]:
+    """``am/<cell>/alive/<service>`` -> (cell, service)."""
+    m = re.fullmatch(rf"{ROOT}/([^/]+)/alive/([^/]+)", key)
+    if not m:
+        raise ValueError(f"not a liveliness key: {key}")
+    return m.group(1), m.group(2)

@@ -1,0 +1,19 @@
+"""All message schemas; importing this package registers every type in ``REGISTRY``."""
+from fabric.schemas.base import REGISTRY, Schema, f, schema, to_plain, validate_into
+from fabric.schemas.common import (Ack, Artifact, ArtifactQuery, Empty, ErrorReply, JobAccepted,
+                                   JobQuery, JobStatus)
+from fabric.schemas.pipeline import (Backends, CollisionReport, CollisionRequest, ExportRequest,
+                                     FabricStatus, JobList, JobSubmit, PlanRequest, PlanSummary,
+                                     ProgramMsg, ServiceInfo, SliceRequest, SliceResult)
+from fabric.schemas.station import (CalibrationReport, Check, Event, EventList, EventsQuery,
+                                    Extrusion, LoadRequest, MeshRequest, Overrides, Pose,
+                                    ReadyReport, StartRequest, StationState, Temps, TimeInfo)
+
+__all__ = [
+    "REGISTRY", "Schema", "f", "schema", "to_plain", "validate_into",
+    "Ack", "Artifact", "ArtifactQuery", "Empty", "ErrorReply", "JobAccepted", "JobQuery", "JobStatus",
+    "Backends", "CollisionReport", "CollisionRequest", "ExportRequest", "FabricStatus", "JobList",
+    "JobSubmit", "PlanRequest", "PlanSummary", "ProgramMsg", "ServiceInfo", "SliceRequest", "SliceResult",
+    "CalibrationReport", "Check", "Event", "EventList", "EventsQuery", "Extrusion", "LoadRequest",
+    "MeshRequest", "Overrides", "Pose", "ReadyReport", "StartRequest", "StationState", "Temps", "TimeInfo",
+]

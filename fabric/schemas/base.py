@@ -1,0 +1,205 @@
+"""Typed, versioned message schemas: dataclasses with declared field specs, validated on decode.
+
+A schema is a dataclass decorated with ``@schema("area.Name", version)``. Its
+fields are annotated with plain types (``int``, ``float``, ``str``, ``bool``,
+``bytes``, ``list[X]``, ``dict[str, X]``, ``X | None``, nested schemas,
+``Any`` for free-form plain values) or ``np.ndarray`` for bulk numeric data.
+Ranges, choices and array dtypes/shapes are declared with :func:`f`.
+
+Validation turns a plain decoded mapping into the dataclass, checking every
+field and raising :class:`~fabric.errors.ValidationError` whose
+``details['field']`` is the dotted path of the offending field.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+import typing
+from typing import Any, Callable, ClassVar, TypeVar, Union
+
+import numpy as np
+
+from fabric.errors import ValidationError
+
+__all__ = ["schema", "f", "Schema", "REGISTRY", "validate_into", "to_plain"]
+
+REGISTRY: dict[str, type] = {}
+T = TypeVar("T")
+_MISSING = dataclasses.MISSING
+
+
+class Schema:
+    """Marker base class for all messages (``TYPE`` and ``VERSION`` set by ``@schema``)."""
+
+    TYPE: ClassVar[str]
+    VERSION: ClassVar[int]
+    _SPECS: ClassVar[dict[str, "FieldSpec"]]
+
+
+def f(default: Any = _MISSING, *, ge: float | None = None, le: float | None = None,
+      choices: tuple[Any, ...] | None = None, dtype: str | None = None,
+      shape: tuple[int | None, ...] | None = None, factory: Callable[[], Any] | None = None,
+      max_len: int | None = None) -> Any:
+    """Declare a field with constraints (range, choices, ndarray dtype and shape, length)."""
+    meta = {"ge": ge, "le": le, "choices": choices, "dtype": dtype, "shape": shape, "max_len": max_len}
+    if factory is not None:
+        return dataclasses.field(default_factory=factory, metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+@dataclasses.dataclass(frozen=True)
+class FieldSpec:
+    name: str
+    tp: Any
+    required: bool
+    ge: float | None = None
+    le: float | None = None
+    choices: tuple[Any, ...] | None = None
+    dtype: str | None = None
+    shape: tuple[int | None, ...] | None = None
+    max_len: int | None = None
+
+
+def schema(type_name: str, version: int = 1) -> Callable[[type[T]], type[T]]:
+    """Class decorator: make a dataclass message registered under ``type_name``."""
+
+    def wrap(cls: type[T]) -> type[T]:
+        dc = dataclasses.dataclass(cls)
+        hints = typing.get_type_hints(dc)
+        specs = {}
+        for fld in dataclasses.fields(dc):
+            required = fld.default is _MISSING and fld.default_factory is _MISSING
+            specs[fld.name] = FieldSpec(fld.name, hints[fld.name], required, **dict(fld.metadata))
+        dc.TYPE, dc.VERSION, dc._SPECS = type_name, version, specs  # type: ignore[attr-defined]
+        if type_name in REGISTRY:
+            raise RuntimeError(f"schema {type_name} declared twice")
+        REGISTRY[type_name] = dc
+        return dc
+
+    return wrap
+
+
+def validate_into(cls: type[T], data: Any, path: str = "") -> T:
+    """Build ``cls`` from a plain mapping, validating every field."""
+    if not isinstance(data, dict):
+        raise ValidationError(f"{path or cls.TYPE}: expected a map, got {type(data).__name__}",  # type: ignore[attr-defined]
+                              field=path or "", schema=cls.TYPE)  # type: ignore[attr-defined]
+    specs: dict[str, FieldSpec] = cls._SPECS  # type: ignore[attr-defined]
+    unknown = [k for k in data if k not in specs and not (isinstance(k, str) and k.startswith("_"))]
+    if unknown:
+        name = f"{path}.{unknown[0]}" if path else str(unknown[0])
+        raise ValidationError(f"unknown field '{name}' in {cls.TYPE}", field=name, schema=cls.TYPE)  # type: ignore[attr-defined]
+    kwargs = {}
+    for name, spec in specs.items():
+        fpath = f"{path}.{name}" if path else name
+        if name not in data:
+            if spec.required:
+                raise ValidationError(f"missing field '{fpath}' in {cls.TYPE}", field=fpath, schema=cls.TYPE)  # type: ignore[attr-defined]
+            continue
+        kwargs[name] = _check(spec.tp, data[name], fpath, spec)
+    return cls(**kwargs)
+
+
+def _fail(fpath: str, msg: str) -> ValidationError:
+    return ValidationError(f"field '{fpath}': {msg}", field=fpath)
+
+
+def _check(tp: Any, value: Any, fpath: str, spec: FieldSpec | None) -> Any:
+    origin = typing.get_origin(tp)
+    if tp is Any:
+        return value
+    if origin in (Union, types.UnionType):
+        args = typing.get_args(tp)
+        if value is None:
+            if type(None) in args:
+                return None
+            raise _fail(fpath, "must not be null")
+        inner = [a for a in args if a is not type(None)]
+        return _check(inner[0], value, fpath, spec)
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise _fail(fpath, f"expected a number, got {type(value).__name__}")
+        value = float(value)
+        if math.isnan(value):
+            raise _fail(fpath, "is NaN")
+        return _range(value, fpath, spec)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise _fail(fpath, f"expected an integer, got {type(value).__name__}")
+        return _range(value, fpath, spec)
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise _fail(fpath, f"expected a boolean, got {type(value).__name__}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise _fail(fpath, f"expected a string, got {type(value).__name__}")
+        if spec and spec.choices is not None and value not in spec.choices:
+            raise _fail(fpath, f"'{value}' is not one of {list(spec.choices)}")
+        if spec and spec.max_len is not None and len(value) > spec.max_len:
+            raise _fail(fpath, f"longer than {spec.max_len}")
+        return value
+    if tp is bytes:
+        if not isinstance(value, (bytes, bytearray)):
+            raise _fail(fpath, f"expected bytes, got {type(value).__name__}")
+        return bytes(value)
+    if tp is np.ndarray:
+        return _array(value, fpath, spec)
+    if origin is list:
+        if not isinstance(value, (list, tuple)):
+            raise _fail(fpath, f"expected a list, got {type(value).__name__}")
+        if spec and spec.shape and len(spec.shape) == 1 and spec.shape[0] is not None and len(value) != spec.shape[0]:
+            raise _fail(fpath, f"expected {spec.shape[0]} items, got {len(value)}")
+        (item,) = typing.get_args(tp)
+        sub = FieldSpec(fpath, item, True, ge=spec.ge, le=spec.le, choices=spec.choices) if spec else None
+        return [_check(item, v, f"{fpath}[{i}]", sub) for i, v in enumerate(value)]
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise _fail(fpath, f"expected a map, got {type(value).__name__}")
+        _, vt = typing.get_args(tp)
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str):
+                raise _fail(fpath, "map keys must be strings")
+            out[k] = _check(vt, v, f"{fpath}.{k}", None)
+        return out
+    if isinstance(tp, type) and hasattr(tp, "_SPECS"):
+        return validate_into(tp, value, fpath)
+    raise _fail(fpath, f"unsupported schema type {tp!r}")  # a bug in a schema declaration
+
+
+def _range(value: float, fpath: str, spec: FieldSpec | None) -> Any:
+    if spec is None:
+        return value
+    if spec.ge is not None and value < spec.ge:
+        raise _fail(fpath, f"{value} is below the minimum {spec.ge}")
+    if spec.le is not None and value > spec.le:
+        raise _fail(fpath, f"{value} is above the maximum {spec.le}")
+    if spec.choices is not None and value not in spec.choices:
+        raise _fail(fpath, f"{value} is not one of {list(spec.choices)}")
+    return value
+
+
+def _array(value: Any, fpath: str, spec: FieldSpec | None) -> np.ndarray:
+    if not isinstance(value, np.ndarray):
+        raise _fail(fpath, f"expected a packed array, got {type(value).__name__}")
+    if spec and spec.dtype and value.dtype != np.dtype(spec.dtype):
+        raise _fail(fpath, f"dtype {value.dtype.str}, expected {np.dtype(spec.dtype).str}")
+    if spec and spec.shape is not None:
+        if value.ndim != len(spec.shape) or any(s is not None and s != d for s, d in zip(spec.shape, value.shape)):
+            raise _fail(fpath, f"shape {value.shape}, expected {spec.shape}")
+    if value.dtype.kind == "f" and not np.all(np.isfinite(value)):
+        raise _fail(fpath, "contains NaN or infinity")
+    return value
+
+
+def to_plain(msg: Any) -> Any:
+    """A schema instance as plain values (ndarrays kept), for encoding or ``--json``."""
+    if dataclasses.is_dataclass(msg) and not isinstance(msg, type):
+        return {fl.name: to_plain(getattr(msg, fl.name)) for fl in dataclasses.fields(msg)}
+    if isinstance(msg, (list, tuple)):
+        return [to_plain(v) for v in msg]
+    if isinstance(msg, dict):
+        return {k: to_plain(v) for k, v in msg.items()}
+    return msg

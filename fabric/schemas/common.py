@@ -1,0 +1,70 @@
+"""Messages shared by every service: empty requests, acks, errors, jobs and artifacts."""
+from __future__ import annotations
+
+from typing import Any
+
+from fabric.schemas.base import f, schema
+
+JOB_STATES = ("queued", "running", "done", "failed", "cancelled")
+
+
+@schema("common.Empty")
+class Empty:
+    """A request with no arguments."""
+
+
+@schema("common.Ack")
+class Ack:
+    """A command was carried out; ``message`` says what happened."""
+    ok: bool = True
+    message: str = ""
+    state: str = ""
+
+
+@schema("common.Error")
+class ErrorReply:
+    """The payload of every error reply (``reply_err``)."""
+    code: str
+    message: str
+    details: dict[str, Any] = f(factory=dict)
+
+
+@schema("common.JobAccepted")
+class JobAccepted:
+    """A long task was accepted; follow it with ``JobQuery`` or the progress topic."""
+    job_id: str
+    kind: str
+
+
+@schema("common.JobQuery")
+class JobQuery:
+    job_id: str = f(max_len=128)
+
+
+@schema("common.JobStatus")
+class JobStatus:
+    """State of a job; ``result_id`` names the content-addressed result once done."""
+    job_id: str
+    kind: str
+    state: str = f(choices=JOB_STATES)
+    progress_r: float = f(0.0, ge=0.0, le=1.0)
+    stage: str = ""
+    message: str = ""
+    result_id: str = ""
+    error: dict[str, Any] | None = None
+    created_s: float = 0.0
+    updated_s: float = 0.0
+
+
+@schema("common.ArtifactQuery")
+class ArtifactQuery:
+    artifact_id: str = f(max_len=128)
+
+
+@schema("common.Artifact")
+class Artifact:
+    """Content-addressed bytes (``artifact_id`` = sha256 of ``data``)."""
+    artifact_id: str
+    name: str
+    media_type: str
+    data: bytes

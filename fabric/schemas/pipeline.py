@@ -1,0 +1,144 @@
+"""Messages of the pipeline services: slicer, planner, collision checker, supervisor."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from fabric.schemas.base import f, schema
+
+BACKENDS = ("builtin", "prusaslicer", "slic3r")
+EXPORT_FORMATS = ("rapid", "krl", "urscript", "csv")
+MAX_MODEL_BYTES = 256 << 20
+
+
+# --- slicer ------------------------------------------------------------------
+
+@schema("slicer.SliceRequest")
+class SliceRequest:
+    """Slice a model sent as bytes (so the slicer may run on another host)."""
+    model: bytes
+    filename: str = f(max_len=255)
+    profile: str = "taz-pla-medium"
+    backend: str = f("builtin", choices=BACKENDS)
+    overrides: dict[str, str] = f(factory=dict)
+    center_xy_mm: list[float] | None = f(None, shape=(2,))
+
+
+@schema("slicer.SliceResult")
+class SliceResult:
+    gcode_id: str
+    backend: str
+    layers: int
+    extruded_mm3: float
+    filament_mm: float
+    model_volume_mm3: float
+    faces: int
+    elapsed_s: float
+    warnings: list[str] = f(factory=list)
+
+
+@schema("slicer.Backends")
+class Backends:
+    backends: dict[str, str]      # name -> version ("" when not installed)
+    profiles: list[str]
+
+
+# --- planner -----------------------------------------------------------------
+
+@schema("planner.PlanRequest")
+class PlanRequest:
+    """Plan G-code given inline (``gcode``) or by the slicer's artifact id (``gcode_id``)."""
+    gcode: bytes = b""
+    gcode_id: str = ""
+    filename: str = "part.gcode"
+    offset_mm: list[float] = f(factory=lambda: [0.0, 0.0, 0.0], shape=(3,))
+    tilt_deg: list[float] = f(factory=lambda: [0.0, 0.0], shape=(2,))
+    speed_r: float = f(1.0, ge=0.05, le=4.0)
+    rot_step_deg: float = f(15.0, ge=0.5, le=90.0)
+
+
+@schema("planner.PlanSummary")
+class PlanSummary:
+    program_id: str
+    targets: int
+    moves: int
+    layers: int
+    feasible_r: float
+    runnable: bool
+    estimate_s: float
+    extruded_mm3: float
+    path_mm: float
+    first_unreachable: dict[str, Any] | None = None
+    unreachable_by_reason: dict[str, int] = f(factory=dict)
+    elapsed_s: float = 0.0
+
+
+@schema("planner.ProgramMsg")
+class ProgramMsg:
+    """A whole robot program: its columns as packed arrays (see fabric.sim.program)."""
+    program_id: str
+    columns: dict[str, np.ndarray]
+    wobj: np.ndarray = f(dtype="<f8", shape=(4, 4), factory=lambda: np.eye(4))
+    meta: dict[str, Any] = f(factory=dict)
+
+
+@schema("planner.ExportRequest")
+class ExportRequest:
+    program_id: str
+    fmt: str = f(choices=EXPORT_FORMATS)
+    module_targets: int = f(5000, ge=10, le=1_000_000)
+
+
+# --- collision ---------------------------------------------------------------
+
+@schema("collision.CheckRequest")
+class CollisionRequest:
+    """Sweep a program (by id) or a single joint move (``q_from_deg`` -> ``q_to_deg``)."""
+    program_id: str = ""
+    q_from_deg: list[float] | None = None
+    q_to_deg: list[float] | None = None
+    step_deg: float = f(2.0, ge=0.1, le=30.0)
+    include_part: bool = True
+
+
+@schema("collision.Report")
+class CollisionReport:
+    collision_free: bool
+    checked_configs: int
+    min_distance_mm: float
+    first_hit: dict[str, Any] | None = None     # t_s, row, gcode_line, body_a, body_b
+    elapsed_s: float = 0.0
+
+
+# --- supervisor ---------------------------------------------------------------
+
+@schema("supervisor.ServiceInfo")
+class ServiceInfo:
+    name: str
+    alive: bool
+    since_s: float = 0.0
+
+
+@schema("supervisor.Status")
+class FabricStatus:
+    cell: str
+    services: list[ServiceInfo]
+    job: dict[str, Any] | None = None
+
+
+@schema("supervisor.JobSubmit")
+class JobSubmit:
+    """STL/OBJ/3MF bytes -> slice -> plan -> collision check -> load (-> start)."""
+    model: bytes
+    filename: str = f(max_len=255)
+    profile: str = "taz-pla-medium"
+    backend: str = f("builtin", choices=BACKENDS)
+    overrides: dict[str, str] = f(factory=dict)
+    start: bool = False
+    rtf: float = f(0.0, ge=0.0, le=1e6)
+
+
+@schema("supervisor.JobList")
+class JobList:
+    jobs: list[dict[str, Any]]

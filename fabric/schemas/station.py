@@ -1,0 +1,147 @@
+"""Station (digital twin) messages: telemetry, commands and reports.
+
+Small fixed vectors (a pose's 3 coordinates, 6 joints) are plain lists so a
+monitor needs nothing but msgpack; bulk data elsewhere is packed arrays.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from fabric.schemas.base import f, schema
+
+STATES = ("idle", "ready", "printing", "paused", "stopped", "fault", "moving")
+
+
+@schema("station.Pose")
+class Pose:
+    """TCP pose (plate frame and robot base frame) and joints of the twin."""
+    seq: int
+    t_sim_s: float
+    q_deg: list[float]
+    xyz_mm: list[float]          # TCP in the plate frame (work object)
+    quat_wxyz: list[float]
+    base_xyz_mm: list[float]     # TCP in the robot base frame
+    wall_time_s: float = 0.0
+
+
+@schema("station.Extrusion")
+class Extrusion:
+    seq: int
+    t_sim_s: float
+    on: bool
+    flow_mm3_s: float
+    extruded_mm3: float
+    filament_mm: float
+    layer: int
+    row: int
+    gcode_line: int
+    flow_r: float = 1.0
+
+
+@schema("station.Temps")
+class Temps:
+    nozzle_c: float
+    nozzle_target_c: float
+    bed_c: float
+    bed_target_c: float
+    t_sim_s: float = 0.0
+
+
+@schema("station.State")
+class StationState:
+    """The station's whole state: a snapshot reply and a publication on change."""
+    state: str = f(choices=STATES)
+    reason: str = ""
+    program_id: str = ""
+    job_id: str = ""
+    t_sim_s: float = 0.0
+    total_s: float = 0.0
+    progress_r: float = 0.0
+    layer: int = -1
+    layers_total: int = 0
+    rtf: float = 1.0
+    speed_r: float = 1.0
+    flow_r: float = 1.0
+
+
+@schema("station.Event")
+class Event:
+    """One entry of the lossless event stream (``seq`` has no gaps)."""
+    seq: int
+    t_sim_s: float
+    kind: str
+    row: int = -1
+    gcode_line: int = -1
+    layer: int = -1
+    data: dict[str, Any] = f(factory=dict)
+
+
+@schema("station.EventsQuery")
+class EventsQuery:
+    since_seq: int = f(0, ge=0)
+    limit: int = f(10000, ge=1, le=100000)
+
+
+@schema("station.EventList")
+class EventList:
+    events: list[Event]
+    next_seq: int
+
+
+@schema("station.TimeInfo")
+class TimeInfo:
+    """Simulation time: elapsed, total, remaining, and the estimate given at load."""
+    elapsed_s: float
+    total_s: float
+    remaining_s: float
+    estimate_s: float
+    state: str = ""
+
+
+@schema("station.LoadRequest")
+class LoadRequest:
+    """Load a planned program, fetched by id from the planner's artifact store."""
+    program_id: str = f(max_len=128)
+    job_id: str = ""
+
+
+@schema("station.StartRequest")
+class StartRequest:
+    """``rtf`` 1 = real time, larger = faster, 0 = as fast as possible."""
+    rtf: float = f(1.0, ge=0.0, le=1e6)
+
+
+@schema("station.Overrides")
+class Overrides:
+    speed_r: float | None = f(None, ge=0.05, le=4.0)
+    flow_r: float | None = f(None, ge=0.0, le=4.0)
+    nozzle_c: float | None = f(None, ge=0.0, le=500.0)
+    bed_c: float | None = f(None, ge=0.0, le=200.0)
+
+
+@schema("station.Check")
+class Check:
+    name: str
+    ok: bool
+    detail: str = ""
+
+
+@schema("station.ReadyReport")
+class ReadyReport:
+    ready: bool
+    checks: list[Check]
+
+
+@schema("station.Calibration")
+class CalibrationReport:
+    correction_xyz_mm: list[float]
+    correction_rpy_deg: list[float]
+    residual_rms_mm: float
+    points: int
+    wobj_xyz_mm: list[float]
+    wobj_rpy_deg: list[float]
+
+
+@schema("station.MeshRequest")
+class MeshRequest:
+    fmt: str = f("stl", choices=("stl", "glb"))
