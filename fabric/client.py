@@ -175,6 +175,8 @@ class Client:
     # --- pipeline --------------------------------------------------------------
 
     def slice(self, request: s.SliceRequest) -> s.JobAccepted: return self.call("slicer", "slice", request)
+    def slice_result(self, gcode_id: str) -> s.SliceResult:
+        return self.call("slicer", "result", s.ArtifactQuery(artifact_id=gcode_id))
     def backends(self) -> s.Backends: return self.call("slicer", "backends")
     def plan(self, request: s.PlanRequest) -> s.JobAccepted: return self.call("planner", "plan", request)
     def plan_summary(self, program_id: str) -> s.PlanSummary:

@@ -69,6 +69,7 @@ _TABLE = [
     # slicer
     _ep("slicer", "slice", s.SliceRequest, s.JobAccepted, 10.0, "start slicing a model (a job)"),
     _ep("slicer", "job", s.JobQuery, s.JobStatus, doc="a slicing job's status"),
+    _ep("slicer", "result", s.ArtifactQuery, s.SliceResult, doc="summary of a slicing result by G-code id"),
     _ep("slicer", "backends", s.Empty, s.Backends, doc="installed back-ends and profiles"),
     # planner
     _ep("planner", "plan", s.PlanRequest, s.JobAccepted, 30.0, "start planning G-code (a job)"),

@@ -76,8 +76,9 @@ class PlanSummary:
 
 @schema("planner.ProgramMsg")
 class ProgramMsg:
-    """A whole robot program: its columns as packed arrays (see fabric.sim.program)."""
-    program_id: str
+    """A whole robot program: its columns as packed arrays (see fabric.sim.program).
+
+    Stored as a planner artifact whose id is the sha256 of this message's bytes."""
     columns: dict[str, np.ndarray]
     wobj: np.ndarray = f(dtype="<f8", shape=(4, 4), factory=lambda: np.eye(4))
     meta: dict[str, Any] = f(factory=dict)

@@ -1,0 +1,133 @@
+"""``fabric-cli``: every command over the thin client; ``serve``/``up``/``router`` run the fabric itself."""
+from __future__ import annotations
+
+import argparse
+import importlib
+import signal
+import sys
+import threading
+from pathlib import Path
+
+from fabric.cli import pipeline_cmds, station_cmds
+from fabric.cli.output import emit, fail
+from fabric.client import Client
+from fabric.config import add_session_args, settings_from_args
+from fabric.errors import FabricError
+from fabric.keys import SERVICES
+from fabric.services import SERVICE_MODULES
+
+__all__ = ["main", "build_parser"]
+
+
+def _common() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(add_help=False)
+    add_session_args(p)
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    return p
+
+
+def build_parser() -> argparse.ArgumentParser:
+    common = _common()
+    parser = argparse.ArgumentParser(prog="fabric-cli", description="Control fabric for robotic additive manufacturing")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("serve", help="run one service in this process")
+    ssub = p.add_subparsers(dest="service", required=True)
+    for name, mod in SERVICE_MODULES.items():
+        sp = ssub.add_parser(name, parents=[common], help=f"the {name} service")
+        sp.add_argument("--log-level", default="INFO")
+        importlib.import_module(mod).add_arguments(sp)
+        sp.set_defaults(local=_cmd_serve)
+
+    p = sub.add_parser("up", parents=[common], help="start the whole cell on this host (Ctrl-C stops it)")
+    p.add_argument("--services", nargs="+", choices=SERVICES, default=list(SERVICES))
+    p.add_argument("--no-hub", action="store_true", help="do not host the hub (a router runs elsewhere)")
+    p.add_argument("--log-dir", type=Path, default=None, help="write each service's log there")
+    p.add_argument("--cell-config", default=None, help="cell TOML for the station, planner and collision services")
+    p.set_defaults(local=_cmd_up)
+
+    p = sub.add_parser("router", parents=[common], help="host the fabric hub (a Zenoh router) in this process")
+    p.set_defaults(local=_cmd_router)
+
+    station_cmds.register(sub, common)
+    pipeline_cmds.register(sub, common)
+
+    cell = sub.add_parser("cell", help="the cell configuration")
+    csub = cell.add_subparsers(dest="cell_cmd", required=True)
+    p = csub.add_parser("show", parents=[common], help="print the cell (robot, frames, plate, home)")
+    p.add_argument("--cell-config", default=None)
+    p.set_defaults(local=_cmd_cell_show)
+    p = csub.add_parser("export-urdf", parents=[common], help="write robot + tool as one URDF (TCP frame 'tcp')")
+    p.add_argument("output")
+    p.add_argument("--cell-config", default=None)
+    p.set_defaults(local=_cmd_cell_urdf)
+    return parser
+
+
+def _load_cell(path: str | None):
+    from fabric.sim.cell import Cell
+    return Cell.load(path) if path else Cell.builtin("irb140")
+
+
+def _cmd_serve(a: argparse.Namespace) -> int:
+    from fabric.services.host import serve, setup_logging
+    setup_logging(a.service, a.log_level)
+    return serve(a.service, settings_from_args(a), a)
+
+
+def _cmd_up(a: argparse.Namespace) -> int:
+    from fabric.cli.up import run_up
+    extra = {}
+    if a.cell_config:
+        extra = {n: ["--cell-config", a.cell_config] for n in ("station", "planner", "collision")}
+    return run_up(settings_from_args(a), tuple(a.services), not a.no_hub, a.log_dir, extra)
+
+
+def _cmd_router(a: argparse.Namespace) -> int:
+    import zenoh
+    from fabric.cli.up import hub_settings
+    from fabric.config import zenoh_config
+    st = hub_settings(settings_from_args(a))
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+    with zenoh.open(zenoh_config(st)):
+        print(f"fabric hub listening on {', '.join(st.listen)} (Ctrl-C stops it)", flush=True)
+        stop.wait()
+    return 0
+
+
+def _cmd_cell_show(a: argparse.Namespace) -> int:
+    cell = _load_cell(a.cell_config)
+    emit(cell.to_dict(), a.json)
+    return 0
+
+
+def _cmd_cell_urdf(a: argparse.Namespace) -> int:
+    cell = _load_cell(a.cell_config)
+    cell.robot.export_urdf(a.output)
+    emit({"path": a.output, "robot": cell.robot.name, "tcp_frame": "tcp"}, a.json,
+         lambda d: f"wrote {d['path']} ({d['robot']} + tool, TCP frame 'tcp')")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    a = parser.parse_args(argv)
+    as_json = bool(getattr(a, "json", False))
+    try:
+        if hasattr(a, "local"):
+            return a.local(a)
+        with Client.connect(settings_from_args(a)) as client:
+            return a.run(client, a)
+    except FabricError as err:
+        return fail(err.message, as_json, err.code, err.details)
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+

@@ -1,0 +1,74 @@
+"""CLI output: ``--json`` for scripts, short readable text for people."""
+from __future__ import annotations
+
+import json
+import sys
+from typing import Any, Callable
+
+import numpy as np
+
+from fabric.schemas import to_plain
+
+__all__ = ["emit", "jsonable", "fail"]
+
+
+def jsonable(value: Any) -> Any:
+    """Plain JSON values: arrays become lists, bytes become their length."""
+    value = to_plain(value)
+    if isinstance(value, dict):
+        return {k: jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, (bytes, bytearray)):
+        return {"bytes": len(value)}
+    return value
+
+
+def emit(obj: Any, as_json: bool, human: Callable[[Any], str] | None = None) -> None:
+    if as_json:
+        print(json.dumps(jsonable(obj), indent=None, separators=(",", ":")))
+    elif human is not None:
+        print(human(obj))
+    else:
+        print(_default_text(jsonable(obj)))
+
+
+def _default_text(value: Any, indent: str = "") -> str:
+    if isinstance(value, dict):
+        lines = []
+        for k, v in value.items():
+            if isinstance(v, (dict, list)) and v and not _flat_list(v):
+                lines.append(f"{indent}{k}:")
+                lines.append(_default_text(v, indent + "  "))
+            else:
+                lines.append(f"{indent}{k}: {_fmt(v)}")
+        return "\n".join(lines)
+    if isinstance(value, list):
+        return "\n".join(_default_text(v, indent + "- ") if isinstance(v, dict) else f"{indent}- {_fmt(v)}"
+                         for v in value)
+    return f"{indent}{_fmt(value)}"
+
+
+def _flat_list(v: Any) -> bool:
+    return isinstance(v, list) and all(isinstance(x, (int, float, str, bool)) for x in v)
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}" if abs(v) < 1e5 else f"{v:.1f}"
+    if isinstance(v, list) and _flat_list(v):
+        return "[" + ", ".join(_fmt(x) for x in v) + "]"
+    return str(v)
+
+
+def fail(message: str, as_json: bool, code: str = "error", details: dict | None = None) -> int:
+    """Report an error (to stderr, or as JSON on stdout) and return the exit code 1."""
+    if as_json:
+        print(json.dumps({"error": {"code": code, "message": message, "details": jsonable(details or {})}}))
+    else:
+        print(f"error [{code}]: {message}", file=sys.stderr)
+    return 1

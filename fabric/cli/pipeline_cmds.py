@@ -1,0 +1,174 @@
+"""CLI commands for the pipeline: slice, plan (+ exports), print jobs."""
+from __future__ import annotations
+
+import argparse
+import queue
+import sys
+from pathlib import Path
+
+from fabric import schemas as s
+from fabric.cli.output import emit
+from fabric.client import Client
+from fabric.errors import BadRequest
+
+__all__ = ["register", "parse_sets", "follow_print"]
+
+EXPORT_FLAGS = {"csv": "csv", "rapid": "rapid", "krl": "krl", "urscript": "urscript"}
+END_EVENTS = ("finished", "stopped", "fault")
+
+
+def parse_sets(items: list[str] | None) -> dict[str, str]:
+    out = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise BadRequest(f"--set expects key=value, got {item!r}", value=item)
+        out[key.strip()] = value.strip()
+    return out
+
+
+def _read(path: str) -> bytes:
+    p = Path(path)
+    if not p.is_file():
+        raise BadRequest(f"no such file: {path}", file=path)
+    return p.read_bytes()
+
+
+def _progress(quiet: bool):
+    if quiet:
+        return None
+    def show(st: s.JobStatus) -> None:
+        print(f"\r  {st.stage or st.kind:<20} {100 * st.progress_r:5.1f} %", end="", file=sys.stderr, flush=True)
+    return show
+
+
+def cmd_slice(c: Client, a: argparse.Namespace) -> int:
+    req = s.SliceRequest(model=_read(a.model), filename=Path(a.model).name, profile=a.profile,
+                         backend=a.backend, overrides=parse_sets(a.set),
+                         center_xy_mm=list(a.center) if a.center else None)
+    acc = c.slice(req)
+    st = c.wait_job("slicer", acc.job_id, on_progress=_progress(a.json))
+    if not a.json:
+        print(file=sys.stderr)
+    res = c.slice_result(st.result_id)
+    gcode = c.artifact("slicer", st.result_id)
+    Path(a.output).write_bytes(gcode.data)
+    emit(res, a.json, lambda r: (f"{a.output}: {r.layers} layers, {r.extruded_mm3:.0f} mm3 "
+                                 f"({r.filament_mm:.0f} mm filament) with {r.backend} in {r.elapsed_s:.2f} s"
+                                 + "".join(f"\n  warning: {w}" for w in r.warnings)))
+    return 0
+
+
+def plan_file(c: Client, data: bytes, filename: str, a: argparse.Namespace) -> s.PlanSummary:
+    req = s.PlanRequest(gcode=data, filename=filename, offset_mm=list(a.offset), speed_r=a.speed,
+                        tilt_deg=list(a.tilt), rot_step_deg=a.rot_step)
+    acc = c.plan(req)
+    st = c.wait_job("planner", acc.job_id, on_progress=_progress(a.json))
+    if not a.json:
+        print(file=sys.stderr)
+    return c.plan_summary(st.result_id)
+
+
+def cmd_plan(c: Client, a: argparse.Namespace) -> int:
+    summary = plan_file(c, _read(a.gcode), Path(a.gcode).name, a)
+    written = {}
+    for fmt in EXPORT_FLAGS:
+        out = getattr(a, fmt)
+        if out:
+            art = c.export(summary.program_id, fmt, a.module_targets)
+            Path(out).write_bytes(art.data)
+            written[fmt] = out
+    result = {"summary": summary, "written": written}
+
+    def text(_):
+        r = summary
+        lines = [f"program {r.program_id[:12]}: {r.targets} targets, {r.moves} moves, {r.layers} layers, "
+                 f"cycle time {r.estimate_s:.1f} s, {r.extruded_mm3:.0f} mm3, feasible {100 * r.feasible_r:.2f} %"]
+        if not r.runnable and r.first_unreachable:
+            fu = r.first_unreachable
+            lines.append(f"NOT RUNNABLE: first unreachable target at G-code line {fu.get('gcode_line')}: {fu.get('reason')}")
+        lines += [f"wrote {fmt}: {path}" for fmt, path in written.items()]
+        return "\n".join(lines)
+    emit(result, a.json, text)
+    return 0 if summary.runnable else 2
+
+
+def follow_print(c: Client, timeout_s: float | None = None) -> s.Event:
+    """Wait for the station's end-of-print event (finished, stopped or fault) and return it."""
+    sub = c.subscribe("station", "events")
+    try:
+        seen = c.events().next_seq
+        st = c.state()
+        if st.state not in ("printing", "paused"):
+            for ev in reversed(c.events(max(0, seen - 50)).events):
+                if ev.kind in END_EVENTS:
+                    return ev
+        while True:
+            ev = sub.get(timeout=timeout_s)
+            if ev.kind in END_EVENTS:
+                return ev
+    finally:
+        sub.close()
+
+
+def cmd_job_submit(c: Client, a: argparse.Namespace) -> int:
+    req = s.JobSubmit(model=_read(a.model), filename=Path(a.model).name, profile=a.profile, backend=a.backend,
+                      overrides=parse_sets(a.set), start=a.start, rtf=a.rtf)
+    acc = c.submit(req)
+    if not (a.wait or a.follow):
+        emit(acc, a.json, lambda r: f"job {r.job_id} accepted")
+        return 0
+    st = c.wait_job("supervisor", acc.job_id, on_progress=_progress(a.json))
+    if not a.json:
+        print(file=sys.stderr)
+    result = {"job": st}
+    if a.follow and a.start:
+        try:
+            result["end"] = follow_print(c, timeout_s=a.timeout)
+        except queue.Empty:
+            result["end"] = None
+        result["time"] = c.time()
+    emit(result, a.json, lambda r: f"job {st.job_id}: {st.state} ({st.stage})"
+         + (f"; print {r['end'].kind} at t={r['end'].t_sim_s:.1f} s" if r.get("end") else ""))
+    return 0
+
+
+def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    p = sub.add_parser("slice", parents=[common], help="slice a model (STL/OBJ/3MF) into G-code")
+    p.add_argument("model")
+    p.add_argument("-o", "--output", required=True)
+    p.add_argument("--backend", default="builtin", choices=s.pipeline.BACKENDS)
+    p.add_argument("--profile", default="taz-pla-medium")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a profile key")
+    p.add_argument("--center", nargs=2, type=float, metavar=("X_MM", "Y_MM"), help="part centre on the plate")
+    p.set_defaults(run=cmd_slice)
+
+    p = sub.add_parser("plan", parents=[common], help="plan G-code into a robot program; export it")
+    p.add_argument("gcode")
+    for fmt in EXPORT_FLAGS:
+        p.add_argument(f"--{fmt}", metavar="OUT", help=f"write the {fmt} export")
+    p.add_argument("--offset", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"))
+    p.add_argument("--tilt", nargs=2, type=float, default=(0.0, 0.0), metavar=("RX_DEG", "RY_DEG"))
+    p.add_argument("--speed", type=float, default=1.0, help="feed-rate factor")
+    p.add_argument("--rot-step", type=float, default=15.0, help="free-rotation search step (deg)")
+    p.add_argument("--module-targets", type=int, default=5000, help="targets per RAPID/KRL module")
+    p.set_defaults(run=cmd_plan)
+
+    job = sub.add_parser("job", help="print jobs (slice -> plan -> check -> load)")
+    jsub = job.add_subparsers(dest="job_cmd", required=True)
+    p = jsub.add_parser("submit", parents=[common], help="submit a model as a print job")
+    p.add_argument("model")
+    p.add_argument("--profile", default="taz-pla-medium")
+    p.add_argument("--backend", default="builtin", choices=s.pipeline.BACKENDS)
+    p.add_argument("--set", action="append", metavar="KEY=VALUE")
+    p.add_argument("--start", action="store_true", help="start printing once loaded")
+    p.add_argument("--rtf", type=float, default=0.0, help="real-time factor when started (0 = max)")
+    p.add_argument("--wait", action="store_true", help="wait for the pipeline to finish")
+    p.add_argument("--follow", action="store_true", help="with --start: wait for the print to end")
+    p.add_argument("--timeout", type=float, default=None)
+    p.set_defaults(run=cmd_job_submit)
+    p = jsub.add_parser("status", parents=[common], help="a job's status")
+    p.add_argument("job_id")
+    p.set_defaults(run=lambda c, a: (emit(c.job(a.job_id), a.json), 0)[1])
+    p = jsub.add_parser("list", parents=[common], help="job history")
+    p.set_defaults(run=lambda c, a: (emit(c.jobs(), a.json), 0)[1])

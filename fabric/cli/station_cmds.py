@@ -1,0 +1,152 @@
+"""CLI commands for the station (the paper's operator commands), status and telemetry."""
+from __future__ import annotations
+
+import argparse
+import queue
+from pathlib import Path
+
+from fabric import schemas as s
+from fabric.cli.output import emit
+from fabric.client import Client
+from fabric.errors import FabricError
+
+__all__ = ["register"]
+
+
+def _pose_text(p) -> str:
+    x, y, z = p.xyz_mm
+    bx, by, bz = p.base_xyz_mm
+    q = ", ".join(f"{v:.2f}" for v in p.q_deg)
+    return (f"TCP  plate ({x:.2f}, {y:.2f}, {z:.2f}) mm   base ({bx:.2f}, {by:.2f}, {bz:.2f}) mm\n"
+            f"quat (w,x,y,z) ({', '.join(f'{v:.4f}' for v in p.quat_wxyz)})\n"
+            f"joints [{q}] deg   t_sim {p.t_sim_s:.2f} s")
+
+
+def _time_text(t) -> str:
+    return (f"elapsed {t.elapsed_s:.2f} s  total {t.total_s:.2f} s  remaining {t.remaining_s:.2f} s  "
+            f"(estimate {t.estimate_s:.2f} s)  [{t.state}]")
+
+
+def _ready_text(r) -> str:
+    lines = [f"station {'READY' if r.ready else 'NOT READY'}"]
+    lines += [f"  [{'pass' if c.ok else 'FAIL'}] {c.name}{': ' + c.detail if c.detail else ''}" for c in r.checks]
+    return "\n".join(lines)
+
+
+def _status_text(st) -> str:
+    lines = [f"cell {st.cell}"] + [f"  {i.name:<11} {'alive' if i.alive else 'DEAD'}" for i in st.services]
+    if st.job:
+        lines.append(f"job {st.job.get('job_id')} {st.job.get('filename', '')}")
+    return "\n".join(lines)
+
+
+def _collision_text(r) -> str:
+    if r.collision_free:
+        return (f"collision-free: {r.checked_configs} configurations checked, min clearance "
+                f"{r.min_distance_mm:.1f} mm ({r.elapsed_s:.2f} s)")
+    h = r.first_hit or {}
+    return (f"COLLISION at t={h.get('t_s', 0):.2f} s, row {h.get('row')}, G-code line {h.get('gcode_line')}: "
+            f"{h.get('body_a')} <-> {h.get('body_b')}")
+
+
+def _ack_text(a) -> str:
+    return a.message or ("ok" if a.ok else "failed")
+
+
+def cmd_status(c: Client, a: argparse.Namespace) -> int:
+    """Liveliness straight from the fabric (works even when the supervisor is down)."""
+    alive = c.alive(timeout=a.timeout)
+    st = s.FabricStatus(cell=c.keys.cell, services=[s.ServiceInfo(name=n, alive=v) for n, v in alive.items()])
+    if alive.get("supervisor"):
+        try:
+            st.job = c.status().job
+        except FabricError as exc:  # the supervisor may be mid-shutdown: liveliness already answered
+            st.job = {"error": str(exc)}
+    emit(st, a.json, _status_text)
+    return 0 if all(alive.values()) else 3
+
+
+def cmd_calibrate(c: Client, a: argparse.Namespace) -> int:
+    r = c.calibrate()
+    emit(r, a.json, lambda r: (
+        f"plate frame corrected by ({', '.join(f'{v:.3f}' for v in r.correction_xyz_mm)}) mm, "
+        f"({', '.join(f'{v:.4f}' for v in r.correction_rpy_deg)}) deg; residual RMS {r.residual_rms_mm:.4f} mm "
+        f"over {r.points} probes"))
+    return 0
+
+
+def cmd_watch(c: Client, a: argparse.Namespace) -> int:
+    sub = c.subscribe("station", a.topic)
+    n = 0
+    try:
+        while a.count <= 0 or n < a.count:
+            try:
+                msg = sub.get(timeout=a.timeout if a.timeout > 0 else None)
+            except queue.Empty:
+                break
+            n += 1
+            emit(msg, a.json, _watch_text(a.topic))
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sub.close()
+    return 0
+
+
+def _watch_text(topic: str):
+    if topic == "pose":
+        return lambda p: (f"{p.t_sim_s:9.2f}s  xyz ({p.xyz_mm[0]:8.2f} {p.xyz_mm[1]:8.2f} {p.xyz_mm[2]:8.2f})  "
+                          f"q [{' '.join(f'{v:7.2f}' for v in p.q_deg)}]")
+    if topic == "extrusion":
+        return lambda e: (f"{e.t_sim_s:9.2f}s  {'ON ' if e.on else 'off'} flow {e.flow_mm3_s:7.2f} mm3/s  "
+                          f"total {e.extruded_mm3:10.1f} mm3  layer {e.layer}  line {e.gcode_line}")
+    if topic == "events":
+        return lambda e: f"#{e.seq:<6} {e.t_sim_s:9.2f}s  {e.kind:<13} layer {e.layer} line {e.gcode_line} {e.data or ''}"
+    return None
+
+
+def cmd_mesh(c: Client, a: argparse.Namespace) -> int:
+    art = c.mesh(a.format)
+    Path(a.output).write_bytes(art.data)
+    emit({"path": a.output, "bytes": len(art.data), "artifact_id": art.artifact_id}, a.json,
+         lambda d: f"wrote {d['path']} ({d['bytes']} bytes)")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    def simple(name: str, fn, text, help_: str, **kw):
+        p = sub.add_parser(name, parents=[common], help=help_)
+        p.set_defaults(run=lambda c, a: (emit(fn(c, a), a.json, text), 0)[1], **kw)
+        return p
+
+    p = sub.add_parser("status", parents=[common], help="which services are alive")
+    p.add_argument("--timeout", type=float, default=1.0)
+    p.set_defaults(run=cmd_status)
+    simple("position", lambda c, a: c.position(), _pose_text, "TCP pose and joints of the twin now")
+    simple("home", lambda c, a: c.home(), _ack_text, "collision-checked joint move to home")
+    for name, help_ in (("start", "start printing the loaded program"), ("resume", "resume a paused print")):
+        p = simple(name, (lambda c, a, n=name: getattr(c, n)(rtf=a.rtf)), _ack_text, help_)
+        p.add_argument("--rtf", type=float, default=1.0, help="real-time factor (0 = as fast as possible)")
+    simple("pause", lambda c, a: c.pause(), _ack_text, "pause: extruder off, retract, lift")
+    simple("stop", lambda c, a: c.stop(), _ack_text, "abort the print safely")
+    simple("collisions", lambda c, a: c.collisions(), _collision_text, "sweep the loaded program for collisions")
+    p = sub.add_parser("calibrate", parents=[common], help="probe the plate and fit the work object")
+    p.set_defaults(run=cmd_calibrate)
+    simple("ready", lambda c, a: c.ready(), _ready_text, "station-ready checklist")
+    simple("time", lambda c, a: c.time(), _time_text, "simulation time: elapsed, total, remaining")
+    simple("state", lambda c, a: c.state(), None, "the station's state snapshot")
+    p = simple("events", lambda c, a: c.events(a.since), None, "event history")
+    p.add_argument("--since", type=int, default=0)
+    p = simple("override", lambda c, a: c.overrides(speed_r=a.speed, flow_r=a.flow, nozzle_c=a.nozzle, bed_c=a.bed),
+               None, "live overrides: speed, flow, temperatures")
+    for flag in ("speed", "flow", "nozzle", "bed"):
+        p.add_argument(f"--{flag}", type=float, default=None)
+    p = sub.add_parser("watch", parents=[common], help="follow a telemetry topic")
+    p.add_argument("topic", choices=("pose", "extrusion", "state", "temps", "events"))
+    p.add_argument("--count", type=int, default=0, help="stop after N messages (0 = forever)")
+    p.add_argument("--timeout", type=float, default=0.0, help="stop after this long without a message")
+    p.set_defaults(run=cmd_watch)
+    p = sub.add_parser("mesh", parents=[common], help="export the as-printed part")
+    p.add_argument("-o", "--output", required=True)
+    p.add_argument("--format", choices=("stl", "glb"), default="stl")
+    p.set_defaults(run=cmd_mesh)

@@ -1,0 +1,56 @@
+"""Programs on the wire: Program <-> ProgramMsg, content-addressed artifacts, fetching by id."""
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+
+from fabric import codec
+from fabric import schemas as s
+from fabric.errors import DecodeError, ValidationError
+from fabric.sim.program import COLUMNS, Program
+
+__all__ = ["program_to_msg", "program_from_msg", "program_artifact", "program_from_artifact", "content_id",
+           "PROGRAM_MEDIA_TYPE"]
+
+PROGRAM_MEDIA_TYPE = "application/x-am-fabric-program+msgpack"
+
+
+def content_id(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def program_to_msg(program: Program) -> s.ProgramMsg:
+    return s.ProgramMsg(columns=program.columns(), wobj=program.wobj, meta=dict(program.meta))
+
+
+def program_from_msg(msg: s.ProgramMsg) -> Program:
+    """Rebuild and check a program: every column present, with the right dtype and shape."""
+    missing = [c for c in COLUMNS if c not in msg.columns]
+    if missing:
+        raise ValidationError(f"program lacks column '{missing[0]}'", field=f"columns.{missing[0]}")
+    unknown = [c for c in msg.columns if c not in COLUMNS]
+    if unknown:
+        raise ValidationError(f"unknown program column '{unknown[0]}'", field=f"columns.{unknown[0]}")
+    cols = {}
+    n = len(msg.columns["op"])
+    for name, (dtype, shape) in COLUMNS.items():
+        arr = msg.columns[name]
+        if arr.dtype != np.dtype(dtype) or arr.shape != (n, *shape):
+            raise ValidationError(f"program column '{name}' has dtype {arr.dtype} shape {arr.shape}, "
+                                  f"expected {dtype} {(n, *shape)}", field=f"columns.{name}")
+        cols[name] = arr
+    return Program(**cols, wobj=msg.wobj, meta=msg.meta)
+
+
+def program_artifact(program: Program, name: str = "program") -> s.Artifact:
+    data = codec.encode(program_to_msg(program))
+    return s.Artifact(artifact_id=content_id(data), name=name, media_type=PROGRAM_MEDIA_TYPE, data=data)
+
+
+def program_from_artifact(art: s.Artifact) -> Program:
+    if art.media_type != PROGRAM_MEDIA_TYPE:
+        raise DecodeError(f"artifact {art.artifact_id} is {art.media_type}, not a program")
+    if content_id(art.data) != art.artifact_id:
+        raise DecodeError(f"artifact {art.artifact_id} does not match its content hash")
+    return program_from_msg(codec.decode(art.data, s.ProgramMsg))

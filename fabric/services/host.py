@@ -1,0 +1,41 @@
+"""Run one service as a process: open the session, start the service, stop cleanly on SIGTERM/SIGINT."""
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import signal
+import threading
+
+import zenoh
+
+from fabric.config import SessionSettings, zenoh_config
+from fabric.services import SERVICE_MODULES
+
+__all__ = ["serve", "setup_logging"]
+
+
+def setup_logging(name: str, level: str = "INFO") -> None:
+    logging.basicConfig(level=getattr(logging, level.upper(), logging.INFO),
+                        format=f"%(asctime)s {name} %(levelname)s %(message)s", datefmt="%H:%M:%S")
+
+
+def serve(name: str, settings: SessionSettings, options: argparse.Namespace,
+          ready: threading.Event | None = None, stop: threading.Event | None = None) -> int:
+    """Run service ``name`` until ``stop`` is set or a termination signal arrives."""
+    module = importlib.import_module(SERVICE_MODULES[name])
+    stop = stop or threading.Event()
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, lambda *_: stop.set())
+    with zenoh.open(zenoh_config(settings)) as session:
+        svc = module.build(session, settings.cell, options)
+        try:
+            svc.start()
+            if ready is not None:
+                ready.set()
+            stop.wait()
+        finally:
+            svc.close()
+    logging.getLogger(f"fabric.{name}").info("%s stopped", name)
+    return 0

@@ -1,0 +1,107 @@
+"""Planner service: G-code (inline or the slicer's artifact) -> verified robot program, as a job.
+
+Results are content-addressed: the program is stored as an artifact whose id
+is the sha256 of its encoded bytes, served at ``planner/artifact/<id>`` so
+that the station and the collision checker fetch it over the fabric (no
+shared filesystem between hosts).
+"""
+from __future__ import annotations
+
+import argparse
+import io
+
+import numpy as np
+import zenoh
+
+from fabric import schemas as s
+from fabric.client import Client
+from fabric.errors import BadRequest, NotFound, UnreachableError
+from fabric.jobs import Job, JobRunner
+from fabric.programs import content_id, program_artifact, program_from_artifact
+from fabric.runtime import Service
+from fabric.sim.cell import Cell
+from fabric.planning import PlanOptions, plan_gcode
+from fabric.planning.post import write_export
+
+__all__ = ["PlannerService", "build", "add_arguments"]
+
+MEDIA = {"rapid": "text/x-rapid", "krl": "text/x-krl", "urscript": "text/x-urscript", "csv": "text/csv"}
+SUFFIX = {"rapid": "mod", "krl": "src", "urscript": "script", "csv": "csv"}
+
+
+class PlannerService(Service):
+    name = "planner"
+
+    def __init__(self, session: zenoh.Session, cell_id: str, cell: Cell) -> None:
+        super().__init__(session, cell_id)
+        self.cell = cell
+        self.client = Client(session, cell_id)
+        self.jobs = JobRunner("planner", self.publisher("progress", lossless=True))
+        self.summaries: dict[str, s.PlanSummary] = {}
+        self.handle("plan", self.on_plan)
+        self.handle("job", lambda q: self.jobs.get(q.job_id))
+        self.handle("summary", self.on_summary)
+        self.handle("export", self.on_export)
+
+    def close(self) -> None:
+        super().close()
+        self.jobs.close()
+
+    def on_plan(self, req: s.PlanRequest) -> s.JobAccepted:
+        if not req.gcode and not req.gcode_id:
+            raise BadRequest("give the G-code inline (gcode) or a slicer artifact id (gcode_id)", field="gcode")
+        options = PlanOptions(offset_mm=tuple(req.offset_mm), tilt_deg=tuple(req.tilt_deg), speed_r=req.speed_r,
+                              rot_step_deg=req.rot_step_deg)
+        st = self.jobs.submit("plan", lambda job: self._run(job, req, options))
+        return s.JobAccepted(job_id=st.job_id, kind="plan")
+
+    def _run(self, job: Job, req: s.PlanRequest, options: PlanOptions) -> str:
+        data = req.gcode
+        if req.gcode_id:
+            job.progress(0.0, "fetching G-code")
+            data = self.client.artifact("slicer", req.gcode_id).data
+        job.progress(0.0, "planning")
+        result = plan_gcode(data, self.cell, options, progress=lambda fr: job.progress(fr, "planning"),
+                            filename=req.filename)
+        program = result.program
+        art = program_artifact(program, name=req.filename.rsplit(".", 1)[0] + ".program")
+        pid = self.store_artifact(art)
+        rep = result.report
+        first = None
+        if rep.first_unreachable is not None:
+            first = {"gcode_line": int(rep.first_unreachable[0]), "reason": str(rep.first_unreachable[1])}
+        st = result.stats
+        self.summaries[pid] = s.PlanSummary(
+            program_id=pid, targets=len(program), moves=int(st["moves"]), layers=int(st["layers"]),
+            feasible_r=float(rep.feasible_r), runnable=first is None, estimate_s=float(result.estimate_s),
+            extruded_mm3=float(st["extruded_mm3"]), path_mm=float(st["path_mm"]), first_unreachable=first,
+            unreachable_by_reason={str(k): int(v) for k, v in rep.counts_by_reason.items()},
+            elapsed_s=float(st.get("elapsed_s", 0.0)))
+        return pid
+
+    def on_summary(self, req: s.ArtifactQuery) -> s.PlanSummary:
+        if req.artifact_id not in self.summaries:
+            raise NotFound(f"no planned program {req.artifact_id}", artifact_id=req.artifact_id)
+        return self.summaries[req.artifact_id]
+
+    def on_export(self, req: s.ExportRequest) -> s.Artifact:
+        summary = self.on_summary(s.ArtifactQuery(artifact_id=req.program_id))
+        if not summary.runnable and req.fmt != "csv":
+            fu = summary.first_unreachable or {}
+            raise UnreachableError(f"program is not runnable: first unreachable target at G-code line "
+                                   f"{fu.get('gcode_line')} ({fu.get('reason')})", **fu)
+        program = program_from_artifact(self.get_artifact(req.program_id))
+        buf = io.StringIO()
+        write_export(program, req.fmt, buf, self.cell, module_targets=req.module_targets)
+        data = buf.getvalue().encode()
+        name = f"{program.meta.get('name', 'program')}.{SUFFIX[req.fmt]}"
+        return s.Artifact(artifact_id=content_id(data), name=name, media_type=MEDIA[req.fmt], data=data)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--cell-config", default=None, help="cell TOML (default: the built-in IRB 140 cell)")
+
+
+def build(session: zenoh.Session, cell_id: str, options: argparse.Namespace) -> PlannerService:
+    cell = Cell.load(options.cell_config) if options.cell_config else Cell.builtin("irb140")
+    return PlannerService(session, cell_id, cell)

@@ -1,0 +1,79 @@
+"""Slicer service: model bytes in, G-code out, as a job; back-ends builtin, PrusaSlicer and Slic3r."""
+from __future__ import annotations
+
+import argparse
+
+import zenoh
+
+from fabric import schemas as s
+from fabric.errors import NotFound
+from fabric.jobs import Job, JobRunner
+from fabric.programs import content_id
+from fabric.runtime import Service
+from fabric.sim.cell import Cell
+from fabric.slicing import Placement, available_backends, list_profiles, load_profile, slice_model
+
+__all__ = ["SlicerService", "build", "add_arguments"]
+
+GCODE_MEDIA_TYPE = "text/x-gcode"
+
+
+class SlicerService(Service):
+    name = "slicer"
+
+    def __init__(self, session: zenoh.Session, cell_id: str, plate_size_mm: tuple[float, float],
+                 build_height_mm: float) -> None:
+        super().__init__(session, cell_id)
+        self.plate_size_mm, self.build_height_mm = plate_size_mm, build_height_mm
+        self.jobs = JobRunner("slicer", self.publisher("progress", lossless=True))
+        self.results: dict[str, s.SliceResult] = {}
+        self.handle("slice", self.on_slice)
+        self.handle("job", lambda q: self.jobs.get(q.job_id))
+        self.handle("result", self.on_result)
+        self.handle("backends", self.on_backends)
+
+    def close(self) -> None:
+        super().close()
+        self.jobs.close()
+
+    def on_slice(self, req: s.SliceRequest) -> s.JobAccepted:
+        profile = load_profile(req.profile, req.overrides)     # a bad profile fails now, not in the job
+        backends = available_backends()
+        if backends.get(req.backend) is None:
+            raise NotFound(f"slicer back-end '{req.backend}' is not installed on this host",
+                           backend=req.backend, installed=[k for k, v in backends.items() if v])
+        placement = Placement(center_xy_mm=tuple(req.center_xy_mm) if req.center_xy_mm else None)
+        st = self.jobs.submit("slice", lambda job: self._run(job, req, profile, placement))
+        return s.JobAccepted(job_id=st.job_id, kind="slice")
+
+    def _run(self, job: Job, req: s.SliceRequest, profile, placement) -> str:
+        res = slice_model(req.model, req.filename, profile, backend=req.backend, placement=placement,
+                          plate_size_mm=self.plate_size_mm, build_height_mm=self.build_height_mm,
+                          progress=lambda fr: job.progress(fr, "slicing"))
+        data = res.gcode.encode() if isinstance(res.gcode, str) else bytes(res.gcode)
+        gid = self.store_artifact(s.Artifact(artifact_id=content_id(data), name=req.filename.rsplit(".", 1)[0] + ".gcode",
+                                             media_type=GCODE_MEDIA_TYPE, data=data))
+        self.results[gid] = s.SliceResult(gcode_id=gid, backend=res.backend, layers=int(res.layers),
+                                          extruded_mm3=float(res.extruded_mm3), filament_mm=float(res.filament_mm),
+                                          model_volume_mm3=float(res.model_volume_mm3), faces=int(res.faces),
+                                          elapsed_s=float(res.elapsed_s), warnings=list(res.warnings))
+        return gid
+
+    def on_result(self, req: s.ArtifactQuery) -> s.SliceResult:
+        if req.artifact_id not in self.results:
+            raise NotFound(f"no slicing result {req.artifact_id}", artifact_id=req.artifact_id)
+        return self.results[req.artifact_id]
+
+    def on_backends(self, _: s.Empty) -> s.Backends:
+        return s.Backends(backends={k: v or "" for k, v in available_backends().items()}, profiles=list_profiles())
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--cell-config", default=None, help="cell TOML: the plate size and build volume")
+    parser.add_argument("--build-height", type=float, default=250.0, help="reachable build height (mm)")
+
+
+def build(session: zenoh.Session, cell_id: str, options: argparse.Namespace) -> SlicerService:
+    cell = Cell.load(options.cell_config) if options.cell_config else Cell.builtin("irb140")
+    size = tuple(float(v) for v in cell.plate_size_mm[:2])
+    return SlicerService(session, cell_id, size, options.build_height)

@@ -1,0 +1,138 @@
+"""Supervisor service: tracks the services' liveliness and runs print jobs through the pipeline.
+
+A job is the paper's one-click path made explicit: slice the model (slicer),
+plan the G-code into a robot program (planner), sweep it for collisions
+(collision), load it on the station, and optionally start it. Each stage
+calls the owning service over the fabric, so every service may live on
+another host. Stages and failures are published on ``supervisor/progress``.
+"""
+from __future__ import annotations
+
+import argparse
+import queue
+import threading
+import time
+from typing import Any
+
+import zenoh
+
+from fabric import schemas as s
+from fabric.client import Client
+from fabric.errors import CollisionError, UnreachableError
+from fabric.jobs import Job, JobRunner
+from fabric.keys import SERVICES, parse_alive
+from fabric.runtime import Service
+
+__all__ = ["SupervisorService", "build", "add_arguments"]
+
+
+class SupervisorService(Service):
+    name = "supervisor"
+
+    def __init__(self, session: zenoh.Session, cell: str) -> None:
+        super().__init__(session, cell)
+        self.client = Client(session, cell)
+        self._alive: dict[str, float] = {}           # service -> since (wall time)
+        self._alive_lock = threading.Lock()
+        self._events: queue.Queue[tuple[str, str]] = queue.Queue()
+        self._records: dict[str, dict[str, Any]] = {}
+        self.jobs = JobRunner("supervisor", self.publisher("progress", lossless=True))
+        self.handle("status", self.on_status)
+        self.handle("submit", self.on_submit)
+        self.handle("job", lambda q: self.jobs.get(q.job_id))
+        self.handle("jobs", self.on_jobs)
+
+    def start(self) -> None:
+        # liveliness: the callback only enqueues; a worker applies and logs
+        self._live_sub = self.session.liveliness().declare_subscriber(
+            self.keys.alive_all(), lambda smp: self._events.put((str(smp.kind), str(smp.key_expr))), history=True)
+        threading.Thread(target=self._track, name="supervisor:liveliness", daemon=True).start()
+        super().start()
+
+    def _track(self) -> None:
+        while not self.closed.is_set():
+            try:
+                kind, key = self._events.get(timeout=0.5)
+            except queue.Empty:
+                continue
+            _, svc = parse_alive(key)
+            with self._alive_lock:
+                if kind.endswith("PUT"):
+                    self._alive[svc] = time.time()
+                    self.log.info("service %s is alive", svc)
+                else:
+                    self._alive.pop(svc, None)
+                    self.log.warning("service %s is gone", svc)
+
+    def close(self) -> None:
+        super().close()
+        self._live_sub.undeclare()
+        self.jobs.close()
+
+    # --- handlers -----------------------------------------------------------
+
+    def on_status(self, _: s.Empty) -> s.FabricStatus:
+        with self._alive_lock:
+            alive = dict(self._alive)
+        alive.setdefault("supervisor", self.started_s)
+        infos = [s.ServiceInfo(name=n, alive=n in alive, since_s=alive.get(n, 0.0)) for n in SERVICES]
+        jobs = self.jobs.all()
+        current = self._records.get(jobs[-1].job_id) if jobs else None
+        return s.FabricStatus(cell=self.keys.cell, services=infos, job=current)
+
+    def on_submit(self, req: s.JobSubmit) -> s.JobAccepted:
+        st = self.jobs.submit("print", lambda job: self._pipeline(job, req))
+        self._records[st.job_id] = {"job_id": st.job_id, "filename": req.filename, "profile": req.profile,
+                                    "backend": req.backend, "created_s": st.created_s}
+        return s.JobAccepted(job_id=st.job_id, kind="print")
+
+    def on_jobs(self, _: s.Empty) -> s.JobList:
+        out = []
+        for st in self.jobs.all():
+            rec = dict(self._records.get(st.job_id, {}))
+            rec.update(state=st.state, stage=st.stage, message=st.message, result_id=st.result_id)
+            out.append(rec)
+        return s.JobList(jobs=out)
+
+    # --- the pipeline ---------------------------------------------------------
+
+    def _pipeline(self, job: Job, req: s.JobSubmit) -> str:
+        rec = self._records[job.job_id]
+        c = self.client
+        job.progress(0.0, "slicing")
+        acc = c.slice(s.SliceRequest(model=req.model, filename=req.filename, profile=req.profile,
+                                     backend=req.backend, overrides=req.overrides))
+        sl = c.wait_job("slicer", acc.job_id, on_progress=lambda st: job.progress(0.3 * st.progress_r))
+        rec["gcode_id"] = sl.result_id
+        job.progress(0.3, "planning")
+        acc = c.plan(s.PlanRequest(gcode_id=sl.result_id, filename=req.filename.rsplit(".", 1)[0] + ".gcode"))
+        pl = c.wait_job("planner", acc.job_id, on_progress=lambda st: job.progress(0.3 + 0.4 * st.progress_r))
+        summary = c.plan_summary(pl.result_id)
+        rec["program_id"], rec["plan"] = pl.result_id, s.to_plain(summary)
+        if not summary.runnable:
+            fu = summary.first_unreachable or {}
+            raise UnreachableError(f"program has unreachable targets, first at G-code line {fu.get('gcode_line')}: "
+                                   f"{fu.get('reason')}", **fu)
+        job.progress(0.7, "checking collisions")
+        report = c.check(s.CollisionRequest(program_id=pl.result_id))
+        rec["collisions"] = s.to_plain(report)
+        if not report.collision_free:
+            hit = report.first_hit or {}
+            raise CollisionError(f"collision at t={hit.get('t_s', 0):.2f} s, G-code line {hit.get('gcode_line')}: "
+                                 f"{hit.get('body_a')} hits {hit.get('body_b')}", **hit)
+        job.progress(0.9, "loading")
+        c.load(pl.result_id, job_id=job.job_id)
+        if req.start:
+            c.start(rtf=req.rtf)
+            job.progress(1.0, "printing")
+        else:
+            job.progress(1.0, "loaded")
+        return pl.result_id
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The supervisor has no options of its own."""
+
+
+def build(session: zenoh.Session, cell: str, options: argparse.Namespace) -> SupervisorService:
+    return SupervisorService(session, cell)
