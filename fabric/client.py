@@ -27,6 +27,8 @@ from fabric.keys import ENDPOINTS, SERVICES, TOPICS, Keys, parse_alive
 
 __all__ = ["Client", "Subscription"]
 
+DISCOVERY_WINDOW_S = 1.0
+
 
 class Subscription:
     """Decoded messages of one topic; the Zenoh callback only enqueues bytes."""
@@ -86,10 +88,18 @@ class Client:
         return self._get_one(key, payload, reply_type, timeout, f"{service}/{command}")
 
     def _get_one(self, key: str, payload: bytes | None, reply_type: type, timeout: float, what: str) -> Any:
-        for reply in self.session.get(key, payload=payload, timeout=timeout):
-            if reply.ok is not None:
-                return codec.decode(reply.ok.payload.to_bytes(), reply_type)
-            raise _error_of(reply.err.payload.to_bytes())
+        # A get with no matching queryable returns at once; right after a service (or this session)
+        # starts, its declaration may still be on the way: retry for a short, bounded window.
+        t0 = time.monotonic()
+        while True:
+            for reply in self.session.get(key, payload=payload, timeout=timeout):
+                if reply.ok is not None:
+                    return codec.decode(reply.ok.payload.to_bytes(), reply_type)
+                raise _error_of(reply.err.payload.to_bytes())
+            waited = time.monotonic() - t0
+            if waited >= min(timeout, DISCOVERY_WINDOW_S):
+                break
+            time.sleep(0.05)
         raise ServiceUnavailable(f"no reply from {what} within {timeout:g} s (is the service running?)",
                                  key=key, timeout_s=timeout)
 
@@ -115,8 +125,9 @@ class Client:
                     missing = sorted(set(services) - alive)
                     raise ServiceUnavailable(f"not alive after {deadline_s:g} s: {', '.join(missing)}", missing=missing)
                 try:
-                    kind, name = events.get(timeout=left)
-                except queue.Empty:
+                    kind, name = events.get(timeout=min(left, 1.0))
+                except queue.Empty:  # a link still coming up can hide a token: ask again, bounded
+                    alive |= {k for k, v in self.alive(timeout=0.5).items() if v}
                     continue
                 (alive.add if kind == "put" else alive.discard)(name)
 
@@ -206,7 +217,7 @@ def _liveliness_queue(session: zenoh.Session, key: str) -> Iterator["queue.Queue
         kind = "put" if sample.kind == zenoh.SampleKind.PUT else "delete"
         events.put((kind, parse_alive(str(sample.key_expr))[1]))
 
-    sub = session.liveliness().declare_subscriber(key, on_sample)
+    sub = session.liveliness().declare_subscriber(key, on_sample, history=True)
     try:
         yield events
     finally:

@@ -1,0 +1,64 @@
+"""Shared fixtures: Zenoh sessions on free loopback ports (scouting off) and the whole cell as processes."""
+from __future__ import annotations
+
+import socket
+import uuid
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from fabric.config import SessionSettings, zenoh_config
+from fabric.cli.up import Cell as CellProcesses, hub_settings
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def make_settings() -> SessionSettings:
+    return SessionSettings(connect=[f"tcp/127.0.0.1:{free_port()}"], cell=f"t{uuid.uuid4().hex[:8]}")
+
+
+@pytest.fixture
+def settings() -> SessionSettings:
+    """Fresh hub endpoint and cell name per test."""
+    return make_settings()
+
+
+@pytest.fixture
+def hub(settings):
+    """An in-process router session hosting the hub endpoint."""
+    with zenoh.open(zenoh_config(hub_settings(settings))) as session:
+        yield session
+
+
+@pytest.fixture
+def session(hub, settings):
+    """A peer session connected to the hub."""
+    with zenoh.open(zenoh_config(settings)) as s:
+        yield s
+
+
+@pytest.fixture
+def peers():
+    """Two in-process peers: one listens on a free loopback port, the other connects to it."""
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    a = zenoh.open(zenoh_config(SessionSettings(listen=[ep], connect=[])))
+    b = zenoh.open(zenoh_config(SessionSettings(connect=[ep])))
+    yield a, b
+    b.close()
+    a.close()
+
+
+@pytest.fixture(scope="session")
+def running_cell(tmp_path_factory):
+    """The five services as separate processes, awaited by liveliness with a deadline."""
+    st = make_settings()
+    logs = Path(tmp_path_factory.mktemp("cell-logs"))
+    cell = CellProcesses(st, log_dir=logs)
+    cell.start(deadline_s=90.0)
+    yield cell
+    cell.stop()

@@ -1,0 +1,149 @@
+"""Runtime, client and config over real in-process Zenoh sessions on loopback."""
+from __future__ import annotations
+
+import argparse
+import queue
+import threading
+
+import msgpack
+import pytest
+import zenoh
+
+from fabric import codec
+from fabric import schemas as s
+from fabric.client import Client
+from fabric.config import SessionSettings, add_session_args, settings_from_args, zenoh_config
+from fabric.errors import DecodeError, NotFound, ServiceUnavailable, ValidationError
+from fabric.keys import ENDPOINTS, Keys, parse_alive
+from fabric.services.supervisor import SupervisorService
+
+
+@pytest.fixture
+def supervisor(session, settings, client):
+    svc = SupervisorService(session, settings.cell)
+    svc.start()
+    client.wait_alive(("supervisor",), deadline_s=10)   # its token follows its queryables
+    yield svc
+    svc.close()
+
+
+@pytest.fixture
+def client(hub, settings):
+    with Client.connect(settings) as c:
+        yield c
+
+
+def test_peers_exchange_queries_and_samples(peers):
+    a, b = peers
+    q = a.declare_queryable("am/x/ping", handler=zenoh.handlers.FifoChannel(8))
+
+    def serve():
+        with q.recv() as query:
+            query.reply(query.key_expr, b"pong")
+    t = threading.Thread(target=serve)
+    t.start()
+    replies = []
+    for _ in range(50):  # discovery between two fresh peers takes a moment: retry, bounded
+        replies = [r.ok.payload.to_bytes() for r in b.get("am/x/ping", timeout=0.2) if r.ok]
+        if replies:
+            break
+    t.join(timeout=5)
+    assert replies == [b"pong"]
+
+
+def test_garbage_gets_an_error_reply_and_the_service_keeps_serving(supervisor, client):
+    key = client.keys.cmd("supervisor", "status")
+    for garbage in (b"", b"\xc1\xff garbage", msgpack.packb([1, 2, 3]), msgpack.packb({"_t": "nope", "_v": 1})):
+        replies = list(client.session.get(key, payload=garbage, timeout=5.0))
+        assert len(replies) == 1 and replies[0].err is not None
+        err = codec.decode(replies[0].err.payload.to_bytes(), s.ErrorReply)
+        assert err.code == "decode" and err.message
+    st = client.status()
+    assert st.cell == client.keys.cell
+    assert {i.name for i in st.services} == {"station", "slicer", "planner", "collision", "supervisor"}
+    assert supervisor.degraded is None
+
+
+def test_invalid_field_is_a_validation_error_naming_it(supervisor, client):
+    bad = codec.pack({"_t": "supervisor.JobSubmit", "_v": 1, "model": b"x", "filename": "a.stl", "rtf": -3.0})
+    with pytest.raises(ValidationError) as e:
+        client.call_raw("supervisor", "submit", bad, s.JobAccepted, 5.0)
+    assert e.value.details["field"] == "rtf"
+
+
+def test_unknown_job_is_not_found(supervisor, client):
+    with pytest.raises(NotFound, match="no supervisor job"):
+        client.job("deadbeef")
+
+
+def test_no_service_is_unavailable_within_the_timeout(client):
+    with pytest.raises(ServiceUnavailable, match="station/position"):
+        client.call("station", "position", timeout=0.3)
+
+
+def test_liveliness_reports_alive_and_gone(session, settings, client):
+    assert not client.alive(timeout=0.3)["supervisor"]
+    svc = SupervisorService(session, settings.cell)
+    svc.start()
+    client.wait_alive(("supervisor",), deadline_s=10)
+    assert client.alive()["supervisor"]
+    svc.close()
+    with pytest.raises(ServiceUnavailable, match="supervisor"):
+        client.wait_alive(("supervisor",), deadline_s=0.5)
+
+
+def test_supervisor_tracks_liveliness(supervisor, session, settings, client):
+    token = session.liveliness().declare_token(Keys(settings.cell).alive("planner"))
+    sub = client.subscribe("supervisor", "progress")  # any handle; we wait on the status itself below
+    try:
+        for _ in range(100):
+            if {i.name: i.alive for i in client.status().services}["planner"]:
+                break
+            threading.Event().wait(0.02)
+        assert {i.name: i.alive for i in client.status().services}["planner"]
+    finally:
+        sub.close()
+        token.undeclare()
+
+
+def test_subscription_decodes_and_validates(session, settings, client):
+    sub = client.subscribe("station", "state")
+    pub = session.declare_publisher(Keys(settings.cell).topic("station", "state"))
+    try:
+        for _ in range(100):
+            pub.put(codec.encode(s.StationState(state="idle")))
+            try:
+                msg = sub.get(timeout=0.05)
+                break
+            except queue.Empty:
+                continue
+        assert msg.state == "idle"
+        pub.put(b"\x00garbage")
+        with pytest.raises(DecodeError):
+            while True:
+                sub.get(timeout=2.0)
+    finally:
+        sub.close()
+        pub.undeclare()
+
+
+def test_endpoint_table_and_keys_are_consistent():
+    keys = Keys("cellA")
+    for (service, command), ep in ENDPOINTS.items():
+        assert keys.cmd(service, command) == f"am/cellA/{service}/cmd/{command}"
+        assert ep.timeout_s > 0 and hasattr(ep.request, "TYPE") and hasattr(ep.reply, "TYPE")
+    assert parse_alive(keys.alive("station")) == ("cellA", "station")
+    assert keys.parse_artifact(keys.artifact("planner", "ab12")) == "ab12"
+    with pytest.raises(ValueError):
+        Keys("bad/cell")
+
+
+def test_session_settings_from_flags():
+    p = argparse.ArgumentParser()
+    add_session_args(p)
+    st = settings_from_args(p.parse_args(["--mode", "client", "--connect", "tcp/10.0.0.2:7447", "--cell", "c9"]))
+    assert (st.mode, st.connect, st.cell) == ("client", ["tcp/10.0.0.2:7447"], "c9")
+    assert "--connect" in st.to_args()
+    conf = zenoh_config(SessionSettings(listen=["tcp/127.0.0.1:0"], connect=[]))
+    assert "tcp/127.0.0.1:0" in conf.get_json("listen/endpoints")
+    assert conf.get_json("scouting/multicast/enabled") == "false"
