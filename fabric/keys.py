@@ -60,7 +60,7 @@ _TABLE = [
     _ep("station", "stop", s.Empty, s.Ack, doc="abort safely, keep the deposit record"),
     _ep("station", "collisions", s.Empty, s.CollisionReport, 120.0, "sweep the loaded program"),
     _ep("station", "calibrate", s.Empty, s.CalibrationReport, 30.0, "probe the plate, fit the work object"),
-    _ep("station", "ready", s.Empty, s.ReadyReport, 10.0, "checklist with pass/fail per item"),
+    _ep("station", "ready", s.Empty, s.ReadyReport, 120.0, "checklist with pass/fail per item"),
     _ep("station", "time", s.Empty, s.TimeInfo, doc="elapsed, total and remaining simulated time"),
     _ep("station", "state", s.Empty, s.StationState, doc="state snapshot"),
     _ep("station", "events", s.EventsQuery, s.EventList, doc="event history since a sequence number"),
