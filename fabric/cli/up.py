@@ -22,7 +22,7 @@ __all__ = ["Cell", "hub_settings"]
 
 def hub_settings(settings: SessionSettings) -> SessionSettings:
     """The router session that hosts the hub endpoint the services connect to."""
-    return replace(settings, mode="router", listen=list(settings.connect), connect=[])
+    return replace(settings, mode="router", listen=list(settings.listen or settings.connect), connect=[])
 
 
 class Cell:
