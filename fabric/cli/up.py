@@ -51,7 +51,8 @@ class Cell:
                                          exited=dead) from None
 
     def spawn(self, name: str) -> subprocess.Popen:
-        cmd = [sys.executable, "-m", "fabric.cli.main", "serve", name, *self.settings.to_args(),
+        child = replace(self.settings, listen=[])      # children connect to the hub; they never take its port
+        cmd = [sys.executable, "-m", "fabric.cli.main", "serve", name, *child.to_args(),
                *self.extra_args.get(name, [])]
         out = None
         if self.log_dir is not None:
