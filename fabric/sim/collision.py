@@ -59,10 +59,12 @@ class CollisionChecker:
         gm = robot.collision_model.copy()
         self.n_robot = len(gm.geometryObjects)
         env = []
-        for name, size_mm, T in (("table", cell.table_size_mm, cell.table_T), ("plate", cell.plate_size_mm,
-                                                                               cell.true_plate_T)):
+        # cell frames (fabric.sim.cell): the table's reference is the centre of its top face (the box hangs
+        # below it), the plate's the centre of its bottom face; coal boxes are centred on their origin
+        for name, size_mm, T, below in (("table", cell.table_size_mm, cell.table_T, True),
+                                        ("plate", cell.plate_size_mm, cell.true_plate_T, False)):
             box = coal.Box(*(np.asarray(size_mm, float) * MM))
-            pose = np.asarray(T, float) @ _center_offset(size_mm)   # base frame; box reference = bottom centre
+            pose = np.asarray(T, float) @ _center_offset(size_mm, below)
             obj = pin.GeometryObject(name, 0, 0, pin.SE3(pose[:3, :3], pose[:3, 3] * MM), box)
             env.append(gm.addGeometryObject(obj))
         self.env_names = ["table", "plate"]
@@ -177,9 +179,9 @@ def layer_boxes(program: Program, base_from_plate: np.ndarray, nozzle_gap_mm: fl
     return boxes * MM
 
 
-def _center_offset(size_mm) -> np.ndarray:
+def _center_offset(size_mm, below: bool) -> np.ndarray:
     T = np.eye(4)
-    T[2, 3] = float(size_mm[2]) / 2
+    T[2, 3] = float(size_mm[2]) / 2 * (-1.0 if below else 1.0)
     return T
 
 
