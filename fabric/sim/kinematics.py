@@ -1,0 +1,472 @@
+"""Closed-form, vectorised kinematics of a spherical-wrist 6R arm (the ABB IRB 140), plus IK status codes.
+
+Geometry (mm, ABB joint signs, see ``robots/irb140.urdf``): A1 turns about the
+base z axis; the shoulder (A2) sits ``a1`` forward and ``d1`` up; the upper arm
+(``a2``) is vertical at zero; the forearm leaves the elbow (A3) along +x (``d4``
+to the wrist centre, ``a3`` above the elbow axis: 0 on the IRB 140); A4, A5, A6
+meet at the wrist centre; the flange is ``d6`` beyond it. A2, A3 and A5 turn
+about +y (positive = forward / down), A1 about +z, A4 and A6 about the forearm /
+flange axis. Flange frame: z out of the flange, x pointing down at zero.
+
+Inverse kinematics is the spherical-wrist decomposition: the wrist centre
+``c = p_flange - d6 * z_flange`` fixes A1 (facing the target, or turned 180 deg
+and reaching back over the top), then A2/A3 by the law of cosines in the arm
+plane (elbow up / down), then ``R36 = R03^T R06 = Rx(q4) Ry(q5) Rx(q6)`` gives the
+wrist (q5 or -q5: the wrist flip). All 8 branches are arrays ``(N, 8, 6)``,
+branch ``b = 4*shoulder + 2*elbow + wrist``.
+
+Branch choice (``select_branches``): row i takes, among its valid branches, the
+one nearest (joint-space distance, angles compared modulo 2*pi) the solution
+chosen for row i-1; row 0 the one nearest the seed. Written as a map
+``nxt[i, b]`` ("best branch at row i if row i-1 used b") the sequential part is
+only the chain ``b_i = nxt[i, b_{i-1}]``. ``nxt[i]`` is the identity whenever
+every branch moved less than half the smallest distance between two branches of
+row i (triangle inequality), and that separation is known in closed form:
+branches differing in shoulder or wrist differ by pi in A1 or A4; branches
+differing in elbow differ by ``pi - 2|psi|`` in A3 (small only near the stretched
+elbow). So a cheap per-row test marks the "quiet" rows, the full 8x8 distances
+are computed only for the others, and a Python loop follows the chain through
+those few rows: on a smooth toolpath that is a handful, not N. Multi-turn joints
+(range >= 360 deg: A1, A4, A6) are finally unwrapped towards the previous row
+and shifted by 2*pi back into their limits if a wind-up would leave them.
+
+Singularities, flagged ``IK_SINGULAR`` (the exact solution is still returned):
+the Jacobian determinant factors as ``a2 * L * cos(psi) * rho * sin(q5)`` (``L``
+forearm length, ``psi`` the elbow angle from the stretched-out forearm, ``rho``
+the wrist centre's distance from the A1 axis), so a row is singular when
+``|sin q5| < WRIST_SING_SIN`` (0.01: wrist rates 100x the TCP rate),
+``|cos psi| < ELBOW_SING_COS`` (0.01: arm stretched or folded) or
+``rho < SHOULDER_SING_MM`` (10 mm). Where q5 is exactly 0 only q4 + q6 is
+defined: q4 is held at the previous row's value and q6 solved; where the wrist
+centre is exactly on the A1 axis, A1 is held likewise.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "IK_OK", "IK_OUT_OF_REACH", "IK_JOINT_LIMIT", "IK_SINGULAR", "IK_JUMP", "IK_REASONS",
+    "WRIST_SING_SIN", "ELBOW_SING_COS", "SHOULDER_SING_MM", "SphericalWristArm", "IRB140_ARM",
+    "ClosedFormIK", "select_branches", "multi_turn_mask", "wrist_q6",
+]
+
+IK_OK, IK_OUT_OF_REACH, IK_JOINT_LIMIT, IK_SINGULAR, IK_JUMP = 0, 1, 2, 3, 4
+IK_REASONS: dict[int, str] = {
+    IK_OK: "ok",
+    IK_OUT_OF_REACH: "out of reach",
+    IK_JOINT_LIMIT: "joint limit",
+    IK_SINGULAR: "singular",
+    IK_JUMP: "joint jump (configuration change between consecutive targets)",
+}
+
+WRIST_SING_SIN = 0.01
+ELBOW_SING_COS = 0.01
+SHOULDER_SING_MM = 10.0
+_LIMIT_TOL_RAD = 1e-9
+_TWO_PI = 2.0 * np.pi
+_PI = np.pi
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    """Angles wrapped to [-pi, pi]."""
+    return a - _TWO_PI * np.rint(a / _TWO_PI)
+
+
+def _wrap_diff(d: np.ndarray) -> np.ndarray:
+    """Differences of two angles in [-pi, pi] (so d in [-2*pi, 2*pi]) wrapped to [-pi, pi]."""
+    d = np.where(d > _PI, d - _TWO_PI, d)
+    return np.where(d < -_PI, d + _TWO_PI, d)
+
+
+def _flip(a: np.ndarray) -> np.ndarray:
+    """``wrap(a + pi)`` for a in [-pi, pi], without a modulo."""
+    return np.where(a >= 0.0, a - _PI, a + _PI)
+
+
+def multi_turn_mask(lower_rad: np.ndarray, upper_rad: np.ndarray) -> np.ndarray:
+    """Joints whose range spans a full turn: IK only defines their angle modulo 2*pi."""
+    return (np.asarray(upper_rad) - np.asarray(lower_rad)) >= _TWO_PI - 1e-9
+
+
+@dataclass(frozen=True)
+class SphericalWristArm:
+    """Link lengths (mm) of an ABB-style 6R arm with a spherical wrist (see module docstring)."""
+
+    d1_mm: float
+    a1_mm: float
+    a2_mm: float
+    a3_mm: float
+    d4_mm: float
+    d6_mm: float
+
+    def fk_flange(self, q_rad: np.ndarray) -> np.ndarray:
+        """Flange poses (N, 4, 4) in mm for joints (N, 6); (4, 4) for (6,)."""
+        q = np.asarray(q_rad, dtype=float)
+        single = q.ndim == 1
+        q = np.atleast_2d(q)
+        c1, s1 = np.cos(q[:, 0]), np.sin(q[:, 0])
+        c2, s2 = np.cos(q[:, 1]), np.sin(q[:, 1])
+        c23, s23 = np.cos(q[:, 1] + q[:, 2]), np.sin(q[:, 1] + q[:, 2])
+        ca, sa = np.cos(q[:, 3]), np.sin(q[:, 3])
+        cb, sb = np.cos(q[:, 4]), np.sin(q[:, 4])
+        cc, sc = np.cos(q[:, 5]), np.sin(q[:, 5])
+        # wrist centre: radial r and height z in the arm plane
+        r = self.a1_mm + self.a2_mm * s2 + self.d4_mm * c23 + self.a3_mm * s23
+        z = self.d1_mm + self.a2_mm * c2 - self.d4_mm * s23 + self.a3_mm * c23
+        # R36 = Rx(q4) Ry(q5) Rx(q6), columns k = 0, 1, 2 as (x, y, z) rows of the arm plane
+        cols = (
+            (cb, sa * sb, -ca * sb),
+            (sb * sc, ca * cc - sa * cb * sc, sa * cc + ca * cb * sc),
+            (sb * cc, -ca * sc - sa * cb * cc, -sa * sc + ca * cb * cc),
+        )
+        T = np.zeros((4, 4, len(q)))                      # filled row-contiguous, returned as (N, 4, 4)
+        # R06 = Rz(q1) Ry(q23) R36; flange = link 6 turned +90 deg about y: z_f = x6, y_f = y6, x_f = -z6
+        for k, dst, sign in ((0, 2, 1.0), (1, 1, 1.0), (2, 0, -1.0)):
+            x3, y3, z3 = cols[k]
+            xa = c23 * x3 + s23 * z3
+            za = -s23 * x3 + c23 * z3
+            T[0, dst] = sign * (c1 * xa - s1 * y3)
+            T[1, dst] = sign * (s1 * xa + c1 * y3)
+            T[2, dst] = sign * za
+        T[0, 3] = c1 * r + self.d6_mm * T[0, 2]
+        T[1, 3] = s1 * r + self.d6_mm * T[1, 2]
+        T[2, 3] = z + self.d6_mm * T[2, 2]
+        T[3, 3] = 1.0
+        T = np.ascontiguousarray(T.transpose(2, 0, 1))
+        return T[0] if single else T
+
+    def ik_branches(self, T_flange: np.ndarray, q1_hold: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """All 8 IK branches of flange poses (N, 4, 4) mm.
+
+        Returns ``q`` (N, 8, 6), angles in [-pi, pi], ``reach`` (N, 8) True
+        where the branch is a real solution and ``sing`` (N, 8) True where it
+        is singular. ``q1_hold`` (N,) imposes A1 (and A1 + pi for the back
+        shoulder) instead of ``atan2`` of the wrist centre.
+        """
+        F = self._terms(T_flange, q1_hold)
+        n = len(F[0])
+        qt = np.empty((8, 6, n))                          # filled row-contiguous, returned as (n, 8, 6)
+        reach = np.empty((n, 8), dtype=bool)
+        sing = np.empty((n, 8), dtype=bool)
+        for b in range(0, 8, 2):
+            cols, ok, sg, _ = self._solve(F, b // 4, (b // 2) % 2)
+            for w in range(2):
+                for j, col in enumerate(_wrist_variant(cols, w)):
+                    qt[b + w, j] = col
+            reach[:, b:b + 2] = ok[:, None]
+            sing[:, b:b + 2] = sg[:, None]
+        return qt.transpose(2, 0, 1), reach, sing
+
+    def ik_branch(self, T_flange: np.ndarray, branch: int, q1_hold: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One branch for every row: ``q (N, 6), reach (N,), singular (N,), elbow_gap_rad (N,)``.
+
+        ``elbow_gap_rad`` is the A3 distance to the other elbow branch (the
+        smallest separation between this branch and any other, capped at pi).
+        """
+        cols, ok, sg, gap = self._solve(self._terms(T_flange, q1_hold), branch // 4, (branch // 2) % 2)
+        return np.stack(_wrist_variant(cols, branch % 2), axis=1), ok, sg, gap
+
+    def _terms(self, T_flange: np.ndarray, q1_hold: np.ndarray | None) -> tuple[np.ndarray, ...]:
+        """Per-row inputs of :meth:`_solve`: flange z and y columns, wrist centre, A1."""
+        T = np.asarray(T_flange, dtype=float).reshape(-1, 4, 4)
+        zx, zy, zz = T[:, 0, 2], T[:, 1, 2], T[:, 2, 2]
+        wx, wy = T[:, 0, 3] - self.d6_mm * zx, T[:, 1, 3] - self.d6_mm * zy
+        v = T[:, 2, 3] - self.d6_mm * zz - self.d1_mm
+        q1 = np.arctan2(wy, wx) if q1_hold is None else _wrap(np.asarray(q1_hold, dtype=float))
+        return (zx, zy, zz, T[:, 0, 1], T[:, 1, 1], T[:, 2, 1], wx, wy, v, q1,
+                np.hypot(wx, wy) < SHOULDER_SING_MM)
+
+    def _solve(self, F: tuple[np.ndarray, ...], shoulder: int, elbow: int
+               ) -> tuple[tuple[np.ndarray, ...], np.ndarray, np.ndarray, np.ndarray]:
+        """q1..q6 of one shoulder/elbow choice (wrist 0), reach, singular, elbow gap."""
+        zx, zy, zz, yx, yy, yz, wx, wy, v, q1, shoulder_sing = F
+        L = float(np.hypot(self.d4_mm, self.a3_mm))
+        phi = float(np.arctan2(self.a3_mm, self.d4_mm))
+        if shoulder:
+            q1 = _flip(q1)
+        c1, s1 = np.cos(q1), np.sin(q1)
+        # the flange z and y columns expressed in the arm plane: Rz(-q1) applied
+        zx1, zy1 = c1 * zx + s1 * zy, -s1 * zx + c1 * zy
+        yx1, yy1 = c1 * yx + s1 * yy, -s1 * yx + c1 * yy
+        u = c1 * wx + s1 * wy - self.a1_mm
+        k = (self.a2_mm ** 2 + L * L - u * u - v * v) / (2.0 * self.a2_mm * L)
+        ok = np.abs(k) <= 1.0 + 1e-12
+        kc = np.clip(k, -1.0, 1.0)
+        cabs = np.sqrt(np.maximum(0.0, 1.0 - kc * kc))
+        cpsi = -cabs if elbow else cabs
+        A, B = self.a2_mm - L * kc, L * cpsi
+        q2 = np.arctan2(A * u - B * v, A * v + B * u)
+        q3 = np.arctan2(kc, cpsi)
+        if phi:
+            q3 = _wrap(q3 + phi)
+        c23, s23 = np.cos(q2 + q3), np.sin(q2 + q3)
+        # first two columns of R36 = Ry(q23)^T (Rz(q1)^T R06)
+        R00, R10, R20 = c23 * zx1 - s23 * zz, zy1, s23 * zx1 + c23 * zz
+        R01, R11, R21 = c23 * yx1 - s23 * yz, yy1, s23 * yx1 + c23 * yz
+        h = np.hypot(R10, R20)
+        q4 = np.arctan2(R10, -R20)
+        q5 = np.arctan2(h, R00)
+        # q6 with cos/sin q4 = -R20/h, R10/h and sin q5 = h, all scaled by h (no division)
+        q6 = np.arctan2(h * h * R01 - R00 * (R10 * R11 + R20 * R21), R10 * R21 - R20 * R11)
+        near = np.flatnonzero(h < 1e-3)
+        if len(near):
+            q6[near] = wrist_q6(R01[near], R11[near], R21[near], q4[near], q5[near])
+        sing = (h < WRIST_SING_SIN) | (cabs < ELBOW_SING_COS) | shoulder_sing
+        gap = 2.0 * np.arctan2(cabs, np.abs(kc))        # |q3(elbow 0) - q3(elbow 1)| wrapped
+        return (q1, q2, q3, q4, q5, q6), ok, sing, gap
+
+
+def _wrist_variant(cols: tuple[np.ndarray, ...], wrist: int) -> tuple[np.ndarray, ...]:
+    """The wrist-flipped solution (q4 + pi, -q5, q6 + pi) when ``wrist`` is 1."""
+    if not wrist:
+        return cols
+    q1, q2, q3, q4, q5, q6 = cols
+    return q1, q2, q3, _flip(q4), -q5, _flip(q6)
+
+
+def wrist_q6(R01: np.ndarray, R11: np.ndarray, R21: np.ndarray, q4: np.ndarray, q5: np.ndarray) -> np.ndarray:
+    """q6 from ``Rx(q6) = Ry(q5)^T Rx(q4)^T R36`` (column 1 of R36): exact for any q4, q5."""
+    c4, s4, c5, s5 = np.cos(q4), np.sin(q4), np.cos(q5), np.sin(q5)
+    return np.arctan2(s5 * R01 + c5 * (-s4 * R11 + c4 * R21), c4 * R11 + s4 * R21)
+
+
+IRB140_ARM = SphericalWristArm(d1_mm=352.0, a1_mm=70.0, a2_mm=360.0, a3_mm=0.0, d4_mm=380.0, d6_mm=65.0)
+"""The ABB IRB 140 from its public figures."""
+
+
+# Branch selection along a path ------------------------------------------------
+
+def _sq_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Squared joint distance, every angle compared modulo 2*pi (last axis = joints)."""
+    d = _wrap(a - b)
+    return np.einsum("...j,...j->...", d, d)
+
+
+def select_branches(qb: np.ndarray, allowed: np.ndarray, q_seed: np.ndarray,
+                    quiet: np.ndarray | None = None) -> np.ndarray:
+    """Branch index (N,) per row: the allowed branch nearest the previous row's choice.
+
+    ``qb`` (N, B, nq) candidates, ``allowed`` (N, B) the candidates a row may
+    take (a row with none keeps its predecessor's index). ``quiet`` (N,) marks
+    rows known to keep every allowed branch (see module docstring); rows not
+    marked get the full B x B distance test.
+    """
+    n, nb, _ = qb.shape
+    d0 = np.where(allowed[0], _sq_dist(qb[0], np.asarray(q_seed, dtype=float)), np.inf)
+    marks = np.full(n, -1, dtype=np.intp)
+    marks[0] = int(np.argmin(d0)) if allowed[0].any() else 0
+    if n > 1:
+        check = np.arange(1, n) if quiet is None else np.flatnonzero(~quiet[1:]) + 1
+        eye = np.arange(nb)
+        rows, nxts = [], []
+        for s in range(0, len(check), 4096):            # bounded memory: 4096 x B x B x nq
+            idx = check[s:s + 4096]
+            d = _sq_dist(qb[idx][:, None, :, :], qb[idx - 1][:, :, None, :])
+            al = allowed[idx]
+            best = np.argmin(np.where(al[:, None, :], d, np.inf), axis=2)
+            best[~al.any(axis=1)] = eye
+            moving = (best != eye).any(axis=1)
+            rows.append(idx[moving])
+            nxts.append(best[moving])
+        b = int(marks[0])
+        if rows:
+            for i, row in zip(np.concatenate(rows).tolist(), np.concatenate(nxts).tolist()):
+                b = row[b]
+                marks[i] = b
+    idx = np.maximum.accumulate(np.where(marks >= 0, np.arange(n), 0))
+    return marks[idx]
+
+
+class ClosedFormIK:
+    """Closed-form IK of a :class:`SphericalWristArm` within joint limits, on flange poses (mm)."""
+
+    max_rows = 65536          # bound on rows per vectorised step (memory: max_rows x 8 x 6 floats)
+    tracking = True           # False: always the full 8-branch method (reference for tests)
+
+    def __init__(self, arm: SphericalWristArm, lower_rad: np.ndarray, upper_rad: np.ndarray,
+                 tool_T: np.ndarray | None = None) -> None:
+        self.arm = arm
+        self.lower_rad = np.asarray(lower_rad, dtype=float)
+        self.upper_rad = np.asarray(upper_rad, dtype=float)
+        self.multi = multi_turn_mask(self.lower_rad, self.upper_rad)
+        self.tool_T = np.eye(4) if tool_T is None else np.asarray(tool_T, dtype=float)
+        R = self.tool_T[:3, :3].T
+        self._tool_inv = np.eye(4)
+        self._tool_inv[:3, :3], self._tool_inv[:3, 3] = R, -R @ self.tool_T[:3, 3]
+
+    def fk_flange(self, q_rad: np.ndarray) -> np.ndarray:
+        """Flange poses for joints (N, 6) or (6,)."""
+        return self.arm.fk_flange(q_rad)
+
+    def canon(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Put single-turn joints of q (..., 6), angles in [-pi, pi], in ``[lower, lower + 2*pi)``.
+
+        That representation is unique for a range under a turn; returns q
+        (modified in place) and the in-limits mask (...,). Multi-turn joints
+        stay in [-pi, pi] and are placed by unwrapping along the path.
+        """
+        inlim = np.ones(q.shape[:-1], dtype=bool)
+        for j in np.flatnonzero(~self.multi):
+            lo, col = self.lower_rad[j], q[..., j]
+            if lo > -_PI:
+                col[col < lo] += _TWO_PI
+            elif lo + _TWO_PI <= _PI:
+                col[col >= lo + _TWO_PI] -= _TWO_PI
+            inlim &= col <= self.upper_rad[j] + _LIMIT_TOL_RAD
+        return q, inlim
+
+    def branches(self, T_flange: np.ndarray, q1_hold: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The 8 branches in limit representation: ``q (N, 8, 6), ok, reach, singular`` (N, 8)."""
+        qb, reach, sing = self.arm.ik_branches(T_flange, q1_hold)
+        qb, inlim = self.canon(qb)
+        return qb, reach & inlim, reach, sing
+
+    def ik_flange(self, T_flange: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Joints (N, 6) and status (N,) uint8 for flange poses (N, 4, 4), continuous from ``q_seed``."""
+        return self._ik(np.asarray(T_flange, dtype=float).reshape(-1, 4, 4), q_seed, np.eye(4))
+
+    def ik(self, T_tcp: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """As :meth:`ik_flange` for TCP poses: ``tool_T`` is removed block by block (no N x 4 x 4 copy)."""
+        return self._ik(np.asarray(T_tcp, dtype=float).reshape(-1, 4, 4), q_seed, self._tool_inv)
+
+    def _ik(self, T_in: np.ndarray, q_seed: np.ndarray, tool_inv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        seed = np.asarray(q_seed, dtype=float).reshape(6)
+        n = len(T_in)
+        ident = bool(np.array_equal(tool_inv, np.eye(4)))
+
+        def to_flange(Tb: np.ndarray) -> np.ndarray:
+            return Tb if ident else Tb @ tool_inv
+
+        # wrist centre = p + R (t_inv - d6 * z_inv): only what the A1 hold test needs, no full copy
+        off = tool_inv[:3, 3] - self.arm.d6_mm * tool_inv[:3, 2]
+        wx = T_in[:, 0, 3] + T_in[:, 0, 0] * off[0] + T_in[:, 0, 1] * off[1] + T_in[:, 0, 2] * off[2]
+        wy = T_in[:, 1, 3] + T_in[:, 1, 0] * off[0] + T_in[:, 1, 1] * off[1] + T_in[:, 1, 2] * off[2]
+        degen = np.hypot(wx, wy) < 1e-6                  # wrist centre on A1: hold A1
+        hold = _forward_fill(np.arctan2(wy, wx), ~degen, seed[0]) if degen.any() else None
+        q = np.empty((n, 6))
+        row_ok, reach_any, sing = (np.empty(n, dtype=bool) for _ in range(3))
+        self._track(T_in, to_flange, hold, seed, q, row_ok, reach_any, sing)
+        wdeg = reach_any & (np.abs(np.sin(q[:, 4])) < 1e-9)    # q5 == 0: hold A4, solve A6
+        if wdeg.any():
+            sel = np.flatnonzero(wdeg)
+            q4 = _forward_fill(q[:, 3], ~wdeg, seed[3])[sel]
+            R36 = self._r36(to_flange(T_in[sel]), q[sel])
+            q[sel, 3] = q4
+            q[sel, 5] = wrist_q6(R36[:, 0, 1], R36[:, 1, 1], R36[:, 2, 1], q4, q[sel, 4])
+        if not reach_any.all():                           # unreachable rows hold the previous joints
+            for j in range(6):
+                q[:, j] = _forward_fill(q[:, j], reach_any, seed[j])
+        self._place_multi_turn(q, seed)
+        status = np.full(n, IK_OK, dtype=np.uint8)
+        status[sing & row_ok] = IK_SINGULAR
+        status[~row_ok & reach_any] = IK_JOINT_LIMIT
+        status[~reach_any] = IK_OUT_OF_REACH
+        return q, status
+
+    def _track(self, T: np.ndarray, to_flange: Callable[[np.ndarray], np.ndarray], hold: np.ndarray | None,
+               seed: np.ndarray, q: np.ndarray, row_ok: np.ndarray, reach_any: np.ndarray,
+               sing: np.ndarray) -> None:
+        """Fill the chosen branch's solution per row (module docstring: branch choice).
+
+        Alternates two vectorised modes. *Tracking*: solve only the current
+        branch for a block of rows and accept the leading rows where it stays
+        valid and quiet (step < half the distance to any other branch: then it
+        is provably the nearest). *Full*: at the first row that fails, solve all
+        8 branches over a window and run :func:`select_branches`. Windows grow
+        while tracking keeps failing at once (scattered targets), so the cost
+        stays that of the full method in the worst case and ~1/4 of it on paths.
+        """
+        n = len(T)
+        i, b, prev = 0, -1, seed
+        window, block = 32, 1024
+        while i < n:
+            if b < 0 or not self.tracking:
+                j = min(n, i + (window if self.tracking else self.max_rows))
+                qb, ok, reach, sg = self.branches(to_flange(T[i:j]), None if hold is None else hold[i:j])
+                allowed = np.where(ok.any(axis=1, keepdims=True), ok, reach)
+                bidx = select_branches(qb, allowed, prev, self._quiet(qb, allowed))
+                r = np.arange(j - i)
+                q[i:j], row_ok[i:j], sing[i:j] = qb[r, bidx], ok[r, bidx], sg[r, bidx]
+                reach_any[i:j] = reach.any(axis=1)
+                b = int(bidx[-1]) if ok[-1, bidx[-1]] else -1
+                window = min(self.max_rows, window * 2) if b < 0 else window
+                prev, i = q[j - 1], j
+                continue
+            j = min(n, i + block)
+            qt, reach_t, sg, gap = self.arm.ik_branch(to_flange(T[i:j]), b, None if hold is None else hold[i:j])
+            qt, inlim = self.canon(qt)
+            d = _wrap(np.diff(qt, axis=0, prepend=prev[None, :]))
+            sep = np.minimum(gap, _PI)
+            fine = reach_t & inlim & (4.0 * np.einsum("ij,ij->i", d, d) < sep * sep)
+            f = int(np.argmin(fine)) if not fine.all() else j - i
+            q[i:i + f], sing[i:i + f] = qt[:f], sg[:f]
+            row_ok[i:i + f] = True
+            reach_any[i:i + f] = True
+            if f:
+                prev = q[i + f - 1]
+            i += f
+            if i < j:                                      # switch to the full method at row i
+                b = -1
+                window = 32 if f >= 256 else min(self.max_rows, window * 4)
+                block = 1024
+            else:
+                block = min(self.max_rows, block * 2)
+
+    def _quiet(self, qb: np.ndarray, allowed: np.ndarray) -> np.ndarray:
+        """Rows where every allowed branch's nearest successor is itself (module docstring)."""
+        n = len(qb)
+        quiet = np.zeros(n, dtype=bool)
+        if n < 2:
+            return quiet
+        same = np.all(allowed[1:] == allowed[:-1], axis=1)
+        # step of each shoulder/elbow pair (the wrist flip moves by exactly the same amount)
+        step2 = _sq_dist(qb[1:, ::2, :], qb[:-1, ::2, :])
+        pair_allowed = allowed[1:, ::2] | allowed[1:, 1::2]
+        max_step2 = np.max(np.where(pair_allowed, step2, 0.0), axis=1)
+        sep = np.full(n - 1, _PI)
+        for s in range(2):
+            gap = np.abs(_wrap_diff(qb[1:, 4 * s, 2] - qb[1:, 4 * s + 2, 2]))
+            both = pair_allowed[:, 2 * s] & pair_allowed[:, 2 * s + 1]
+            sep = np.where(both, np.minimum(sep, gap), sep)
+        quiet[1:] = same & (4.0 * max_step2 < sep * sep)
+        return quiet
+
+    def _r36(self, T: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Wrist rotation ``R03^T R06`` for chosen joints (rows of T and q)."""
+        R06 = np.stack([T[:, :3, 2], T[:, :3, 1], -T[:, :3, 0]], axis=-1)
+        c1, s1 = np.cos(q[:, 0]), np.sin(q[:, 0])
+        c, s = np.cos(q[:, 1] + q[:, 2]), np.sin(q[:, 1] + q[:, 2])
+        R03 = np.zeros((len(q), 3, 3))
+        R03[:, 0, 0], R03[:, 0, 1], R03[:, 0, 2] = c1 * c, -s1, c1 * s
+        R03[:, 1, 0], R03[:, 1, 1], R03[:, 1, 2] = s1 * c, c1, s1 * s
+        R03[:, 2, 0], R03[:, 2, 2] = -s, c
+        return np.swapaxes(R03, 1, 2) @ R06
+
+    def _place_multi_turn(self, q: np.ndarray, seed: np.ndarray) -> None:
+        """Unwrap multi-turn joints from the seed on, then shift any wind-up back into limits.
+
+        Works on integer turn counts (exact) and adds ``2*pi*turns`` to the
+        wrapped angle once, so long paths that wind a joint many times before
+        being shifted back lose no precision.
+        """
+        for j in np.flatnonzero(self.multi):
+            raw = q[:, j]
+            step = -np.rint(np.diff(raw, prepend=seed[j]) / _TWO_PI)
+            turns = np.cumsum(step)
+            lo, hi = self.lower_rad[j], self.upper_rad[j]
+            col = raw + _TWO_PI * turns
+            turns -= np.where(col > hi + _LIMIT_TOL_RAD, np.ceil((col - hi) / _TWO_PI), 0.0)
+            turns += np.where(col < lo - _LIMIT_TOL_RAD, np.ceil((lo - col) / _TWO_PI), 0.0)
+            q[:, j] = raw + _TWO_PI * turns
+
+
+def _forward_fill(values: np.ndarray, valid: np.ndarray, first: float) -> np.ndarray:
+    """Replace invalid entries by the last valid one before them (``first`` before any)."""
+    idx = np.maximum.accumulate(np.where(valid, np.arange(len(values)), -1))
+    return np.where(idx >= 0, values[np.maximum(idx, 0)], first)

@@ -1,0 +1,88 @@
+"""Numeric IK fallback for any robot: Pinocchio damped least squares on the SE3 log error.
+
+Used by :meth:`RobotModel.ik` when no closed form applies (UR5, Panda, ...).
+Each row starts from the previous row's solution (row 0 from the seed), so a
+smooth path stays on one configuration. The error is ``log6(T_current^-1 T_target)``
+in the TCP frame (metres, radians) and the step is the damped pseudo-inverse
+``dq = J^T (J J^T + lambda^2 I)^-1 e`` with the TCP-frame Jacobian; joints are
+clipped to their limits after each step so the solver looks for in-limit
+solutions. A row that does not converge from the warm start is retried from the
+seed and from the middle of the joint ranges, then once without clipping: a
+solution found only beyond the limits is ``IK_JOINT_LIMIT``, no solution at all
+``IK_OUT_OF_REACH`` (the row then holds the previous joints);
+one whose Jacobian's smallest singular value (linear rows in metres) is below
+``SINGULAR_SIGMA`` is ``IK_SINGULAR``.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pinocchio as pin
+
+from fabric.sim.kinematics import IK_JOINT_LIMIT, IK_OK, IK_OUT_OF_REACH, IK_SINGULAR
+
+if TYPE_CHECKING:
+    from fabric.sim.robot import RobotModel
+
+__all__ = ["numeric_ik", "solve_one", "SINGULAR_SIGMA"]
+
+SINGULAR_SIGMA = 5e-3
+TOL_M = 1e-7
+TOL_RAD = 1e-7
+MAX_ITER = 100
+DAMPING = 1e-6
+
+
+def solve_one(robot: "RobotModel", target: pin.SE3, q0: np.ndarray, frame_id: int,
+              max_iter: int = MAX_ITER, clip: bool = True) -> tuple[np.ndarray, bool, np.ndarray]:
+    """One DLS solve from ``q0``: ``(q, converged, J)`` with J the last TCP-frame Jacobian."""
+    model, data = robot.pin_model, robot.pin_data
+    q = np.array(q0, dtype=float)
+    lo, hi = robot.lower_rad, robot.upper_rad
+    J = np.zeros((6, model.nv))
+    for _ in range(max_iter):
+        pin.forwardKinematics(model, data, q)
+        cur = pin.updateFramePlacement(model, data, frame_id)
+        err = pin.log6(cur.actInv(target)).vector
+        J = pin.computeFrameJacobian(model, data, q, frame_id, pin.ReferenceFrame.LOCAL)
+        if np.linalg.norm(err[:3]) < TOL_M and np.linalg.norm(err[3:]) < TOL_RAD:
+            return q, True, J
+        # J_log6 maps joint rates to the rate of the log error; near convergence it is ~identity
+        Jl = pin.Jlog6(cur.actInv(target)) @ J
+        dq = Jl.T @ np.linalg.solve(Jl @ Jl.T + DAMPING * np.eye(6), err)
+        q = pin.integrate(model, q, dq)
+        if clip:
+            q = np.clip(q, lo, hi)
+    return q, False, J
+
+
+def numeric_ik(robot: "RobotModel", T_tcp_mm: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Joints (N, nq) and status (N,) for TCP poses (N, 4, 4) mm, warm-started row to row."""
+    T = np.asarray(T_tcp_mm, dtype=float).reshape(-1, 4, 4)
+    n = len(T)
+    q_out = np.empty((n, robot.nq))
+    status = np.empty(n, dtype=np.uint8)
+    mid = 0.5 * (np.maximum(robot.lower_rad, -np.pi) + np.minimum(robot.upper_rad, np.pi))
+    prev = np.asarray(q_seed, dtype=float).copy()
+    for i in range(n):
+        target = pin.SE3(T[i, :3, :3].copy(), T[i, :3, 3] / 1000.0)
+        for start in (prev, np.asarray(q_seed, dtype=float), mid):
+            q, ok, J = solve_one(robot, target, start, robot.tcp_frame_id)
+            if ok:
+                break
+        else:  # no in-limit solution found: is there one beyond the limits?
+            q, ok, J = solve_one(robot, target, prev, robot.tcp_frame_id, clip=False)
+        if not ok:
+            q_out[i], status[i] = prev, IK_OUT_OF_REACH
+            continue
+        q_out[i] = q
+        if not robot.within_limits(q[None])[0]:
+            status[i] = IK_JOINT_LIMIT             # keep warm-starting from the last in-limit row
+            continue
+        prev = q
+        if np.linalg.svd(J, compute_uv=False)[-1] < SINGULAR_SIGMA:
+            status[i] = IK_SINGULAR
+        else:
+            status[i] = IK_OK
+    return q_out, status

@@ -1,0 +1,299 @@
+"""The robot model: a URDF arm plus the extruder tool, in mm at the API and metres inside Pinocchio.
+
+A :class:`RobotModel` is built from our IRB 140 URDF (or any URDF) or from any
+example-robot-data robot by name. The extruder tool is added to the robot's
+URDF as three links hanging from the flange: ``tool_body`` (a cylinder along
+the flange z axis), ``tool_nozzle`` (a thin cylinder ending just short of the
+tip, so a nozzle printing a first layer does not count as touching the plate)
+and ``tcp`` (the nozzle tip; its +z points out of the nozzle). The combined
+URDF is what Pinocchio loads, so :meth:`RobotModel.urdf_text` re-exports
+exactly the model in use.
+
+Kinematics: when the arm matches the closed-form IRB 140 geometry (checked
+numerically at load time against Pinocchio) FK and IK are the vectorised
+closed form of ``kinematics.py``; otherwise FK loops over Pinocchio and IK is
+the damped-least-squares fallback of ``numik.py``. Both share the status codes
+of ``kinematics.py``.
+
+Acceleration and jerk limits are not published for the IRB 140 (nor in URDFs):
+they default to ``ACC_PER_S`` = 4 x the velocity limit per second (a joint
+reaches full speed in 0.25 s) and ``JERK_PER_S2`` = 40 x per second squared
+(full acceleration in 0.1 s), and can be overridden per cell.
+"""
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from fabric.errors import ConfigError, NotFound, ValidationError
+from fabric.sim import frames
+from fabric.sim.kinematics import IRB140_ARM, ClosedFormIK
+
+__all__ = ["RobotModel", "ToolGeometry", "DEFAULT_TOOL_T", "ACC_PER_S", "JERK_PER_S2", "IRB140_URDF"]
+
+ACC_PER_S = 4.0
+JERK_PER_S2 = 40.0
+IRB140_URDF = Path(__file__).with_name("robots") / "irb140.urdf"
+DEFAULT_TOOL_T = frames.xyzrpy_to_T([0.0, 0.0, 150.0], [0.0, 0.0, 0.0])
+"""Flange -> TCP of the default extruder: nozzle tip 150 mm out along the flange z axis."""
+
+
+@dataclass(frozen=True)
+class ToolGeometry:
+    """Collision envelope of the extruder tool (mm).
+
+    The body is a cylinder from the flange along its z axis; the nozzle is a
+    cylinder along the TCP z axis that stops ``nozzle_clearance_mm`` short of
+    the tip.
+    """
+
+    body_diameter_mm: float = 60.0
+    body_length_mm: float = 120.0
+    nozzle_diameter_mm: float = 8.0
+    nozzle_length_mm: float = 29.0
+    nozzle_clearance_mm: float = 1.0
+
+    def check(self) -> None:
+        """Raise ConfigError naming the first non-positive dimension."""
+        for name, value in vars(self).items():
+            if not (np.isfinite(value) and value > 0.0):
+                raise ConfigError(f"tool.{name} must be > 0, got {value}", field=f"tool.{name}", value=value)
+
+
+def _f(v: float) -> str:
+    return f"{float(v):.12g}"
+
+
+def _tool_urdf(robot_urdf: str, flange_frame: str, tool_T: np.ndarray, tool: ToolGeometry) -> str:
+    """The robot URDF with the tool links (metres) hung from ``flange_frame``."""
+    try:
+        root = ET.fromstring(robot_urdf)
+    except ET.ParseError as exc:
+        raise ConfigError(f"robot URDF is not valid XML: {exc}", field="robot.urdf") from exc
+    links = {el.get("name") for el in root.findall("link")}
+    if flange_frame not in links:
+        raise ConfigError(f"flange frame {flange_frame!r} is not a link of the URDF",
+                          field="robot.flange_frame", value=flange_frame, links=sorted(links))
+    for name in ("tool_body", "tool_nozzle", "tcp"):
+        if name in links:
+            raise ConfigError(f"URDF already has a link named {name!r}", field="robot.urdf", link=name)
+    xyz_mm, rpy_deg = frames.T_to_xyzrpy(tool_T)
+    tcp_xyz = " ".join(_f(v / 1000.0 + 0.0) for v in xyz_mm)
+    tcp_rpy = " ".join(_f(v + 0.0) for v in np.radians(rpy_deg))
+    m = 1e-3
+    nz = -(tool.nozzle_clearance_mm + tool.nozzle_length_mm / 2.0) * m
+    extra = f"""
+  <link name="tool_body"><collision><origin xyz="0 0 {_f(tool.body_length_mm * m / 2)}" rpy="0 0 0"/>
+    <geometry><cylinder radius="{_f(tool.body_diameter_mm * m / 2)}" length="{_f(tool.body_length_mm * m)}"/></geometry>
+  </collision></link>
+  <joint name="flange-tool_body" type="fixed"><parent link="{flange_frame}"/><child link="tool_body"/>
+    <origin xyz="0 0 0" rpy="0 0 0"/></joint>
+  <link name="tcp"/>
+  <joint name="flange-tcp" type="fixed"><parent link="{flange_frame}"/><child link="tcp"/>
+    <origin xyz="{tcp_xyz}" rpy="{tcp_rpy}"/></joint>
+  <link name="tool_nozzle"><collision><origin xyz="0 0 {_f(nz)}" rpy="0 0 0"/>
+    <geometry><cylinder radius="{_f(tool.nozzle_diameter_mm * m / 2)}" length="{_f(tool.nozzle_length_mm * m)}"/></geometry>
+  </collision></link>
+  <joint name="tcp-tool_nozzle" type="fixed"><parent link="tcp"/><child link="tool_nozzle"/>
+    <origin xyz="0 0 0" rpy="0 0 0"/></joint>
+"""
+    for el in ET.fromstring(f"<x>{extra}</x>"):
+        root.append(el)
+    ET.indent(root, space="  ")
+    return ('<?xml version="1.0"?>\n<!-- generated by am-fabric: robot + extruder tool, TCP link "tcp" -->\n'
+            + ET.tostring(root, encoding="unicode") + "\n")
+
+
+def _default_flange(urdf_text: str) -> str:
+    """The usual flange link names (``tool0``, ``flange``, ``ee_link``, ``*_hand``), else the child of the
+    last revolute joint."""
+    root = ET.fromstring(urdf_text)
+    links = [str(el.get("name")) for el in root.findall("link")]
+    for name in ("tool0", "flange", "ee_link"):
+        if name in links:
+            return name
+    hands = [n for n in links if n.endswith("_hand")]
+    if hands:
+        return hands[0]
+    revolute = [j for j in root.findall("joint") if j.get("type") in ("revolute", "continuous")]
+    if not revolute:
+        raise ConfigError("URDF has no revolute joint to find a flange after", field="robot.flange_frame")
+    return str(revolute[-1].find("child").get("link"))
+
+
+class RobotModel:
+    """A 6-axis (or any serial) arm with the extruder tool: kinematics and limits in mm / rad.
+
+    Not thread-safe: ``pin_data`` is shared; give each thread its own model.
+    """
+
+    def __init__(self, urdf_text: str, tool_T: np.ndarray, flange_frame: str, name: str,
+                 package_dirs: list[str] | None = None, tool: ToolGeometry | None = None) -> None:
+        tool_T = np.asarray(tool_T, dtype=float)
+        if tool_T.shape != (4, 4) or not np.allclose(tool_T[:3, :3].T @ tool_T[:3, :3], np.eye(3), atol=1e-9):
+            raise ValidationError("tool_T must be a 4x4 rigid transform (mm)", field="tool_T")
+        self.name = name
+        self.tool = tool or ToolGeometry()
+        self.tool.check()
+        self.tool_T = tool_T.copy()
+        self.flange_frame = flange_frame
+        self.package_dirs = list(package_dirs or [])
+        self._robot_urdf = urdf_text
+        self._urdf = _tool_urdf(urdf_text, flange_frame, tool_T, self.tool)
+        self.pin_model = pin.buildModelFromXML(self._urdf)
+        if self.pin_model.nq != self.pin_model.nv:
+            raise ConfigError(f"robot {name!r} has continuous / multi-dof joints (nq != nv)", robot=name)
+        self.pin_data = self.pin_model.createData()
+        self.collision_model = pin.buildGeomFromUrdfString(
+            self.pin_model, self._urdf, pin.GeometryType.COLLISION, package_dirs=self.package_dirs)
+        self._add_collision_pairs()
+        self.nq: int = int(self.pin_model.nq)
+        self.joint_names: list[str] = [str(n) for n in self.pin_model.names[1:]]
+        self.tcp_frame_id = int(self.pin_model.getFrameId("tcp"))
+        self.flange_frame_id = int(self.pin_model.getFrameId(flange_frame))
+        self.lower_rad = np.array(self.pin_model.lowerPositionLimit, dtype=float)
+        self.upper_rad = np.array(self.pin_model.upperPositionLimit, dtype=float)
+        self.vel_limit_rad_s = np.array(self.pin_model.velocityLimit, dtype=float)
+        self.acc_limit_rad_s2 = ACC_PER_S * self.vel_limit_rad_s
+        self.jerk_limit_rad_s3 = JERK_PER_S2 * self.vel_limit_rad_s
+        self._tool_inv = frames.inv_T(self.tool_T)
+        self.closed_form: ClosedFormIK | None = None
+        if self.nq == 6 and self._matches_irb140():
+            self.closed_form = ClosedFormIK(IRB140_ARM, self.lower_rad, self.upper_rad, self.tool_T)
+
+    # Construction ------------------------------------------------------
+    @classmethod
+    def from_urdf(cls, path_or_text: str | Path, tool_T: np.ndarray = DEFAULT_TOOL_T,
+                  flange_frame: str = "flange", name: str = "irb140",
+                  tool: ToolGeometry | None = None) -> "RobotModel":
+        """Load a URDF file (or URDF text); meshes resolve relative to the file's directory."""
+        text = str(path_or_text)
+        package_dirs: list[str] = []
+        if not text.lstrip().startswith("<"):
+            path = Path(text)
+            if not path.is_file():
+                raise NotFound(f"URDF file not found: {path}", file=str(path))
+            text = path.read_text()
+            package_dirs = [str(path.parent.resolve())]
+        return cls(text, tool_T, flange_frame, name, package_dirs, tool)
+
+    @classmethod
+    def from_example_robot_data(cls, name: str, tool_T: np.ndarray = DEFAULT_TOOL_T,
+                                flange_frame: str | None = None,
+                                tool: ToolGeometry | None = None) -> "RobotModel":
+        """Any arm of example-robot-data by loader name (``"ur5"``, ``"panda"``, ...).
+
+        ``flange_frame`` defaults to the URDF's ``tool0`` / ``flange`` / ``ee_link`` /
+        ``*_hand`` link, else the child of the last revolute joint. Robots with
+        continuous (unbounded) joints are refused (their nq != nv).
+        """
+        from example_robot_data.robots_loader import ROBOTS
+        if name not in ROBOTS:
+            raise NotFound(f"unknown example-robot-data robot {name!r}", robot=name)
+        loader = ROBOTS[name]()
+        urdf_path = Path(loader.df_path)
+        text = urdf_path.read_text()
+        share = Path(loader.model_path).resolve().parent.parent   # .../share, holding example-robot-data/
+        if flange_frame is None:
+            flange_frame = _default_flange(text)
+        return cls(text, tool_T, flange_frame, name, [str(share)], tool)
+
+    def with_limits(self, lower_rad: np.ndarray | None = None, upper_rad: np.ndarray | None = None,
+                    vel_limit_rad_s: np.ndarray | None = None, acc_limit_rad_s2: np.ndarray | None = None,
+                    jerk_limit_rad_s3: np.ndarray | None = None) -> "RobotModel":
+        """Override limits in place (cell ``[limits]``); position limits may only narrow the URDF's."""
+        for attr, val in (("lower_rad", lower_rad), ("upper_rad", upper_rad), ("vel_limit_rad_s", vel_limit_rad_s),
+                          ("acc_limit_rad_s2", acc_limit_rad_s2), ("jerk_limit_rad_s3", jerk_limit_rad_s3)):
+            if val is None:
+                continue
+            arr = np.asarray(val, dtype=float)
+            if arr.shape != (self.nq,) or not np.all(np.isfinite(arr)):
+                raise ValidationError(f"{attr} needs {self.nq} finite values", field=attr)
+            setattr(self, attr, arr.copy())
+        if np.any(self.lower_rad >= self.upper_rad):
+            j = int(np.argmax(self.lower_rad >= self.upper_rad))
+            raise ValidationError(f"joint {self.joint_names[j]}: lower limit >= upper limit",
+                                  field="limits", joint=self.joint_names[j])
+        for attr in ("vel_limit_rad_s", "acc_limit_rad_s2", "jerk_limit_rad_s3"):
+            if np.any(getattr(self, attr) <= 0):
+                raise ValidationError(f"{attr} must be > 0", field=attr)
+        if self.closed_form is not None:
+            self.closed_form = ClosedFormIK(IRB140_ARM, self.lower_rad, self.upper_rad, self.tool_T)
+        return self
+
+    # Kinematics --------------------------------------------------------
+    def fk(self, q: np.ndarray) -> np.ndarray:
+        """TCP pose(s) in the robot base frame, mm: (4, 4) for q (nq,), (N, 4, 4) for (N, nq)."""
+        return self.fk_flange(q) @ self.tool_T
+
+    def fk_flange(self, q: np.ndarray) -> np.ndarray:
+        """Flange pose(s) in the robot base frame, mm (same shapes as :meth:`fk`)."""
+        q = np.asarray(q, dtype=float)
+        if q.shape[-1] != self.nq:
+            raise ValidationError(f"q needs {self.nq} joints, got shape {q.shape}", field="q")
+        if self.closed_form is not None:
+            return self.closed_form.fk_flange(q)
+        return self.frame_poses(q, self.flange_frame_id)
+
+    def frame_poses(self, q: np.ndarray, frame_id: int) -> np.ndarray:
+        """Pose(s) of any Pinocchio frame (mm), by a Pinocchio loop over rows."""
+        qs = np.atleast_2d(np.asarray(q, dtype=float))
+        out = np.empty((len(qs), 4, 4))
+        for i, qi in enumerate(qs):
+            pin.forwardKinematics(self.pin_model, self.pin_data, qi)
+            out[i] = pin.updateFramePlacement(self.pin_model, self.pin_data, frame_id).homogeneous
+        out[:, :3, 3] *= 1000.0
+        return out[0] if np.asarray(q).ndim == 1 else out
+
+    def ik(self, T: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Joints (N, nq) and status (N,) uint8 reaching TCP poses T ((4, 4) or (N, 4, 4), mm, base frame).
+
+        Row i is solved continuous with row i-1 (row 0 with ``q_seed``): the
+        valid solution nearest the previous one. Status codes: ``IK_*`` of
+        ``fabric.sim.kinematics``.
+        """
+        T = np.asarray(T, dtype=float).reshape(-1, 4, 4)
+        q_seed = np.asarray(q_seed, dtype=float).reshape(-1)
+        if q_seed.shape != (self.nq,):
+            raise ValidationError(f"q_seed needs {self.nq} joints", field="q_seed")
+        if self.closed_form is not None:
+            return self.closed_form.ik(T, q_seed)
+        from fabric.sim.numik import numeric_ik
+        return numeric_ik(self, T, q_seed)
+
+    def within_limits(self, q: np.ndarray, tol_rad: float = 1e-9) -> np.ndarray:
+        """Rows of q (N, nq) inside the position limits: bool (N,)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        return np.all((q >= self.lower_rad - tol_rad) & (q <= self.upper_rad + tol_rad), axis=1)
+
+    # URDF --------------------------------------------------------------
+    def urdf_text(self) -> str:
+        """The robot and tool as one URDF (metres), with the TCP link ``tcp``."""
+        return self._urdf
+
+    def export_urdf(self, path: str | Path) -> None:
+        """Write :meth:`urdf_text` to ``path``."""
+        Path(path).write_text(self._urdf)
+
+    # Internals ---------------------------------------------------------
+    def _matches_irb140(self) -> bool:
+        """True if the closed-form IRB 140 reproduces Pinocchio's flange poses (1e-6 mm)."""
+        rng = np.random.default_rng(1)
+        q = rng.uniform(np.maximum(self.lower_rad, -3.0), np.minimum(self.upper_rad, 3.0), (8, 6))
+        ref = self.frame_poses(q, self.flange_frame_id)
+        return bool(np.abs(IRB140_ARM.fk_flange(q) - ref).max() < 1e-6)
+
+    def _add_collision_pairs(self) -> None:
+        """All pairs of geometries except those on the same or on parent/child joints."""
+        gm, model = self.collision_model, self.pin_model
+        objs = gm.geometryObjects
+        for a in range(len(objs)):
+            for b in range(a + 1, len(objs)):
+                ja, jb = objs[a].parentJoint, objs[b].parentJoint
+                if ja == jb or model.parents[ja] == jb or model.parents[jb] == ja:
+                    continue
+                gm.addCollisionPair(pin.CollisionPair(a, b))

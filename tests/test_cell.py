@@ -1,0 +1,158 @@
+"""Cell files: the shipped cells, strict parsing, frames, URDF export, and the UR5 numeric path."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from fabric.errors import ConfigError, NotFound
+from fabric.sim.cell import CELLS_DIR, Cell
+from fabric.sim.ikpath import solve_path
+from fabric.sim.kinematics import IK_OK
+
+IRB_TEXT = (CELLS_DIR / "irb140.toml").read_text()
+
+
+@pytest.fixture(scope="module")
+def irb() -> Cell:
+    return Cell.builtin("irb140")
+
+
+@pytest.fixture(scope="module")
+def ur5() -> Cell:
+    return Cell.builtin("ur5")
+
+
+def test_irb140_cell_is_the_papers_layout(irb: Cell) -> None:
+    assert irb.robot.closed_form is not None and irb.robot.name == "irb140"
+    np.testing.assert_allclose(irb.base_T, np.eye(4))
+    np.testing.assert_allclose(irb.table_T[:3, 3], [310, 0, 0])
+    np.testing.assert_allclose(irb.plate_T[:3, 3], [600, 0, 0])
+    np.testing.assert_allclose(irb.plate_size_mm, [250, 250, 10])
+    np.testing.assert_allclose(irb.wobj_T()[:3, 3], [475, -125, 10])           # top-face corner, x/y min
+    np.testing.assert_allclose(irb.wobj_T()[:3, :3], np.eye(3))
+    assert irb.approach_speed_mm_s == 150.0 and irb.approach_zone_mm == 0.0
+    np.testing.assert_allclose(irb.robot.tool_T[:3, 3], [0, 0, 150])
+
+
+@pytest.mark.parametrize("name", ["irb140", "ur5"])
+def test_home_is_within_limits_clear_of_the_plate_and_collision_free(name: str, irb: Cell, ur5: Cell) -> None:
+    cell = irb if name == "irb140" else ur5
+    r = cell.robot
+    assert r.within_limits(cell.home_q_rad)[0]
+    tcp = cell.home_tcp_T()
+    assert tcp[2, 3] > cell.plate_T[2, 3] + cell.plate_size_mm[2] + 200.0       # well above the plate
+    np.testing.assert_allclose(tcp[:3, 2], [0, 0, -1], atol=1e-9)              # nozzle down
+    gd = r.collision_model.createData()
+    assert not pin.computeCollisions(r.pin_model, r.pin_data, r.collision_model, gd, cell.home_q_rad, True)
+
+
+def test_to_dict_is_plain_and_has_the_work_object(irb: Cell) -> None:
+    d = json.loads(json.dumps(irb.to_dict()))
+    assert d["wobj"] == {"xyz_mm": [475.0, -125.0, 10.0], "rpy_deg": [0.0, 0.0, 0.0]}
+    assert d["robot"]["upper_deg"] == [180.0, 110.0, 50.0, 200.0, 115.0, 400.0]
+    assert d["approach"]["zone"] == "fine" and d["source_path"].endswith("irb140.toml")
+
+
+@pytest.mark.parametrize("edit, key", [
+    (("[plate]\n", "[plate]\ncolour = \"red\"\n"), "plate.colour"),
+    (("[plate.true_offset]\n", "[plate.true_offset]\nyaw_deg = 1.0\n"), "plate.true_offset.yaw_deg"),
+    (("[home]\n", "[homing]\nspeed = 1\n\n[home]\n"), "homing"),
+])
+def test_unknown_keys_are_config_errors_naming_them(edit: tuple[str, str], key: str) -> None:
+    with pytest.raises(ConfigError) as exc:
+        Cell.from_toml_text(IRB_TEXT.replace(*edit, 1))
+    assert exc.value.details["key"] == key and key in str(exc.value)
+
+
+@pytest.mark.parametrize("edit, key", [
+    (("speed_mm_s = 150.0", "speed_mm_s = -5.0"), "approach.speed_mm_s"),
+    (("speed_mm_s = 150.0", "speed_mm_s = \"fast\""), "approach.speed_mm_s"),
+    (("zone = \"fine\"", "zone = \"z1000\""), "approach.zone"),
+    (("size_mm = [250.0, 250.0, 10.0]", "size_mm = [250.0, 250.0]"), "plate.size_mm"),
+    (("joints_deg = [0.0, 0.0, 0.0, 0.0, 90.0, 0.0]", "joints_deg = [0.0, 0.0, 0.0, 0.0, 130.0, 0.0]"),
+     "home.joints_deg"),
+    (("urdf = \"sim/robots/irb140.urdf\"", "urdf = \"sim/robots/nope.urdf\""), "robot.urdf"),
+    (("[approach]", "[limits]\nupper_deg = [180.0, 110.0, 50.0, 200.0, 130.0, 400.0]\n\n[approach]"),
+     "limits.upper_deg"),
+])
+def test_values_are_range_checked(edit: tuple[str, str], key: str) -> None:
+    assert edit[0] in IRB_TEXT
+    with pytest.raises(ConfigError) as exc:
+        Cell.from_toml_text(IRB_TEXT.replace(*edit, 1))
+    assert exc.value.details["key"] == key
+
+
+def test_missing_section_and_unknown_builtin() -> None:
+    with pytest.raises(ConfigError) as exc:
+        Cell.from_toml_text(IRB_TEXT.replace("[home]\n", "[home_was_here]\n").replace(
+            "joints_deg = [0.0, 0.0, 0.0, 0.0, 90.0, 0.0]", ""))
+    assert exc.value.details["key"] == "home_was_here"
+    with pytest.raises(NotFound):
+        Cell.builtin("kuka")
+
+
+def test_true_offset_and_limit_overrides() -> None:
+    text = IRB_TEXT.replace("xyz_mm = [0.0, 0.0, 0.0]\nrpy_deg = [0.0, 0.0, 0.0]\n\n[home]",
+                            "xyz_mm = [1.5, -2.0, 0.5]\nrpy_deg = [0.0, 0.0, 2.0]\n\n[home]")
+    text = text.replace("[approach]", "[limits]\nvel_deg_s = [100.0, 100.0, 100.0, 100.0, 100.0, 100.0]\n\n[approach]")
+    cell = Cell.from_toml_text(text)
+    np.testing.assert_allclose(cell.true_plate_T[:3, 3], [601.5, -2.0, 0.5])
+    np.testing.assert_allclose(cell.plate_T[:3, 3], [600.0, 0.0, 0.0])
+    yaw = np.degrees(np.arctan2(cell.true_plate_T[1, 0], cell.true_plate_T[0, 0]))
+    assert yaw == pytest.approx(2.0)
+    np.testing.assert_allclose(np.degrees(cell.robot.vel_limit_rad_s), 100.0)
+    assert not np.allclose(cell.true_wobj_T(), cell.wobj_T())
+
+
+@pytest.mark.parametrize("name", ["irb140", "ur5"])
+def test_exported_urdf_reloads_with_the_same_tcp(name: str, irb: Cell, ur5: Cell, tmp_path: Path) -> None:
+    cell = irb if name == "irb140" else ur5
+    r = cell.robot
+    path = tmp_path / f"{name}.urdf"
+    r.export_urdf(path)
+    model = pin.buildModelFromUrdf(str(path))
+    data = model.createData()
+    geom = pin.buildGeomFromUrdf(model, str(path), pin.GeometryType.COLLISION, package_dirs=r.package_dirs)
+    assert geom.ngeoms == r.collision_model.ngeoms
+    fid = model.getFrameId("tcp")
+    rng = np.random.default_rng(11)
+    q = rng.uniform(np.maximum(r.lower_rad, -np.pi), np.minimum(r.upper_rad, np.pi), (10, r.nq))
+    ours = r.fk(q)
+    for i in range(len(q)):
+        pin.framesForwardKinematics(model, data, q[i])
+        T = data.oMf[fid].homogeneous.copy()
+        T[:3, 3] *= 1000.0
+        np.testing.assert_allclose(T, ours[i], atol=1e-9)
+
+
+def test_ur5_numeric_ik_round_trip(ur5: Cell) -> None:
+    r = ur5.robot
+    assert r.closed_form is None and r.flange_frame == "tool0"
+    rng = np.random.default_rng(12)
+    q = ur5.home_q_rad + np.cumsum(rng.normal(0.0, 0.02, (40, 6)), axis=0)   # a wandering joint path
+    T = r.fk(q)
+    qs, st = r.ik(T, q[0])
+    assert np.all(st == IK_OK)
+    back = r.fk(qs)
+    np.testing.assert_allclose(back[:, :3, 3], T[:, :3, 3], atol=1e-3)        # mm (solver: 1e-7 m)
+    np.testing.assert_allclose(back[:, :3, :3], T[:, :3, :3], atol=1e-6)
+    np.testing.assert_allclose(qs, q, atol=1e-4)                               # warm start keeps the branch
+    far = T[:1].copy()
+    far[0, :3, 3] = [3000.0, 0.0, 0.0]
+    assert r.ik(far, q[0])[1][0] != IK_OK
+
+
+def test_ur5_plate_is_reachable_with_a_vertical_nozzle(ur5: Cell) -> None:
+    W = ur5.wobj_T()
+    u = np.linspace(0.0, 250.0, 5)
+    X, Y = np.meshgrid(u, u)
+    X[1::2] = X[1::2, ::-1]
+    pts = np.concatenate([np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, z)]) for z in (0.3, 200.0)])
+    xyz = pts @ W[:3, :3].T + W[:3, 3]
+    res = solve_path(ur5.robot, xyz, [0.0, 0.0, -1.0], ur5.home_q_rad)
+    assert res.feasible_r == 1.0, res.status
+    np.testing.assert_allclose(ur5.robot.fk(res.q_rad)[:, :3, 3], xyz, atol=1e-3)
