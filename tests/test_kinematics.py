@@ -9,8 +9,9 @@ import pytest
 from fabric.sim import frames
 from fabric.sim.cell import Cell
 from fabric.sim.ikpath import joint_jumps, solve_path
+from fabric.sim.branches import ClosedFormIK
 from fabric.sim.kinematics import (IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR,
-                                   IRB140_ARM, ClosedFormIK, SphericalWristArm)
+                                   IRB140_ARM, SphericalWristArm)
 from fabric.sim.robot import IRB140_URDF, RobotModel
 
 

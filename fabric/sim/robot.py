@@ -31,7 +31,8 @@ import pinocchio as pin
 
 from fabric.errors import ConfigError, NotFound, ValidationError
 from fabric.sim import frames
-from fabric.sim.kinematics import IRB140_ARM, ClosedFormIK
+from fabric.sim.branches import ClosedFormIK
+from fabric.sim.kinematics import IRB140_ARM
 
 __all__ = ["RobotModel", "ToolGeometry", "DEFAULT_TOOL_T", "ACC_PER_S", "JERK_PER_S2", "IRB140_URDF"]
 
