@@ -56,6 +56,8 @@ class PlanRequest:
     tilt_deg: list[float] = f(factory=lambda: [0.0, 0.0], shape=(2,))
     speed_r: float = f(1.0, ge=0.05, le=4.0)
     rot_step_deg: float = f(15.0, ge=0.5, le=90.0)
+    wobj_xyz_mm: list[float] | None = f(None, shape=(3,))     # work object override (e.g. after calibration)
+    wobj_rpy_deg: list[float] | None = f(None, shape=(3,))
 
 
 @schema("planner.PlanSummary")

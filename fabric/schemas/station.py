@@ -62,6 +62,8 @@ class StationState:
     rtf: float = 1.0
     speed_r: float = 1.0
     flow_r: float = 1.0
+    wobj_xyz_mm: list[float] = f(factory=lambda: [0.0, 0.0, 0.0], shape=(3,))    # work object now (calibrated)
+    wobj_rpy_deg: list[float] = f(factory=lambda: [0.0, 0.0, 0.0], shape=(3,))
 
 
 @schema("station.Event")

@@ -135,11 +135,13 @@ class StationService(Service):
     def _state_msg(self) -> s.StationState:
         ti = self.twin.time_info()
         layer = int(self.twin.extrusion().layer)
+        wobj_xyz, wobj_rpy = T_to_xyzrpy(self.twin.work_object_T)
         return s.StationState(state=self.twin.state, reason=self.twin.reason, program_id=self.program_id,
                               job_id=self.job_id, t_sim_s=round(float(ti.elapsed_s), 1), total_s=float(ti.total_s),
                               progress_r=round(float(ti.elapsed_s / ti.total_s), 3) if ti.total_s > 0 else 0.0,
                               layer=layer, layers_total=self.layers_total, rtf=self.rtf,
-                              speed_r=float(self.twin.speed_r), flow_r=float(self.twin.flow_r))
+                              speed_r=float(self.twin.speed_r), flow_r=float(self.twin.flow_r),
+                              wobj_xyz_mm=np.asarray(wobj_xyz).tolist(), wobj_rpy_deg=np.asarray(wobj_rpy).tolist())
 
     def _ack(self, message: str) -> s.Ack:
         return s.Ack(ok=True, message=message, state=self.twin.state)

@@ -105,7 +105,9 @@ class SupervisorService(Service):
         sl = c.wait_job("slicer", acc.job_id, on_progress=lambda st: job.progress(0.3 * st.progress_r))
         rec["gcode_id"] = sl.result_id
         job.progress(0.3, "planning")
-        acc = c.plan(s.PlanRequest(gcode_id=sl.result_id, filename=req.filename.rsplit(".", 1)[0] + ".gcode"))
+        station = c.state()          # plan against the station's current (possibly calibrated) work object
+        acc = c.plan(s.PlanRequest(gcode_id=sl.result_id, filename=req.filename.rsplit(".", 1)[0] + ".gcode",
+                                   wobj_xyz_mm=station.wobj_xyz_mm, wobj_rpy_deg=station.wobj_rpy_deg))
         pl = c.wait_job("planner", acc.job_id, on_progress=lambda st: job.progress(0.3 + 0.4 * st.progress_r))
         summary = c.plan_summary(pl.result_id)
         rec["program_id"], rec["plan"] = pl.result_id, s.to_plain(summary)

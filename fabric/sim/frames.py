@@ -162,6 +162,7 @@ def frame_from_z_axis(z_axis: np.ndarray, x_ref: np.ndarray) -> np.ndarray:
     z = np.broadcast_to(z, (n, 3))
     z = z / np.linalg.norm(z, axis=-1, keepdims=True)
     xr = np.array(np.broadcast_to(np.asarray(x_ref, dtype=float), (n, 3)))
+    bad = np.zeros(n, dtype=bool)
     for fallback in (None, np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
         if fallback is not None:
             xr[bad] = fallback
