@@ -248,7 +248,7 @@ class StationService(Service):
 
     def on_mesh(self, req: s.MeshRequest) -> s.Artifact:
         with self.lock:
-            if self.twin.beads.count == 0:
+            if len(self.twin.beads) == 0:
                 raise NotFound("nothing has been deposited yet")
             data = self.twin.beads.export_mesh(req.fmt)
         media = "model/stl" if req.fmt == "stl" else "model/gltf-binary"
