@@ -23,7 +23,7 @@ import zenoh
 from fabric import codec
 from fabric.errors import FabricError, InternalError, NotFound
 from fabric.keys import ENDPOINTS, TOPICS, Endpoint, Keys
-from fabric.schemas import Artifact, ArtifactQuery, ErrorReply
+from fabric.schemas import Artifact, ErrorReply
 
 __all__ = ["Service", "Publisher", "reply_error"]
 

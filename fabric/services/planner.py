@@ -20,6 +20,7 @@ from fabric.jobs import Job, JobRunner
 from fabric.programs import content_id, program_artifact, program_from_artifact
 from fabric.runtime import Service
 from fabric.sim.cell import Cell
+from fabric.sim.frames import xyzrpy_to_T
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.post import write_export
 
@@ -50,8 +51,12 @@ class PlannerService(Service):
     def on_plan(self, req: s.PlanRequest) -> s.JobAccepted:
         if not req.gcode and not req.gcode_id:
             raise BadRequest("give the G-code inline (gcode) or a slicer artifact id (gcode_id)", field="gcode")
+        wobj = None
+        if req.wobj_xyz_mm is not None or req.wobj_rpy_deg is not None:
+            wobj = xyzrpy_to_T(np.asarray(req.wobj_xyz_mm or [0.0, 0.0, 0.0]),
+                               np.asarray(req.wobj_rpy_deg or [0.0, 0.0, 0.0]))
         options = PlanOptions(offset_mm=tuple(req.offset_mm), tilt_deg=tuple(req.tilt_deg), speed_r=req.speed_r,
-                              rot_step_deg=req.rot_step_deg)
+                              rot_step_deg=req.rot_step_deg, wobj_T=wobj)
         st = self.jobs.submit("plan", lambda job: self._run(job, req, options))
         return s.JobAccepted(job_id=st.job_id, kind="plan")
 
@@ -71,12 +76,13 @@ class PlannerService(Service):
         if rep.first_unreachable is not None:
             first = {"gcode_line": int(rep.first_unreachable[0]), "reason": str(rep.first_unreachable[1])}
         st = result.stats
+        estimate = float(result.estimate_s) if np.isfinite(result.estimate_s) else -1.0
         self.summaries[pid] = s.PlanSummary(
-            program_id=pid, targets=len(program), moves=int(st["moves"]), layers=int(st["layers"]),
-            feasible_r=float(rep.feasible_r), runnable=first is None, estimate_s=float(result.estimate_s),
-            extruded_mm3=float(st["extruded_mm3"]), path_mm=float(st["path_mm"]), first_unreachable=first,
-            unreachable_by_reason={str(k): int(v) for k, v in rep.counts_by_reason.items()},
-            elapsed_s=float(st.get("elapsed_s", 0.0)))
+            program_id=pid, targets=int(st.targets), moves=int(st.moves), layers=int(st.layers),
+            feasible_r=float(rep.feasible_r), runnable=first is None, estimate_s=estimate,
+            extruded_mm3=float(st.extruded_volume_mm3), path_mm=float(st.path_length_mm), first_unreachable=first,
+            unreachable_by_reason={str(k): int(v) for k, v in rep.counts.items() if k != "ok"},
+            elapsed_s=float(st.total_s))
         return pid
 
     def on_summary(self, req: s.ArtifactQuery) -> s.PlanSummary:

@@ -216,7 +216,7 @@ class StationService(Service):
             wobj_xyz, wobj_rpy = T_to_xyzrpy(self.twin.work_object_T)
         return s.CalibrationReport(correction_xyz_mm=list(map(float, r.correction_xyz_mm)),
                                    correction_rpy_deg=list(map(float, r.correction_rpy_deg)),
-                                   residual_rms_mm=float(r.residual_rms_mm), points=int(r.points),
+                                   residual_rms_mm=float(r.residual_rms_mm), points=int(r.n_points),
                                    wobj_xyz_mm=np.asarray(wobj_xyz).tolist(), wobj_rpy_deg=np.asarray(wobj_rpy).tolist())
 
     def on_ready(self, _: s.Empty) -> s.ReadyReport:

@@ -28,7 +28,7 @@ def ready_report(svc: "StationService") -> s.ReadyReport:
     checks.append(s.Check(name="program planned and loaded", ok=program_ok,
                           detail=svc.program_id[:12] if program_ok else "no program loaded"))
 
-    if program_ok and svc.collision_report is None and "collision" not in dead:
+    if program_ok and svc.collision_report is None:
         try:
             svc.collision_report = svc.client.check(s.CollisionRequest(program_id=svc.program_id))
         except FabricError as err:

@@ -1,0 +1,96 @@
+"""Entry points: G-code text or file -> :class:`Toolpath`, read in blocks of whole lines."""
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterator
+from typing import BinaryIO
+
+from fabric.errors import NotFound, ValidationError
+from fabric.gcode.dialects import detect_slicer
+from fabric.gcode.interp import Interpreter
+from fabric.gcode.toolpath import Toolpath
+
+__all__ = ["parse_gcode", "parse_gcode_file", "iter_blocks", "BLOCK_BYTES"]
+
+BLOCK_BYTES = 1 << 18      # ~10k lines: the arrays of one block stay in the CPU cache
+
+
+def iter_blocks(stream: BinaryIO, block_bytes: int = BLOCK_BYTES) -> Iterator[bytes]:
+    """Blocks of whole lines from a binary stream (each but the last ends with a newline)."""
+    rest = b""
+    while True:
+        chunk = stream.read(block_bytes)
+        if not chunk:
+            if rest:
+                yield rest
+            return
+        data = rest + chunk if rest else chunk
+        cut = data.rfind(b"\n") + 1
+        if cut == 0:
+            rest = data
+            continue
+        yield data[:cut]
+        rest = data[cut:]
+
+
+def _check(chord_tol_mm: float, block_bytes: int) -> None:
+    if not (chord_tol_mm > 0):
+        raise ValidationError("chord_tol_mm must be > 0", field="chord_tol_mm", value=chord_tol_mm)
+    if block_bytes < 1024:
+        raise ValidationError("block_bytes must be >= 1024", field="block_bytes", value=block_bytes)
+
+
+def parse_gcode(source: str | bytes | bytearray | memoryview, *, chord_tol_mm: float = 0.01,
+                block_bytes: int = BLOCK_BYTES,
+                progress: Callable[[float], None] | None = None) -> Toolpath:
+    """Interpret G-code held in memory.
+
+    ``chord_tol_mm`` bounds how far arc chords stray from the arc. ``progress``
+    is called with the fraction of bytes done after each block. Raises
+    :class:`GcodeError` (with ``line`` and ``text``) on a malformed known command.
+    """
+    _check(chord_tol_mm, block_bytes)
+    if isinstance(source, str):
+        data: bytes | bytearray = source.encode("utf-8", "surrogateescape")
+    else:
+        data = source if isinstance(source, (bytes, bytearray)) else bytes(source)
+    view = memoryview(data).cast("B")
+    interp = Interpreter(chord_tol_mm)
+    n, pos = len(view), 0
+    while pos < n:
+        stop = min(pos + block_bytes, n)
+        if stop < n:                              # extend to the end of the line
+            nl = data.find(b"\n", stop - 1)
+            stop = n if nl < 0 else nl + 1
+        interp.feed(view[pos:stop])
+        pos = stop
+        if progress is not None:
+            progress(pos / n)
+    tp = interp.finish()
+    tp.slicer = detect_slicer(bytes(view[:8192]))
+    return tp
+
+
+def parse_gcode_file(path: str | os.PathLike[str], *, chord_tol_mm: float = 0.01,
+                     block_bytes: int = BLOCK_BYTES,
+                     progress: Callable[[float], None] | None = None) -> Toolpath:
+    """Interpret a G-code file, streaming it in blocks (memory: one block plus the output)."""
+    _check(chord_tol_mm, block_bytes)
+    try:
+        size = os.path.getsize(path)
+        stream = open(path, "rb")
+    except FileNotFoundError as exc:
+        raise NotFound(f"G-code file not found: {path}", file=str(path)) from exc
+    interp = Interpreter(chord_tol_mm)
+    done = 0
+    with stream:
+        head = stream.read(8192)
+        stream.seek(0)
+        for block in iter_blocks(stream, block_bytes):
+            interp.feed(block)
+            done += len(block)
+            if progress is not None:
+                progress(done / max(size, 1))
+    tp = interp.finish()
+    tp.slicer = detect_slicer(head)
+    return tp

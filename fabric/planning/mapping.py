@@ -1,0 +1,175 @@
+"""Toolpath -> the Print section's rows in the plate frame (no kinematics yet), vectorised.
+
+Each toolpath row becomes one linear move at ``feed * speed_r`` (capped), with
+the extruder's flow per mm of path ``e * (pi d^2 / 4) / length`` on extruding
+rows and 0 elsewhere. Events become non-motion rows placed before the move
+they precede: temperatures (SET_TEMP, or WAIT_TEMP for M109/M190), dwells
+(WAIT), extruder-only moves and firmware retractions (RETRACT, signed filament
+mm); a retraction *during* a move (negative E while moving) becomes a RETRACT
+just before that move. Fan events have no robot instruction and are counted.
+
+Travel lifts: a run of consecutive non-extruding rows whose XY length is at
+least ``lift_min_travel_mm`` is lifted by ``travel_lift_mm`` along the plate z:
+a move straight up from the last point, the run's points raised, and a move
+straight down onto the run's last point.
+
+The whole mapping is array arithmetic: each toolpath row owns a block of output
+rows ``[events..., up?, move, down?]`` whose offsets are a cumulative sum.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fabric.errors import ValidationError
+from fabric.gcode.toolpath import (EV_BED_TEMP, EV_DWELL, EV_EXTRUDE, EV_FAN, EV_FW_RETRACT,
+                                   EV_FW_UNRETRACT, EV_NOZZLE_TEMP, WAIT_NONE, Toolpath)
+from fabric.planning.options import PlanOptions
+from fabric.sim.program import BED, MOVEL, NOZZLE, RETRACT, SET_TEMP, WAIT, WAIT_TEMP
+
+__all__ = ["PrintRows", "map_toolpath"]
+
+
+@dataclass
+class PrintRows:
+    """Program columns holding the Print section at rows ``[start, stop)`` (plate frame).
+
+    The arrays are allocated with ``head`` rows before and ``tail`` rows after
+    the print rows, so the caller fills in the approach and return rows and
+    builds the :class:`~fabric.sim.program.Program` on them without a copy.
+    ``first_xyz_mm`` is where the approach lands.
+    """
+
+    start: int
+    stop: int
+    op: np.ndarray
+    xyz_mm: np.ndarray
+    speed_mm_s: np.ndarray
+    zone_mm: np.ndarray
+    flow_mm3_mm: np.ndarray
+    value: np.ndarray
+    aux: np.ndarray
+    gcode_line: np.ndarray
+    layer: np.ndarray
+    first_xyz_mm: np.ndarray
+    first_line: int
+    n_lifts: int
+    n_fan_events: int
+
+    def __len__(self) -> int:
+        return self.stop - self.start
+
+
+def _events(tp: Toolpath, e: np.ndarray, moving_retract: np.ndarray, opt: PlanOptions
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """Toolpath events (plus retractions while moving) as program ops: (row, op, value, aux, line)."""
+    kind, aux, val = tp.event_kind, tp.event_aux, tp.event_value
+    op = np.full(len(kind), 255, np.uint8)
+    heater = np.where(kind == EV_BED_TEMP, BED, NOZZLE)
+    temp = (kind == EV_NOZZLE_TEMP) | (kind == EV_BED_TEMP)
+    op[temp] = np.where(aux[temp] == WAIT_NONE, SET_TEMP, WAIT_TEMP)
+    op[kind == EV_DWELL] = WAIT
+    op[kind == EV_EXTRUDE] = RETRACT
+    value = val.astype(np.float64).copy()
+    if opt.fw_retract_mm > 0:
+        op[(kind == EV_FW_RETRACT) | (kind == EV_FW_UNRETRACT)] = RETRACT
+        value[kind == EV_FW_RETRACT] = -opt.fw_retract_mm
+        value[kind == EV_FW_UNRETRACT] = opt.fw_retract_mm
+    keep = op != 255
+    mr = np.flatnonzero(moving_retract)
+    rows = np.concatenate([tp.event_row[keep], mr])
+    order = np.argsort(rows, kind="stable")
+    cat = lambda a, b: np.concatenate([a, b])[order]          # noqa: E731
+    return (rows[order], cat(op[keep], np.full(len(mr), RETRACT, np.uint8)), cat(value[keep], e[mr]),
+            cat(np.where(temp, heater, 0)[keep].astype(np.int16), np.zeros(len(mr), np.int16)),
+            cat(tp.event_line[keep], tp.line[mr]), int((kind == EV_FAN).sum()))
+
+
+def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0) -> PrintRows:
+    """Map a toolpath (G-code frame) to Print-section rows (plate frame); see the module docstring."""
+    n = len(tp)
+    if n == 0:
+        raise ValidationError("the G-code has no moves", field="gcode", n_lines=tp.n_lines)
+    off = np.asarray(opt.offset_mm)
+    pts = tp.xyz_mm + off
+    d = np.diff(tp.xyz_mm, axis=0, prepend=tp.start_xyz_mm[None])
+    seg = np.sqrt(np.einsum("ij,ij->i", d, d))
+    e = tp.e_mm
+    ext = (e > 0) & (seg > 1e-9)
+    k0 = 0 if ext[0] else 1                       # the approach lands on row 0's end unless it extrudes
+    first = (tp.start_xyz_mm + off) if k0 == 0 else pts[0]
+    ev_row, ev_op, ev_val, ev_aux, ev_line, n_fan = _events(tp, e, (e < 0) & (seg > 1e-9), opt)
+    sl = slice(k0, n)
+    m = n - k0
+    speed = np.minimum(tp.feed_mm_s[sl] * opt.speed_r, opt.max_tcp_speed_mm_s)
+    flow = np.where(ext[sl], e[sl] * (opt.filament_area_mm2 / np.maximum(seg[sl], 1e-300)), 0.0)
+    # travel runs and their lifts
+    travel = ~ext[sl]
+    prev_t = np.concatenate([[False], travel[:-1]])
+    next_t = np.concatenate([travel[1:], [False]])
+    run_start = travel & ~prev_t
+    run_end = travel & ~next_t
+    lifted = np.zeros(m, bool)
+    if opt.travel_lift_mm > 0 and run_start.any():
+        run_id = np.cumsum(run_start) - 1
+        xy = np.hypot(d[sl, 0], d[sl, 1])
+        run_xy = np.bincount(run_id[travel], weights=xy[travel], minlength=int(run_start.sum()))
+        lifted = travel & (run_xy[np.maximum(run_id, 0)] >= opt.lift_min_travel_mm)
+    ui = np.flatnonzero(run_start & lifted)
+    di = np.flatnonzero(run_end & lifted)
+    # block layout: [events, up, move, down] per toolpath row, trailing events at the end
+    slot = np.clip(ev_row, k0, n) - k0
+    nev = np.bincount(slot, minlength=m + 1)
+    block = nev[:m] + 1
+    block[ui] += 1
+    block[di] += 1
+    offs = np.cumsum(block) - block
+    total = int(block.sum() + nev[m])
+    main = offs + nev[:m]
+    main[ui] += 1
+    ev_first = np.cumsum(nev) - nev
+    ev_pos = np.concatenate([offs, [total - nev[m]]])[slot] + (np.arange(len(slot)) - ev_first[slot])
+    # columns (views into arrays with room for the approach and return rows)
+    size = head + total + tail
+    full = {"op": np.full(size, MOVEL, np.uint8), "xyz_mm": np.zeros((size, 3)), "speed_mm_s": np.zeros(size),
+            "zone_mm": np.zeros(size), "flow_mm3_mm": np.zeros(size), "value": np.zeros(size),
+            "aux": np.zeros(size, np.int16), "gcode_line": np.full(size, -1, np.int64),
+            "layer": np.full(size, -1, np.int32)}
+    view = {k: v[head:head + total] for k, v in full.items()}
+    op, xyz = view["op"], view["xyz_mm"]
+    op[ev_pos] = ev_op
+    xyz[main] = pts[sl]
+    if len(ui):
+        li = np.flatnonzero(lifted)
+        xyz[main[li], 2] += opt.travel_lift_mm
+        pi = k0 + ui - 1                          # the point the lift starts from
+        xyz[main[ui] - 1] = np.where((pi >= 0)[:, None], pts[np.maximum(pi, 0)], first[None])
+        xyz[main[ui] - 1, 2] += opt.travel_lift_mm
+        xyz[main[di] + 1] = pts[k0 + di]
+    # an event row repeats the pose of the motion row before it (the first point if none)
+    last_motion = main.copy()
+    last_motion[di] += 1
+    prev_pos = np.concatenate([[-1], last_motion])[slot]
+    xyz[ev_pos] = np.where((prev_pos >= 0)[:, None], xyz[np.maximum(prev_pos, 0)], first[None])
+    motion = op == MOVEL
+    speed_col, line, layer = view["speed_mm_s"], view["gcode_line"], view["layer"]
+    t_line, t_layer = tp.line[sl], tp.layer[sl]
+    for shift, rows in ((0, slice(None)), (-1, ui), (1, di)):
+        at = main[rows] + shift
+        speed_col[at] = speed[rows]
+        line[at] = t_line[rows]
+        layer[at] = t_layer[rows]
+    view["flow_mm3_mm"][main] = flow
+    line[ev_pos] = ev_line
+    layer[ev_pos] = tp.layer[np.minimum(np.clip(ev_row, k0, n), n - 1)]
+    view["value"][ev_pos] = ev_val
+    view["aux"][ev_pos] = ev_aux
+    # blend zones, except into a stop (a non-motion row next) and at the end
+    zone = view["zone_mm"]
+    zone[motion] = opt.zone_mm
+    zone[ev_pos[ev_pos > 0] - 1] = 0.0
+    zone[-1] = 0.0
+    return PrintRows(start=head, stop=head + total, **full,
+                     first_xyz_mm=np.asarray(first, dtype=float).copy(),
+                     first_line=int(tp.line[0]), n_lifts=int(ui.size), n_fan_events=n_fan)

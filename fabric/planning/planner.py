@@ -1,0 +1,228 @@
+"""The planner: G-code -> verified joint program (approach, print, return home) with its report.
+
+Pipeline: parse (streamed in blocks) -> map the toolpath to Print rows in the
+plate frame (:mod:`fabric.planning.mapping`) -> frame the print with an
+*Approach* (a joint move from home to ``approach_height_mm`` above the first
+point, then a linear move down, at the cell's approach speed, fine zones) and a
+*Return home* (a linear move up, a joint move to the home joints) -> inverse
+kinematics of every motion row with the free rotation about the nozzle axis
+(``fabric.sim.ikpath.solve_path``), solved in blocks of ``ik_block_rows``
+seeded with the previous block's last joints so memory stays bounded and
+progress can be reported -> the cycle time from the motion model the station
+executes (``fabric.sim.motion.time_program``).
+
+Frames: program targets are the TCP in the plate frame (the work object
+``cell.wobj_T()``); IK takes them in the robot base frame, ``wobj_T @ p``, with
+the nozzle axis ``R_wobj @ axis``. Joint moves carry ``vel_r`` so that they
+cover their TCP distance at about the approach speed: ``vel_r = max_j(|dq_j| /
+vlim_j) * v / distance`` (clipped to [0.01, 1]), the paper's "joint moves at
+150 mm/s".
+"""
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from fabric.gcode import Toolpath, parse_gcode, parse_gcode_file
+from fabric.planning.mapping import map_toolpath
+from fabric.planning.options import PlanOptions
+from fabric.planning.report import PlanResult, PlanStats, Reachability
+from fabric.sim.frames import inv_T, quat_from_R
+from fabric.sim.kinematics import IK_JUMP, IK_OK
+from fabric.sim.program import APPROACH, MOVEJ, MOVEL, PRINT, RETURN_HOME, Program
+
+__all__ = ["plan_gcode", "plan_gcode_file", "plan_toolpath"]
+
+Progress = Callable[[float], None]
+JUMP_DEG = 45.0          # joint step between consecutive linear targets flagged as a jump
+
+
+def _sub(progress: Progress | None, a: float, b: float) -> Progress | None:
+    """A progress callback mapping [0, 1] onto [a, b] of ``progress``."""
+    if progress is None:
+        return None
+    return lambda f: progress(a + (b - a) * min(max(f, 0.0), 1.0))
+
+
+def plan_gcode(text: str | bytes, cell: Any, options: PlanOptions | None = None,
+               progress: Progress | None = None, filename: str | None = None) -> PlanResult:
+    """Plan G-code held in memory for ``cell`` (a :class:`fabric.sim.cell.Cell`).
+
+    ``filename`` (optional) names the job: the program's ``meta`` gets
+    ``filename`` and ``name`` (its stem), which exports use.
+    """
+    opt = options or PlanOptions()
+    t0 = time.perf_counter()
+    tp = parse_gcode(text, chord_tol_mm=opt.chord_tol_mm, progress=_sub(progress, 0.0, 0.25))
+    res = plan_toolpath(tp, cell, opt, _sub(progress, 0.25, 1.0), parse_s=time.perf_counter() - t0)
+    _name(res, filename)
+    return res
+
+
+def _name(res: PlanResult, filename: str | os.PathLike[str] | None) -> None:
+    if filename:
+        path = Path(filename)
+        res.program.meta.update(filename=path.name, name=path.stem)
+
+
+def plan_gcode_file(path: str | os.PathLike[str], cell: Any, options: PlanOptions | None = None,
+                    progress: Progress | None = None) -> PlanResult:
+    """Plan a G-code file, streaming it in blocks."""
+    opt = options or PlanOptions()
+    t0 = time.perf_counter()
+    tp = parse_gcode_file(path, chord_tol_mm=opt.chord_tol_mm, progress=_sub(progress, 0.0, 0.25))
+    res = plan_toolpath(tp, cell, opt, _sub(progress, 0.25, 1.0), parse_s=time.perf_counter() - t0)
+    _name(res, path)
+    return res
+
+
+def _assemble(tp: Toolpath, cell: Any, opt: PlanOptions) -> tuple[Program, int]:
+    """Program rows (plate frame, no joints yet); returns the program and its print-row count."""
+    pr = map_toolpath(tp, opt, head=2, tail=2)
+    h = opt.approach_height_mm or float(cell.approach_height_mm)
+    v_app = min(opt.approach_speed_mm_s or float(cell.approach_speed_mm_s), opt.max_tcp_speed_mm_s)
+    up = np.array([0.0, 0.0, h])
+    n = len(pr.op)
+    cols = {name: getattr(pr, name) for name in ("op", "xyz_mm", "speed_mm_s", "zone_mm", "flow_mm3_mm",
+                                                 "value", "aux", "gcode_line", "layer")}
+    section = np.full(n, PRINT, np.uint8)
+    section[:2] = APPROACH
+    section[-2:] = RETURN_HOME
+    quat = np.zeros((n, 4))
+    quat[:, 0] = 1.0
+    prog = Program(**cols, section=section, q_rad=np.zeros((n, int(cell.robot.nq))), quat_wxyz=quat,
+                   vel_r=np.zeros(n),
+                   wobj=np.asarray(cell.wobj_T() if opt.wobj_T is None else opt.wobj_T, dtype=float),
+                   meta={"source_lines": tp.n_lines, "slicer": tp.slicer})
+    last = prog.xyz_mm[pr.stop - 1] if len(pr) else pr.first_xyz_mm
+    prog.op[:2] = (MOVEJ, MOVEL)
+    prog.op[-2:] = (MOVEL, MOVEJ)
+    prog.xyz_mm[0], prog.xyz_mm[1] = pr.first_xyz_mm + up, pr.first_xyz_mm
+    prog.xyz_mm[-2] = last + up
+    prog.speed_mm_s[[0, 1, -2, -1]] = v_app
+    prog.zone_mm[[0, 1, -2, -1]] = 0.0
+    prog.gcode_line[1] = pr.first_line
+    prog.meta.update(travel_lifts=pr.n_lifts, fan_events_dropped=pr.n_fan_events, approach_speed_mm_s=v_app)
+    return prog, len(pr)
+
+
+def _solve(prog: Program, cell: Any, opt: PlanOptions, progress: Progress | None) -> tuple[np.ndarray, np.ndarray]:
+    """IK of every motion row but the final home move, in blocks; fills q and quat. Returns (status, rot_deg)."""
+    from fabric.sim.ikpath import solve_path
+
+    robot = cell.robot
+    wobj = prog.wobj
+    home = np.asarray(cell.home_q_rad, dtype=float)
+    n = len(prog)
+    motion = np.flatnonzero(prog.op[:-1] <= MOVEL)
+    axis_b = wobj[:3, :3] @ opt.nozzle_axis()
+    status = np.zeros(n, np.uint8)
+    rot = np.zeros(n)
+    seed = home
+    q_wobj_inv = quat_from_R(wobj[:3, :3].T)
+    block = opt.ik_block_rows
+    for a in range(0, len(motion), block):
+        idx = motion[a:a + block]
+        p = prog.xyz_mm[idx]
+        xyz_b = np.einsum("ij,kj->ik", p, wobj[:3, :3]) + wobj[:3, 3]     # no BLAS: (N,3)x(3,3)
+        res = solve_path(robot, xyz_b, np.broadcast_to(axis_b, xyz_b.shape), seed,
+                         rot_range_deg=opt.rot_range_deg, rot_step_deg=opt.rot_step_deg, jump_deg=JUMP_DEG)
+        prog.q_rad[idx] = res.q_rad
+        st = res.status.copy()
+        if a > 0 and len(st) and st[0] == IK_OK and np.max(np.abs(res.q_rad[0] - seed)) > np.radians(JUMP_DEG):
+            st[0] = IK_JUMP                      # across the block boundary, as solve_path does inside
+        prog.quat_wxyz[idx] = _quat_in_plate(q_wobj_inv, res.quat_wxyz)
+        status[idx] = st
+        rot[idx] = res.rot_deg
+        good = np.flatnonzero(st == IK_OK)
+        if len(good):
+            seed = res.q_rad[good[-1]]
+        if progress is not None:
+            progress(min(a + block, len(motion)) / max(len(motion), 1))
+    # the final joint move goes to the home joints
+    prog.q_rad[-1] = home
+    T_home = inv_T(wobj) @ robot.fk(home[None])[0]
+    prog.xyz_mm[-1] = T_home[:3, 3]
+    prog.quat_wxyz[-1] = quat_from_R(T_home[:3, :3])
+    # non-motion rows repeat the previous row's pose and status
+    is_m = prog.op <= MOVEL
+    fill = np.where(is_m, np.arange(n), -1)
+    np.maximum.accumulate(fill, out=fill)
+    fill = np.maximum(fill, 0)
+    rest = np.flatnonzero(~is_m)
+    for name in ("q_rad", "quat_wxyz", "xyz_mm"):
+        arr = getattr(prog, name)
+        arr[rest] = arr[fill[rest]]
+    status[rest], rot[rest] = status[fill[rest]], rot[fill[rest]]
+    return status, rot
+
+
+def _quat_in_plate(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
+    """``qa * qb`` (Hamilton product, (4,) by (N, 4)), sign fixed to w >= 0: base-frame TCP
+    orientations expressed in the plate frame when ``qa`` is the inverse of the plate's."""
+    w1, x1, y1, z1 = qa
+    w2, x2, y2, z2 = qb[:, 0], qb[:, 1], qb[:, 2], qb[:, 3]
+    q = np.empty_like(qb)
+    q[:, 0] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
+    q[:, 1] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
+    q[:, 2] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
+    q[:, 3] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
+    q[q[:, 0] < 0] *= -1.0
+    return q
+
+
+def _joint_speeds(prog: Program, cell: Any, v_mm_s: float) -> None:
+    """``vel_r`` of the joint moves: cover the TCP distance at about ``v_mm_s`` (see module doc)."""
+    robot = cell.robot
+    vlim = np.asarray(robot.vel_limit_rad_s, dtype=float)
+    home = np.asarray(cell.home_q_rad, dtype=float)
+    T_home = inv_T(prog.wobj) @ robot.fk(home[None])[0]
+    for i in np.flatnonzero(prog.op == MOVEJ):
+        q0, p0 = (home, T_home[:3, 3]) if i == 0 else (prog.q_rad[i - 1], prog.xyz_mm[i - 1])
+        dist = float(np.linalg.norm(prog.xyz_mm[i] - p0))
+        t_full = float(np.max(np.abs(prog.q_rad[i] - q0) / vlim))
+        prog.vel_r[i] = 1.0 if dist < 1e-6 else float(np.clip(t_full * v_mm_s / dist, 0.01, 1.0))
+
+
+def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
+                  progress: Progress | None = None, *, parse_s: float = 0.0) -> PlanResult:
+    """Plan an interpreted toolpath for ``cell`` (see the module docstring)."""
+    opt = options or PlanOptions()
+    t0 = time.perf_counter()
+    prog, n_print = _assemble(tp, cell, opt)
+    if progress is not None:
+        progress(0.05)
+    t1 = time.perf_counter()
+    status, rot = _solve(prog, cell, opt, _sub(progress, 0.05, 0.85))
+    ik_s = time.perf_counter() - t1
+    _joint_speeds(prog, cell, float(prog.meta["approach_speed_mm_s"]))
+    motion = prog.op <= MOVEL
+    motion[-1] = False                       # the home move is not an IK target
+    report = Reachability.from_status(status, rot, motion, prog.gcode_line)
+    t2 = time.perf_counter()
+    estimate = float("nan")
+    if report.reachable:
+        from fabric.sim.motion import StartState, time_program
+        start = StartState.at_joints(cell.robot, prog.wobj, np.asarray(cell.home_q_rad, dtype=float))
+        estimate = float(time_program(prog, cell.robot, 1.0, start_state=start).total_s)
+    timing_s = time.perf_counter() - t2
+    if progress is not None:
+        progress(1.0)
+    step = np.diff(prog.xyz_mm, axis=0, prepend=prog.xyz_mm[:1])
+    d = np.sqrt(np.einsum("ij,ij->i", step, step))
+    pm = (prog.section == PRINT) & (prog.op == MOVEL)
+    lin = prog.op == MOVEL
+    stats = PlanStats(
+        moves=len(tp), rows=len(prog), targets=int((prog.op <= MOVEL).sum()), layers=tp.n_layers,
+        extruded_volume_mm3=float(np.dot(prog.flow_mm3_mm[lin], d[lin])), path_length_mm=float(d[pm].sum()),
+        print_length_mm=float(d[pm & (prog.flow_mm3_mm > 0)].sum()),
+        travel_lifts=int(prog.meta["travel_lifts"]), fan_events_dropped=int(prog.meta["fan_events_dropped"]),
+        gcode_lines=tp.n_lines, unknown_commands=dict(tp.unknown_commands), slicer=tp.slicer,
+        parse_s=parse_s, ik_s=ik_s, timing_s=timing_s, total_s=parse_s + time.perf_counter() - t0)
+    prog.meta.update(print_rows=n_print, options=opt.to_dict())
+    return PlanResult(program=prog, report=report, estimate_s=estimate, stats=stats, toolpath=tp)

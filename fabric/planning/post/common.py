@@ -1,0 +1,76 @@
+"""Shared helpers of the post-processors: row iteration, extruder transitions, angle conventions."""
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import TextIO
+
+import numpy as np
+
+from fabric.errors import ValidationError
+from fabric.sim.frames import R_from_quat
+from fabric.sim.program import MOVEL, Program
+
+__all__ = ["check_program", "row_blocks", "extrusion_rate", "quat_to_rotvec", "R_to_zyx_deg",
+           "quat_to_zyx_deg", "write_lines"]
+
+BLOCK_ROWS = 20_000     # rows formatted per write: output streams, memory stays flat
+
+
+def check_program(program: Program) -> None:
+    """Refuse to export a program that is empty or has non-finite targets."""
+    if not isinstance(program, Program):
+        raise ValidationError(f"expected a Program, got {type(program).__name__}", field="program")
+    if len(program) == 0:
+        raise ValidationError("the program has no rows", field="program")
+    motion = program.op <= MOVEL
+    for name in ("q_rad", "xyz_mm", "quat_wxyz"):
+        arr = getattr(program, name)[motion]
+        bad = ~np.isfinite(arr).all(axis=1)
+        if bad.any():
+            row = int(np.flatnonzero(motion)[np.flatnonzero(bad)[0]])
+            raise ValidationError(f"row {row}: {name} is not finite", field=name, row=row,
+                                  gcode_line=int(program.gcode_line[row]))
+
+
+def row_blocks(start: int, stop: int, size: int = BLOCK_ROWS) -> Iterator[tuple[int, int]]:
+    """``[a, b)`` ranges covering ``[start, stop)``."""
+    for a in range(start, stop, size):
+        yield a, min(a + size, stop)
+
+
+def extrusion_rate(program: Program) -> np.ndarray:
+    """(N,) programmed volumetric rate in mm^3/s of every row (flow per mm x speed; 0 off)."""
+    rate = program.flow_mm3_mm * program.speed_mm_s
+    return np.where(program.op == MOVEL, rate, 0.0)
+
+
+def quat_to_rotvec(q_wxyz: np.ndarray) -> np.ndarray:
+    """(N, 3) rotation vectors (axis * angle, rad) of unit quaternions (w, x, y, z)."""
+    q = np.asarray(q_wxyz, dtype=float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    q = np.where(q[..., :1] < 0, -q, q)
+    s = np.linalg.norm(q[..., 1:], axis=-1)
+    angle = 2.0 * np.arctan2(s, q[..., 0])
+    scale = np.where(s > 1e-12, angle / np.maximum(s, 1e-300), 2.0)
+    return q[..., 1:] * scale[..., None]
+
+
+def R_to_zyx_deg(R: np.ndarray) -> np.ndarray:
+    """(N, 3) KUKA ``A, B, C`` (deg): ``R = Rz(A) Ry(B) Rx(C)``."""
+    R = np.asarray(R, dtype=float)
+    b = np.arctan2(-R[..., 2, 0], np.hypot(R[..., 0, 0], R[..., 1, 0]))
+    gimbal = np.hypot(R[..., 0, 0], R[..., 1, 0]) < 1e-12
+    a = np.where(gimbal, np.arctan2(-R[..., 0, 1], R[..., 1, 1]), np.arctan2(R[..., 1, 0], R[..., 0, 0]))
+    c = np.where(gimbal, 0.0, np.arctan2(R[..., 2, 1], R[..., 2, 2]))
+    return np.degrees(np.stack([a, b, c], axis=-1))
+
+
+def quat_to_zyx_deg(q_wxyz: np.ndarray) -> np.ndarray:
+    """(N, 3) KUKA ``A, B, C`` (deg) of quaternions (w, x, y, z)."""
+    return R_to_zyx_deg(R_from_quat(q_wxyz))
+
+
+def write_lines(out: TextIO, lines: list[str]) -> None:
+    if lines:
+        out.write("\n".join(lines))
+        out.write("\n")

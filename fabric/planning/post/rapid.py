@@ -1,0 +1,261 @@
+"""ABB RAPID post-processor: a main module and print modules split at a configurable size.
+
+Layout. ``<P>Main`` holds the tool (``tooldata``: the TCP in the flange frame),
+the work object (``wobjdata``: the plate frame in the robot base frame; every
+print target is a robtarget *in the plate frame* with ``\\WObj``), one
+``speeddata`` / ``zonedata`` per distinct speed and zone, ``main`` calling
+``Approach``, ``Print_1 .. Print_k`` and ``ReturnHome``. Each ``<P>Print_k``
+module holds at most ``targets_per_module`` targets, because controllers
+limit the size of a module (and of the program memory); approach and return
+are joint moves written as ``MoveAbsJ`` with the planned joints, so they are
+exact and need no configuration data.
+
+Extruder. ``doExtruder`` (on/off) and ``aoFlow`` (volumetric rate in mm^3/s
+at the programmed speed) are tied to the path with ``TriggL`` + ``TriggIO``
+(``\\Start``, distance 0): the outputs switch exactly when the robot starts
+the move that begins (or ends) extruding, not when the program pointer
+passes, which would be early with zones. ``MoveLDO`` only switches at the end
+point and has no analog output, so it was not used. Moves whose extrusion
+does not change are plain ``MoveL``. Linear moves run with ``ConfL\\Off``:
+the confdata written (quadrants of A1/A4/A6, and the sign of A5 in ``cfx``)
+is informative; the planner's joints are continuous so the controller's
+nearest configuration is the planned one.
+
+Heaters and retraction go through signals a cell integrator maps:
+``aoTempNozzle`` / ``aoTempBed`` (set points), ``diNozzleAtTemp`` /
+``diBedAtTemp`` (waits) and the ``Retract`` procedure (``aoRetract`` length,
+pulse on ``doRetract``).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Callable, TextIO
+
+import numpy as np
+
+from fabric.errors import ValidationError
+from fabric.planning.post.common import check_program, extrusion_rate, row_blocks, write_lines
+from fabric.sim.frames import quat_from_R
+from fabric.sim.program import BED, MOVEJ, MOVEL, PRINT, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
+
+__all__ = ["RapidOptions", "RapidExport", "write_rapid"]
+
+_IDENT = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,15}$")
+_E9 = "[9E9,9E9,9E9,9E9,9E9,9E9]"
+
+
+@dataclass
+class RapidOptions:
+    """Names and sizes of the RAPID export (identifiers must be valid RAPID names)."""
+
+    targets_per_module: int = 5000
+    prefix: str = "AM"
+    tool_name: str = "tExtruder"
+    wobj_name: str = "wobjPlate"
+    do_extruder: str = "doExtruder"
+    ao_flow: str = "aoFlow"
+    tool_mass_kg: float = 1.5
+    tool_cog_mm: tuple[float, float, float] = (0.0, 0.0, 50.0)
+    ori_speed_deg_s: float = 500.0
+    joint_move_speed_mm_s: float = 150.0
+
+    def __post_init__(self) -> None:
+        if not 1 <= int(self.targets_per_module) <= 1_000_000:
+            raise ValidationError("targets_per_module must be in 1..1000000", field="targets_per_module")
+        for name in ("prefix", "tool_name", "wobj_name", "do_extruder", "ao_flow"):
+            if not _IDENT.match(getattr(self, name)):
+                raise ValidationError(f"{name} is not a RAPID identifier", field=name, value=getattr(self, name))
+        if not (self.tool_mass_kg > 0 and self.ori_speed_deg_s > 0 and self.joint_move_speed_mm_s > 0):
+            raise ValidationError("tool mass and speeds must be positive", field="tool_mass_kg")
+
+
+@dataclass
+class RapidExport:
+    """What was written: module names in order and the number of targets in each."""
+
+    modules: list[str] = field(default_factory=list)
+    targets: list[int] = field(default_factory=list)
+
+
+def _num(v: float, nd: int = 3) -> str:
+    s = f"{v:.{nd}f}".rstrip("0").rstrip(".")
+    return "0" if s in ("-0", "") else s
+
+
+def _pose(xyz: np.ndarray, q: np.ndarray) -> str:
+    pos = ",".join(_num(v) for v in xyz[:3])
+    rot = ",".join(_num(v, 6) for v in q[:4])
+    return f"[[{pos}],[{rot}]]"
+
+
+class _Names:
+    """speeddata / zonedata names for distinct (rounded) values."""
+
+    def __init__(self, prefix: str, speeds: np.ndarray, zones: np.ndarray) -> None:
+        self.prefix = prefix
+        self.speeds = {float(v): f"v{prefix}{_num(v, 1).replace('.', '_')}" for v in np.unique(np.round(speeds, 1))}
+        self.zones = {float(z): f"z{prefix}{_num(z, 2).replace('.', '_')}"
+                      for z in np.unique(np.round(zones, 2)) if z > 0}
+
+    def speed(self, v: float) -> str:
+        return self.speeds[round(float(v), 1)]
+
+    def zone(self, z: float) -> str:
+        z = round(float(z), 2)
+        return "fine" if z <= 0 else self.zones[z]
+
+
+def write_rapid(program: Program, sink: TextIO | Callable[[str], TextIO], *,
+                tool_T: np.ndarray | None = None, options: RapidOptions | None = None) -> RapidExport:
+    """Write ``program`` as RAPID modules.
+
+    ``sink`` is either one text stream (all modules one after another, main
+    first) or a callable ``module_name -> stream`` (e.g. one ``.mod`` file per
+    module; the caller closes them). ``tool_T`` is the TCP in the flange frame
+    (4x4, mm; identity if omitted).
+    """
+    check_program(program)
+    opt = options or RapidOptions()
+    tool = np.eye(4) if tool_T is None else np.asarray(tool_T, dtype=float)
+    moving = program.op <= MOVEL
+    speeds = np.where(program.op == MOVEJ, opt.joint_move_speed_mm_s, program.speed_mm_s)
+    speeds = np.where(speeds > 0, speeds, opt.joint_move_speed_mm_s)
+    names = _Names(opt.prefix, speeds[moving], program.zone_mm[moving])
+    bounds = program.section_bounds()
+    p0, p1 = bounds.get("Print", (0, 0))
+    motion_idx = np.flatnonzero(moving[p0:p1]) + p0
+    per = opt.targets_per_module
+    cuts = [p0] + [int(motion_idx[k]) for k in range(per, len(motion_idx), per)] + [p1]
+    cuts = sorted(set(cuts)) if p1 > p0 else []
+    n_mod = max(len(cuts) - 1, 0)
+    export = RapidExport()
+    rate = extrusion_rate(program)
+    ctx = _Emitter(program, opt, names, speeds, rate)
+    main_name = f"{opt.prefix}Main"
+    out = _open(sink, main_name)
+    _write_main(out, main_name, program, opt, names, tool, n_mod, bounds, ctx)
+    export.modules.append(main_name)
+    export.targets.append(int(moving[slice(*bounds.get("Approach", (0, 0)))].sum()
+                              + moving[slice(*bounds.get("ReturnHome", (0, 0)))].sum()))
+    for k in range(n_mod):
+        name = f"{opt.prefix}Print_{k + 1}"
+        out = _open(sink, name)
+        out.write(f"MODULE {name}\n  PROC Print_{k + 1}()\n")
+        ctx.rows(out, cuts[k], cuts[k + 1])
+        out.write("  ENDPROC\nENDMODULE\n")
+        export.modules.append(name)
+        export.targets.append(int(moving[cuts[k]:cuts[k + 1]].sum()))
+    return export
+
+
+def _open(sink: TextIO | Callable[[str], TextIO], name: str) -> TextIO:
+    return sink(name) if callable(sink) else sink
+
+
+def _write_main(out: TextIO, name: str, program: Program, opt: RapidOptions, names: _Names,
+                tool: np.ndarray, n_mod: int, bounds: dict[str, tuple[int, int]], ctx: "_Emitter") -> None:
+    tq = quat_from_R(tool[:3, :3])
+    wq = quat_from_R(program.wobj[:3, :3])
+    cog = ",".join(_num(c) for c in opt.tool_cog_mm)
+    lines = [
+        f"MODULE {name}",
+        f"  ! am-fabric RAPID export: {int((program.op <= MOVEL).sum())} targets, {n_mod} print modules",
+        f"  PERS tooldata {opt.tool_name} := [TRUE,{_pose(tool[:3, 3], tq)},"
+        f"[{_num(opt.tool_mass_kg)},[{cog}],[1,0,0,0],0,0,0]];",
+        f"  PERS wobjdata {opt.wobj_name} := [FALSE,TRUE,\"\",{_pose(program.wobj[:3, 3], wq)},[[0,0,0],[1,0,0,0]]];",
+    ]
+    lines += [f"  CONST speeddata {n} := [{_num(v, 1)},{_num(opt.ori_speed_deg_s, 1)},5000,1000];"
+              for v, n in names.speeds.items()]
+    lines += [f"  CONST zonedata {n} := [FALSE,{_num(z, 2)},{_num(1.5 * z, 2)},{_num(1.5 * z, 2)},"
+              f"{_num(0.15 * z, 3)},{_num(1.5 * z, 2)},{_num(0.15 * z, 3)}];" for z, n in names.zones.items()]
+    lines += [
+        "  VAR triggdata trOn;", "  VAR triggdata trOff;", "  VAR triggdata trFlow;", "  VAR triggdata trFlowOff;",
+        "", "  PROC main()", "    ConfL\\Off;", "    ExtruderInit;", "    Approach;",
+        *[f"    Print_{k + 1};" for k in range(n_mod)],
+        "    ReturnHome;", "  ENDPROC", "",
+        "  PROC ExtruderInit()",
+        f"    TriggIO trOn, 0\\Start\\DOp:={opt.do_extruder}, 1;",
+        f"    TriggIO trOff, 0\\Start\\DOp:={opt.do_extruder}, 0;",
+        f"    TriggIO trFlowOff, 0\\Start\\AOp:={opt.ao_flow}, 0;",
+        "  ENDPROC", "",
+        "  PROC Retract(num len_mm)",
+        "    ! the extruder drive reads the length (mm, < 0 retracts) and moves on the pulse",
+        "    SetAO aoRetract, len_mm;", "    PulseDO doRetract;", "  ENDPROC", "",
+    ]
+    write_lines(out, lines)
+    for proc in ("Approach", "ReturnHome"):
+        # the extruder is off entering these, whatever the print left it as
+        out.write(f"  PROC {proc}()\n    SetDO {opt.do_extruder}, 0;\n    SetAO {opt.ao_flow}, 0;\n")
+        ctx.on = False
+        if proc in bounds:
+            ctx.rows(out, *bounds[proc])
+        out.write("  ENDPROC\n")
+    out.write("ENDMODULE\n")
+    ctx.on = False
+
+
+class _Emitter:
+    """Formats rows as RAPID instructions, tracking the extruder state across modules."""
+
+    def __init__(self, program: Program, opt: RapidOptions, names: _Names, speeds: np.ndarray,
+                 rate: np.ndarray) -> None:
+        self.p, self.opt, self.names, self.speeds, self.rate = program, opt, names, speeds, rate
+        self.on = False
+        self.cur_rate = -1.0
+        self.layer = -2
+
+    def _off(self, lines: list[str]) -> None:
+        if self.on:
+            lines += [f"    SetDO {self.opt.do_extruder}, 0;", f"    SetAO {self.opt.ao_flow}, 0;"]
+            self.on = False
+
+    def rows(self, out: TextIO, start: int, stop: int) -> None:
+        p, opt = self.p, self.opt
+        tw = f"{opt.tool_name}\\WObj:={opt.wobj_name};"
+        for a, b in row_blocks(start, stop):
+            q_deg = np.degrees(p.q_rad[a:b])
+            cf = np.floor(q_deg[:, [0, 3, 5]] / 90.0).astype(int)
+            cfx = (q_deg[:, 4] < 0).astype(int)
+            lines: list[str] = []
+            for i in range(a, b):
+                k = i - a
+                op = int(p.op[i])
+                if p.layer[i] != self.layer and p.section[i] == PRINT:
+                    self.layer = int(p.layer[i])
+                    lines.append(f"    ! layer {self.layer}")
+                if op == MOVEJ:
+                    self._off(lines)
+                    joints = ",".join(_num(v, 4) for v in q_deg[k])
+                    lines.append(f"    MoveAbsJ [[{joints}],{_E9}]\\NoEOffs, {self.names.speed(self.speeds[i])}, "
+                                 f"{self.names.zone(p.zone_mm[i])}, {tw}")
+                elif op == MOVEL:
+                    target = (f"[{_pose(p.xyz_mm[i], p.quat_wxyz[i])[1:-1]},[{cf[k, 0]},{cf[k, 1]},{cf[k, 2]},"
+                              f"{cfx[k]}],{_E9}]")
+                    sp, zn = self.names.speed(self.speeds[i]), self.names.zone(p.zone_mm[i])
+                    r = round(float(self.rate[i]), 3)
+                    if r > 0 and (not self.on or r != self.cur_rate):
+                        lines.append(f"    TriggIO trFlow, 0\\Start\\AOp:={opt.ao_flow}, {_num(r)};")
+                        trig = "trFlow" if self.on else "trFlow\\T2:=trOn"
+                        lines.append(f"    TriggL {target}, {sp}, {trig}, {zn}, {tw}  ! {p.gcode_line[i]}")
+                        self.on, self.cur_rate = True, r
+                    elif r <= 0 and self.on:
+                        lines.append(f"    TriggL {target}, {sp}, trOff\\T2:=trFlowOff, {zn}, {tw}"
+                                     f"  ! {p.gcode_line[i]}")
+                        self.on = False
+                    else:
+                        lines.append(f"    MoveL {target}, {sp}, {zn}, {tw}  ! {p.gcode_line[i]}")
+                elif op == WAIT:
+                    self._off(lines)
+                    lines.append(f"    WaitTime {_num(p.value[i])};")
+                elif op in (SET_TEMP, WAIT_TEMP):
+                    heater = "Bed" if p.aux[i] == BED else "Nozzle"
+                    lines.append(f"    SetAO aoTemp{heater}, {_num(p.value[i], 1)};")
+                    if op == WAIT_TEMP:
+                        self._off(lines)
+                        lines.append(f"    WaitDI di{heater}AtTemp, 1;")
+                elif op == RETRACT:
+                    self._off(lines)
+                    lines.append(f"    Retract {_num(p.value[i])};")
+            write_lines(out, lines)
+

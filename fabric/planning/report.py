@@ -1,0 +1,106 @@
+"""What planning produced: reachability by row and G-code line, statistics, the result object."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from fabric.errors import UnreachableError
+from fabric.gcode.toolpath import Toolpath
+from fabric.sim.kinematics import IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR
+from fabric.sim.program import Program
+
+__all__ = ["Reachability", "PlanStats", "PlanResult", "UNREACHABLE_CODES"]
+
+# Statuses a program cannot run through. IK_SINGULAR rows have an exact
+# solution (the motion model slows the TCP there): reported, not fatal.
+UNREACHABLE_CODES = (IK_OUT_OF_REACH, IK_JOINT_LIMIT, IK_JUMP)
+
+
+@dataclass
+class Reachability:
+    """Per-row IK status of a program (non-motion rows repeat the previous row's status)."""
+
+    status: np.ndarray                        # (N,) uint8, fabric.sim.kinematics IK_* codes
+    rot_deg: np.ndarray                       # (N,) chosen rotation about the nozzle axis
+    feasible_r: float                         # fraction of motion rows that are reachable
+    counts: dict[str, int] = field(default_factory=dict)   # motion rows by reason
+    first_unreachable: tuple[int, str] | None = None        # (G-code line, reason)
+    first_unreachable_row: int = -1
+
+    @classmethod
+    def from_status(cls, status: np.ndarray, rot_deg: np.ndarray, motion: np.ndarray,
+                    gcode_line: np.ndarray) -> "Reachability":
+        st = status[motion]
+        counts = {IK_REASONS.get(c, f"status {c}"): int(n) for c, n in enumerate(np.bincount(st)) if n}
+        bad = motion & np.isin(status, UNREACHABLE_CODES)
+        first = None
+        row = -1
+        if bad.any():
+            row = int(np.argmax(bad))
+            first = (int(gcode_line[row]), IK_REASONS.get(int(status[row]), f"status {int(status[row])}"))
+        ok = ~np.isin(st, UNREACHABLE_CODES)
+        return cls(status=status, rot_deg=rot_deg, feasible_r=float(ok.mean()) if len(st) else 1.0,
+                   counts=counts, first_unreachable=first, first_unreachable_row=row)
+
+    @property
+    def reachable(self) -> bool:
+        return self.first_unreachable is None
+
+    @property
+    def n_singular(self) -> int:
+        return self.counts.get(IK_REASONS[IK_SINGULAR], 0)
+
+    @property
+    def n_ok(self) -> int:
+        return self.counts.get(IK_REASONS[IK_OK], 0)
+
+
+@dataclass
+class PlanStats:
+    """Figures of a plan (lengths in mm, volume in mm^3, times in s)."""
+
+    moves: int = 0                 # toolpath segments
+    rows: int = 0                  # program rows
+    targets: int = 0               # program motion rows
+    layers: int = 0
+    extruded_volume_mm3: float = 0.0
+    path_length_mm: float = 0.0    # TCP path of the Print section
+    print_length_mm: float = 0.0   # of it, while extruding
+    travel_lifts: int = 0
+    fan_events_dropped: int = 0    # M106/M107: no robot instruction carries them
+    gcode_lines: int = 0
+    unknown_commands: dict[str, int] = field(default_factory=dict)
+    slicer: str = "unknown"
+    parse_s: float = 0.0
+    ik_s: float = 0.0
+    timing_s: float = 0.0
+    total_s: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        from dataclasses import asdict
+        return asdict(self)
+
+
+@dataclass
+class PlanResult:
+    """A planned G-code file: the program, its reachability, the cycle-time estimate and stats."""
+
+    program: Program
+    report: Reachability
+    estimate_s: float
+    stats: PlanStats
+    toolpath: Toolpath | None = None
+
+    def require_runnable(self) -> "PlanResult":
+        """Raise :class:`UnreachableError` naming the first unreachable G-code line, else return self."""
+        first = self.report.first_unreachable
+        if first is not None:
+            line, reason = first
+            row = self.report.first_unreachable_row
+            xyz = self.program.xyz_mm[row].round(3).tolist()
+            raise UnreachableError(f"G-code line {line}: target {xyz} (plate frame, mm) is not reachable: {reason}",
+                                   gcode_line=line, reason=reason, row=row, xyz_mm=xyz,
+                                   counts=dict(self.report.counts))
+        return self

@@ -1,0 +1,157 @@
+"""The station service over real in-process Zenoh sessions: the paper's commands end to end."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fabric import schemas as s
+from fabric.client import Client
+from fabric.errors import NotFound, StateError, ValidationError
+from fabric.programs import program_artifact
+from fabric.services.collision import CollisionService
+from fabric.services.planner import PlannerService
+from fabric.services.station import StationService
+from fabric.sim.cell import Cell
+from fabric.sim.testprog import square_program
+
+pytestmark = pytest.mark.timeout(180)
+
+
+@pytest.fixture(scope="module")
+def cell():
+    return Cell.builtin("irb140")
+
+
+@pytest.fixture
+def fabric(session, settings, cell):
+    """Station, collision and planner services in this process, plus a client; yields (client, station, pid)."""
+    planner = PlannerService(session, settings.cell, cell)
+    collision = CollisionService(session, settings.cell, cell)
+    station = StationService(session, settings.cell, cell, pose_hz=100.0)
+    program = square_program(cell, size_mm=20, layers=3, layer_height_mm=0.5, speed_mm_s=40, nozzle_c=200.0)
+    pid = planner.store_artifact(program_artifact(program))
+    for svc in (planner, collision, station):
+        svc.start()
+    with Client.connect(settings) as client:
+        client.wait_alive(("station", "collision", "planner"), deadline_s=20)
+        yield client, station, pid
+    for svc in (station, collision, planner):
+        svc.close()
+
+
+def wait_event(sub, kinds: tuple[str, ...], timeout: float = 60.0) -> s.Event:
+    while True:
+        ev = sub.get(timeout=timeout)
+        if ev.kind in kinds:
+            return ev
+
+
+def test_position_and_time_before_load(fabric, cell):
+    client, _, _ = fabric
+    pose = client.position()
+    assert np.allclose(np.radians(pose.q_deg), cell.home_q_rad, atol=1e-9)
+    assert len(pose.xyz_mm) == 3 and len(pose.quat_wxyz) == 4
+    with pytest.raises(StateError):
+        client.pause()
+    with pytest.raises(StateError):
+        client.collisions()
+
+
+def test_load_unknown_program_is_not_found(fabric):
+    client, _, _ = fabric
+    with pytest.raises(NotFound):
+        client.load("0" * 64)
+
+
+def test_print_at_max_speed_estimate_matches_and_events_are_lossless(fabric):
+    client, station, pid = fabric
+    info = client.load(pid)
+    assert info.estimate_s > 0 and info.total_s == pytest.approx(info.estimate_s)
+    report = client.collisions()
+    assert report.collision_free and report.checked_configs > 0
+    events = client.subscribe("station", "events")
+    try:
+        client.start(rtf=0)
+        end = wait_event(events, ("finished", "fault"))
+    finally:
+        events.close()
+    assert end.kind == "finished"
+    done = client.time()
+    assert done.total_s == pytest.approx(info.estimate_s, rel=1e-9)
+    assert done.remaining_s == pytest.approx(0.0, abs=1e-9)
+    history = client.events(0).events
+    seqs = [e.seq for e in history]
+    assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))          # gap-free
+    kinds = [e.kind for e in history]
+    assert kinds.count("layer") >= 3 and "extruder_on" in kinds and "extruder_off" in kinds
+    import io
+    import trimesh
+    mesh = trimesh.load(io.BytesIO(client.mesh("stl").data), file_type="stl")
+    assert len(mesh.faces) > 0 and mesh.extents[0] == pytest.approx(20.0, abs=2.0)
+
+
+def test_pause_resume_and_stop_over_the_fabric(fabric):
+    client, station, pid = fabric
+    client.load(pid)
+    events = client.subscribe("station", "events")
+    try:
+        client.start(rtf=4.0)
+        wait_event(events, ("layer",))
+        ack = client.pause()
+        assert ack.state == "paused"
+        paused_at = client.position()
+        with pytest.raises(StateError):
+            client.start()
+        client.resume(rtf=0)
+        assert wait_event(events, ("finished", "fault")).kind == "finished"
+    finally:
+        events.close()
+    assert paused_at.xyz_mm[2] > 0
+    st = client.state()
+    assert st.state in ("idle", "ready", "stopped") or st.progress_r == pytest.approx(1.0)
+
+
+def test_overrides_calibrate_ready_and_home(fabric, cell):
+    client, station, pid = fabric
+    st = client.overrides(speed_r=1.5, flow_r=0.9, nozzle_c=210.0)
+    assert st.speed_r == pytest.approx(1.5) and st.flow_r == pytest.approx(0.9)
+    temps = client.subscribe("station", "temps")
+    try:
+        t = temps.get(timeout=10)
+        assert t.nozzle_target_c == pytest.approx(210.0)
+    finally:
+        temps.close()
+    client.load(pid)
+    ready = client.ready()
+    names = {c.name: c for c in ready.checks}
+    assert names["program planned and loaded"].ok
+    assert names["program collision-free"].ok, ready.checks
+    assert not names["services alive"].ok            # slicer and supervisor are not running here
+    assert not ready.ready
+    events = client.subscribe("station", "events")
+    try:
+        ack = client.home()
+        assert "home" in ack.message
+        wait_event(events, ("home",))
+    finally:
+        events.close()
+    assert np.allclose(np.radians(client.position().q_deg), cell.home_q_rad, atol=1e-6)
+    cal = client.calibrate()
+    assert cal.points >= 6 and cal.residual_rms_mm < 0.1
+    assert client.state().wobj_xyz_mm == pytest.approx(cal.wobj_xyz_mm)
+    with pytest.raises(ValidationError) as e:        # planned for the old work object: re-plan
+        client.load(pid)
+    assert e.value.details.get("field") == "wobj"
+
+
+def test_pose_stream_rate_and_content(fabric):
+    client, _, _ = fabric
+    sub = client.subscribe("station", "pose")
+    try:
+        msgs = [sub.get(timeout=5) for _ in range(20)]
+    finally:
+        sub.close()
+    seqs = [m.seq for m in msgs]
+    assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+    walls = [m.wall_time_s for m in msgs]
+    assert walls == sorted(walls)
