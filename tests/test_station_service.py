@@ -95,7 +95,7 @@ def test_pause_resume_and_stop_over_the_fabric(fabric):
     client.load(pid)
     events = client.subscribe("station", "events")
     try:
-        client.start(rtf=4.0)
+        client.start(rtf=30.0)
         wait_event(events, ("layer",))
         ack = client.pause()
         assert ack.state == "paused"
