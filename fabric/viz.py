@@ -30,15 +30,14 @@ def toolpath_png(program: Program, title: str = "toolpath", max_segments: int = 
 
     fig = plt.figure(figsize=(11, 5), dpi=110)
     ax = fig.add_subplot(1, 2, 1, projection="3d")
-    ax.add_collection3d(Line3DCollection(seg[ext], colors=colors[ext], linewidths=0.6))
-    ax.add_collection3d(Line3DCollection(seg[~ext], colors=(0.8, 0.2, 0.2, 0.25), linewidths=0.3))
+    ax.add_collection3d(Line3DCollection(seg[ext], colors=colors[ext], linewidths=0.6), autolim=False)
+    ax.add_collection3d(Line3DCollection(seg[~ext], colors=(0.8, 0.2, 0.2, 0.25), linewidths=0.3), autolim=False)
     if len(seg):
         lo, hi = seg.reshape(-1, 3).min(axis=0), seg.reshape(-1, 3).max(axis=0)
         span = max(np.max(hi - lo), 1.0)
         mid = (lo + hi) / 2
-        ax.set_xlim(mid[0] - span / 2, mid[0] + span / 2)
-        ax.set_ylim(mid[1] - span / 2, mid[1] + span / 2)
-        ax.set_zlim(lo[2], lo[2] + span)
+        ax.auto_scale_xyz([mid[0] - span / 2, mid[0] + span / 2], [mid[1] - span / 2, mid[1] + span / 2],
+                          [lo[2], lo[2] + span], had_data=False)
     ax.set_xlabel("x mm"), ax.set_ylabel("y mm"), ax.set_zlabel("z mm")
     ax.set_title(f"{title}: {int(ext.sum())} extruding moves, {len(np.unique(layer))} layers")
     ax2 = fig.add_subplot(1, 2, 2)

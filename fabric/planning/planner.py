@@ -107,6 +107,10 @@ def _assemble(tp: Toolpath, cell: Any, opt: PlanOptions) -> tuple[Program, int]:
     prog.speed_mm_s[[0, 1, -2, -1]] = v_app
     prog.zone_mm[[0, 1, -2, -1]] = 0.0
     prog.gcode_line[1] = pr.first_line
+    # non-motion rows (temperatures, waits, retractions) hold the TCP where the last motion row left it
+    motion = prog.op <= MOVEL
+    last_motion = np.maximum.accumulate(np.where(motion, np.arange(n), 0))
+    prog.xyz_mm[:] = prog.xyz_mm[last_motion]
     prog.meta.update(travel_lifts=pr.n_lifts, fan_events_dropped=pr.n_fan_events, approach_speed_mm_s=v_app)
     return prog, len(pr)
 

@@ -1,0 +1,78 @@
+"""Parametric test and demo parts (watertight trimesh meshes, mm, lowest point at Z = 0).
+
+Used by ``tools/make_samples.py`` (the bundled sample STLs), the slicing
+tests and the slicing benchmark, so all three slice exactly the same shapes.
+Solids are built with manifold3d's booleans and twisted extrusion, which
+always produce closed, consistently wound meshes.
+"""
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+from manifold3d import CrossSection, Manifold
+
+__all__ = ["box", "cylinder", "twisted_vase", "islands_part", "sample_part", "sphere", "to_stl_bytes"]
+
+
+def _mesh(solid: Manifold) -> trimesh.Trimesh:
+    m = solid.to_mesh()
+    out = trimesh.Trimesh(np.asarray(m.vert_properties)[:, :3], np.asarray(m.tri_verts), process=True)
+    out.apply_translation((0.0, 0.0, -out.bounds[0, 2]))
+    return out
+
+
+def _star(r_in: float, r_out: float, lobes: int, points_per_lobe: int) -> np.ndarray:
+    t = np.linspace(0.0, 2.0 * np.pi, lobes * points_per_lobe, endpoint=False)
+    r = r_in + (r_out - r_in) * 0.5 * (1.0 + np.cos(lobes * t))
+    return np.column_stack([r * np.cos(t), r * np.sin(t)])
+
+
+def box(size_mm: tuple[float, float, float] = (20.0, 20.0, 10.0)) -> trimesh.Trimesh:
+    """A plain box."""
+    return _mesh(Manifold.cube(size_mm, center=True))
+
+
+def cylinder(radius_mm: float = 10.0, height_mm: float = 10.0, segments: int = 96) -> trimesh.Trimesh:
+    """A round cylinder (faceted with ``segments`` sides)."""
+    return _mesh(Manifold.cylinder(height_mm, radius_mm, radius_mm, segments))
+
+
+def twisted_vase(height_mm: float = 15.0, r_in_mm: float = 9.0, r_out_mm: float = 12.0, wall_mm: float = 1.2,
+                 floor_mm: float = 1.5, twist_deg: float = 60.0, lobes: int = 6, points_per_lobe: int = 16,
+                 divisions: int = 30) -> trimesh.Trimesh:
+    """A hollow star-section vase twisted about Z, open at the top, with a floor."""
+    outer = Manifold.extrude(CrossSection([_star(r_in_mm, r_out_mm, lobes, points_per_lobe)]), height_mm,
+                             divisions, twist_deg)
+    inner = Manifold.extrude(CrossSection([_star(r_in_mm - wall_mm, r_out_mm - wall_mm, lobes, points_per_lobe)]),
+                             height_mm, divisions, twist_deg).translate((0.0, 0.0, floor_mm))
+    return _mesh(outer - inner)
+
+
+def islands_part() -> trimesh.Trimesh:
+    """Three separate towers (islands) on one plate: a tube, a block with a square hole, a pin."""
+    tube = Manifold.cylinder(8.0, 5.0, 5.0, 64).translate((-10.0, 0.0, 0.0)) \
+        - Manifold.cylinder(10.0, 2.5, 2.5, 48).translate((-10.0, 0.0, -1.0))
+    block = Manifold.cube((8.0, 12.0, 8.0)).translate((2.0, -6.0, 0.0)) \
+        - Manifold.cube((4.0, 4.0, 10.0)).translate((4.0, -2.0, -1.0))
+    pin = Manifold.cylinder(8.0, 3.0, 3.0, 48).translate((16.0, 0.0, 0.0))
+    return _mesh(tube + block + pin)
+
+
+def sample_part() -> trimesh.Trimesh:
+    """The demo part: a 40 x 40 x 20 mm block with a 16 mm through hole and a 4 mm deep pocket ring."""
+    block = Manifold.cube((40.0, 40.0, 20.0), center=True)
+    hole = Manifold.cylinder(30.0, 8.0, 8.0, 96, center=True)
+    pocket = (Manifold.cylinder(4.0, 15.0, 15.0, 96) - Manifold.cylinder(4.0, 11.0, 11.0, 96)).translate((0, 0, 6.0))
+    return _mesh(block - hole - pocket)
+
+
+def sphere(radius_mm: float = 15.0, subdivisions: int = 5) -> trimesh.Trimesh:
+    """An icosphere: every layer differs, with gently sloped tops and bottoms."""
+    out = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius_mm)
+    out.apply_translation((0.0, 0.0, radius_mm))
+    return out
+
+
+def to_stl_bytes(mesh: trimesh.Trimesh) -> bytes:
+    """Binary STL of a mesh (what the slicer service receives)."""
+    return mesh.export(file_type="stl")
