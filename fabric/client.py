@@ -25,9 +25,10 @@ from fabric.config import SessionSettings, zenoh_config
 from fabric.errors import DecodeError, FabricError, ServiceUnavailable, error_from_code
 from fabric.keys import ENDPOINTS, SERVICES, TOPICS, Keys, parse_alive
 
-__all__ = ["Client", "Subscription"]
+__all__ = ["Client", "Subscription", "wait_connected"]
 
-DISCOVERY_WINDOW_S = 1.0
+DISCOVERY_WINDOW_S = 1.0   # retry a get that found no queryable for this long (declarations in flight)
+CONNECT_WINDOW_S = 3.0     # how long connect() waits for the first link
 
 
 class Subscription:
@@ -70,6 +71,8 @@ class Client:
         """Open a session from ``settings`` and close it on exit."""
         session = zenoh.open(zenoh_config(settings))
         try:
+            if settings.connect:
+                wait_connected(session, CONNECT_WINDOW_S)
             yield cls(session, settings.cell)
         finally:
             session.close()
@@ -199,6 +202,17 @@ class Client:
     def submit(self, request: s.JobSubmit) -> s.JobAccepted: return self.call("supervisor", "submit", request)
     def job(self, job_id: str) -> s.JobStatus: return self.call("supervisor", "job", s.JobQuery(job_id=job_id))
     def jobs(self) -> s.JobList: return self.call("supervisor", "jobs")
+
+
+def wait_connected(session: zenoh.Session, deadline_s: float) -> bool:
+    """Wait (bounded) until the session has a link to a router or a peer; a fresh session's first
+    query could otherwise leave before the link is up and find no one."""
+    end = time.monotonic() + deadline_s
+    while time.monotonic() < end:
+        if list(session.info.routers_zid()) or list(session.info.peers_zid()):
+            return True
+        time.sleep(0.01)
+    return False
 
 
 def _error_of(payload: bytes) -> FabricError:

@@ -29,6 +29,7 @@ class SessionSettings:
     listen: list[str] = field(default_factory=list)
     config_file: str | None = None
     multicast: bool = False
+    gossip: bool = True
     cell: str = "cell1"
 
     def to_args(self) -> list[str]:
@@ -49,16 +50,24 @@ def add_session_args(parser: argparse.ArgumentParser) -> None:
     """The flags every fabric program accepts."""
     g = parser.add_argument_group("fabric session")
     g.add_argument("--config", dest="zconfig", metavar="FILE", help="Zenoh JSON5 config file (flags override it)")
-    g.add_argument("--mode", choices=MODES, default=None, help="Zenoh mode (default: peer)")
+    g.add_argument("--mode", choices=MODES, default=None,
+                   help="Zenoh mode (default: peer for services, client for the CLI and console)")
     g.add_argument("--connect", action="append", metavar="ENDPOINT", help=f"endpoint to connect to (default {DEFAULT_HUB})")
     g.add_argument("--listen", action="append", metavar="ENDPOINT", help="endpoint to listen on")
     g.add_argument("--multicast", action="store_true", help="enable multicast scouting (off by default)")
     g.add_argument("--cell", default=os.environ.get("FABRIC_CELL", "cell1"), help="cell name: the key prefix am/<cell>/")
 
 
-def settings_from_args(ns: argparse.Namespace) -> SessionSettings:
+def settings_from_args(ns: argparse.Namespace, default_mode: str = "peer") -> SessionSettings:
+    """Settings from the flags; ``default_mode`` applies when ``--mode`` is not given.
+
+    Services default to ``peer``. Short-lived tools (the CLI, the console) default to
+    ``client``: a client routes everything through the hub, which already knows every
+    service, so its first query sees the whole cell; a fresh peer may briefly see only
+    the part of the cell whose declarations reached it first.
+    """
     st = SessionSettings(cell=ns.cell)
-    st.mode = ns.mode or "peer"
+    st.mode = ns.mode or default_mode
     if ns.connect:
         st.connect = list(ns.connect)
     if ns.listen:
@@ -73,12 +82,13 @@ def zenoh_config(st: SessionSettings) -> zenoh.Config:
     conf = zenoh.Config.from_file(st.config_file) if st.config_file else zenoh.Config()
     conf.insert_json5("mode", json.dumps(st.mode))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(st.multicast))
+    conf.insert_json5("scouting/gossip/enabled", json.dumps(st.gossip))
     connect = [ep for ep in st.connect if ep not in st.listen]
     if connect:
         conf.insert_json5("connect/endpoints", json.dumps(connect))
     if st.listen:
         conf.insert_json5("listen/endpoints", json.dumps(st.listen))
-    elif st.mode != "router":
+    elif st.mode == "peer":
         # a peer that listens nowhere cannot be reached directly: ephemeral loopback port
         conf.insert_json5("listen/endpoints", json.dumps(["tcp/127.0.0.1:0"]))
     return conf

@@ -13,6 +13,7 @@ import queue
 import socket
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from fabric import schemas as s
@@ -120,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"starting the cell (5 services, logs in {a.out / 'logs'}) ...")
     try:
         cell.start(deadline_s=120)
-        with Client.connect(settings) as client:
+        with Client.connect(replace(settings, mode="client")) as client:
             summary = run_demo(client, a.model, a.out, a.profile, a.backend, a.rtf)
         print_summary(summary)
         return 0 if summary["end"] == "finished" and summary["collision_free"] else 1

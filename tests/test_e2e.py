@@ -7,6 +7,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import replace
 
 import msgpack
 import pytest
@@ -30,7 +31,8 @@ def client(running_cell):
 
 
 def cli(settings, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "fabric.cli.main", *args, *settings.to_args()],
+    client_args = replace(settings, mode="client").to_args()     # what a user's CLI does by default
+    return subprocess.run([sys.executable, "-m", "fabric.cli.main", *args, *client_args],
                           capture_output=True, text=True, timeout=timeout)
 
 

@@ -118,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if hasattr(a, "local"):
             return a.local(a)
-        with Client.connect(settings_from_args(a)) as client:
+        with Client.connect(settings_from_args(a, default_mode="client")) as client:
             return a.run(client, a)
     except FabricError as err:
         return fail(err.message, as_json, err.code, err.details)

@@ -15,7 +15,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="fabric-tui", description="operator console for an am-fabric cell")
     add_session_args(p)
     a = p.parse_args(argv)
-    with Client.connect(settings_from_args(a)) as client:
+    with Client.connect(settings_from_args(a, default_mode="client")) as client:
         FabricConsole(client).run()
     return 0
 
