@@ -184,6 +184,7 @@ class Client:
         return self.call("station", "events", s.EventsQuery(since_seq=since_seq, limit=limit))
     def overrides(self, **values: float | None) -> s.StationState:
         return self.call("station", "overrides", s.Overrides(**values))
+    def set_rtf(self, rtf: float) -> s.StationState: return self.call("station", "rtf", s.StartRequest(rtf=rtf))
     def mesh(self, fmt: str = "stl") -> s.Artifact: return self.call("station", "mesh", s.MeshRequest(fmt=fmt))
 
     # --- pipeline --------------------------------------------------------------

@@ -65,6 +65,7 @@ _TABLE = [
     _ep("station", "state", s.Empty, s.StationState, doc="state snapshot"),
     _ep("station", "events", s.EventsQuery, s.EventList, doc="event history since a sequence number"),
     _ep("station", "overrides", s.Overrides, s.StationState, doc="speed/flow/temperature overrides"),
+    _ep("station", "rtf", s.StartRequest, s.StationState, doc="change the simulation's real-time factor live"),
     _ep("station", "mesh", s.MeshRequest, s.Artifact, 60.0, "as-printed part as STL or GLB"),
     # slicer
     _ep("slicer", "slice", s.SliceRequest, s.JobAccepted, 10.0, "start slicing a model (a job)"),

@@ -24,7 +24,9 @@ def cell():
 
 @pytest.fixture
 def fabric(session, settings, cell):
-    """Station, collision and planner services in this process, plus a client; yields (client, station, pid)."""
+    """Station, collision and planner services in this process, plus a client.
+
+    Yields (client, station, program id, planner); the program heats the nozzle to 200 C first."""
     planner = PlannerService(session, settings.cell, cell)
     collision = CollisionService(session, settings.cell, cell)
     station = StationService(session, settings.cell, cell, pose_hz=100.0)
@@ -34,7 +36,7 @@ def fabric(session, settings, cell):
         svc.start()
     with Client.connect(settings) as client:
         client.wait_alive(("station", "collision", "planner"), deadline_s=20)
-        yield client, station, pid
+        yield client, station, pid, planner
     for svc in (station, collision, planner):
         svc.close()
 
@@ -47,7 +49,7 @@ def wait_event(sub, kinds: tuple[str, ...], timeout: float = 60.0) -> s.Event:
 
 
 def test_position_and_time_before_load(fabric, cell):
-    client, _, _ = fabric
+    client, _, _, _ = fabric
     pose = client.position()
     assert np.allclose(np.radians(pose.q_deg), cell.home_q_rad, atol=1e-9)
     assert len(pose.xyz_mm) == 3 and len(pose.quat_wxyz) == 4
@@ -58,13 +60,13 @@ def test_position_and_time_before_load(fabric, cell):
 
 
 def test_load_unknown_program_is_not_found(fabric):
-    client, _, _ = fabric
+    client, _, _, _ = fabric
     with pytest.raises(NotFound):
         client.load("0" * 64)
 
 
 def test_print_at_max_speed_estimate_matches_and_events_are_lossless(fabric):
-    client, station, pid = fabric
+    client, station, pid, _ = fabric
     info = client.load(pid)
     assert info.estimate_s > 0 and info.total_s == pytest.approx(info.estimate_s)
     report = client.collisions()
@@ -91,7 +93,7 @@ def test_print_at_max_speed_estimate_matches_and_events_are_lossless(fabric):
 
 
 def test_pause_resume_and_stop_over_the_fabric(fabric):
-    client, station, pid = fabric
+    client, station, pid, _ = fabric
     client.load(pid)
     events = client.subscribe("station", "events")
     try:
@@ -112,7 +114,7 @@ def test_pause_resume_and_stop_over_the_fabric(fabric):
 
 
 def test_overrides_calibrate_ready_and_home(fabric, cell):
-    client, station, pid = fabric
+    client, station, pid, _ = fabric
     st = client.overrides(speed_r=1.5, flow_r=0.9, nozzle_c=210.0)
     assert st.speed_r == pytest.approx(1.5) and st.flow_r == pytest.approx(0.9)
     temps = client.subscribe("station", "temps")
@@ -145,7 +147,7 @@ def test_overrides_calibrate_ready_and_home(fabric, cell):
 
 
 def test_pose_stream_rate_and_content(fabric):
-    client, _, _ = fabric
+    client, _, _, _ = fabric
     sub = client.subscribe("station", "pose")
     try:
         msgs = [sub.get(timeout=5) for _ in range(20)]
@@ -155,3 +157,28 @@ def test_pose_stream_rate_and_content(fabric):
     assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
     walls = [m.wall_time_s for m in msgs]
     assert walls == sorted(walls)
+
+
+def test_real_time_then_max_speed_gives_the_same_print_as_max_speed(fabric):
+    """Simulated time is exact: running part of the print at rtf 1 changes nothing but the wall time."""
+    client, _, _, planner = fabric
+    cold = square_program(Cell.builtin("irb140"), size_mm=20, layers=3, speed_mm_s=40)   # no heat-up wait
+    pid = planner.store_artifact(program_artifact(cold))
+    ends = []
+    for plan in (("max",), ("rt", "max")):
+        client.load(pid)
+        events = client.subscribe("station", "events")
+        try:
+            client.start(rtf=1.0 if plan[0] == "rt" else 0.0)
+            if plan[0] == "rt":
+                first = wait_event(events, ("extruder_on", "layer"))   # really running at rtf 1
+                assert client.state().rtf == 1.0 and first.t_sim_s > 0
+                client.set_rtf(0.0)
+            ends.append(wait_event(events, ("finished", "fault")))
+        finally:
+            events.close()
+    a, b = ends
+    assert a.kind == b.kind == "finished"
+    assert b.data["elapsed_s"] == pytest.approx(a.data["elapsed_s"], rel=1e-9)
+    assert b.data["extruded_mm3"] == pytest.approx(a.data["extruded_mm3"], rel=1e-9)
+    assert b.data["beads"] == a.data["beads"]

@@ -141,6 +141,9 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
                None, "live overrides: speed, flow, temperatures")
     for flag in ("speed", "flow", "nozzle", "bed"):
         p.add_argument(f"--{flag}", type=float, default=None)
+    p = simple("rtf", lambda c, a: c.set_rtf(a.factor), lambda st: f"real-time factor now "
+               f"{'max' if st.rtf == 0 else f'{st.rtf:g}'}", "change the simulation speed live")
+    p.add_argument("factor", type=float, help="1 = real time, 10 = ten times faster, 0 = as fast as possible")
     p = sub.add_parser("watch", parents=[common], help="follow a telemetry topic")
     p.add_argument("topic", choices=("pose", "extrusion", "state", "temps", "events"))
     p.add_argument("--count", type=int, default=0, help="stop after N messages (0 = forever)")

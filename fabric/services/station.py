@@ -59,7 +59,7 @@ class StationService(Service):
         self.pub_state = self.publisher("state", lossless=True)
         self.pub_events = self.publisher("events", lossless=True)
         for command in ("position", "home", "load", "start", "pause", "resume", "stop", "collisions",
-                        "calibrate", "ready", "time", "state", "events", "overrides", "mesh"):
+                        "calibrate", "ready", "time", "state", "events", "overrides", "rtf", "mesh"):
             self.handle(command, getattr(self, f"on_{command}"))
 
     def start(self) -> None:
@@ -244,6 +244,12 @@ class StationService(Service):
     def on_overrides(self, req: s.Overrides) -> s.StationState:
         with self.lock:
             self.twin.set_overrides(speed_r=req.speed_r, flow_r=req.flow_r, nozzle_c=req.nozzle_c, bed_c=req.bed_c)
+            return self._state_msg()
+
+    def on_rtf(self, req: s.StartRequest) -> s.StationState:
+        """Change how fast simulated time runs; the simulation itself is unchanged (time is exact)."""
+        with self.lock:
+            self.rtf = req.rtf
             return self._state_msg()
 
     def on_mesh(self, req: s.MeshRequest) -> s.Artifact:
