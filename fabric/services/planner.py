@@ -21,6 +21,7 @@ from fabric.programs import content_id, program_artifact, program_from_artifact
 from fabric.runtime import Service
 from fabric.sim.cell import Cell
 from fabric.sim.frames import xyzrpy_to_T
+from fabric.sim.motion import StartState, time_program
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.post import write_export
 
@@ -97,8 +98,13 @@ class PlannerService(Service):
             raise UnreachableError(f"program is not runnable: first unreachable target at G-code line "
                                    f"{fu.get('gcode_line')} ({fu.get('reason')})", **fu)
         program = program_from_artifact(self.get_artifact(req.program_id))
+        t_end = None
+        if req.fmt == "csv" and summary.runnable:      # time at each target, from home, as the station runs it
+            start = StartState.at_joints(self.cell.robot, program.wobj, self.cell.home_q_rad)
+            t_end = time_program(program, self.cell.robot, 1.0, start_state=start).t_end_s
         buf = io.StringIO()
-        write_export(program, req.fmt, buf, self.cell, module_targets=req.module_targets)
+        write_export(program, req.fmt, buf, self.cell, module_targets=req.module_targets, t_end_s=t_end,
+                     name=str(program.meta.get("name", "am_print")))
         data = buf.getvalue().encode()
         name = f"{program.meta.get('name', 'program')}.{SUFFIX[req.fmt]}"
         return s.Artifact(artifact_id=content_id(data), name=name, media_type=MEDIA[req.fmt], data=data)

@@ -1,0 +1,153 @@
+"""fabric-cli as a user runs it, against the cell's processes: outputs, exports and clear errors."""
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from fabric.demo import sample_model
+
+pytestmark = pytest.mark.timeout(300)
+
+
+def cli(settings, *args: str, timeout: float = 180) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "fabric.cli.main", *args,
+                           *replace(settings, mode="client").to_args()],
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def local(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "fabric.cli.main", *args], capture_output=True, text=True,
+                          timeout=120)
+
+
+@pytest.fixture(scope="module")
+def settings(running_cell):
+    return running_cell.settings
+
+
+@pytest.fixture(scope="module")
+def gcode(settings, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("cli") / "part.gcode"
+    r = cli(settings, "slice", str(sample_model()), "-o", str(out), "--profile", "robot-1.2mm")
+    assert r.returncode == 0, r.stderr
+    assert "layers" in r.stdout
+    return out
+
+
+def test_slice_writes_gcode_with_layer_markers(gcode):
+    text = gcode.read_text()
+    assert ";LAYER_CHANGE" in text and "M83" in text
+
+
+@pytest.mark.slicers
+def test_slice_with_prusaslicer_backend(settings, tmp_path):
+    out = tmp_path / "p.gcode"
+    r = cli(settings, "slice", str(sample_model()), "-o", str(out), "--backend", "prusaslicer", "--json")
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout)
+    assert res["backend"] == "prusaslicer" and res["layers"] > 10 and out.stat().st_size > 1000
+
+
+def _box(path: Path, size_mm: float) -> Path:
+    trimesh.creation.box((size_mm, size_mm, 10.0)).export(path)
+    return path
+
+
+@pytest.mark.parametrize("case,code,words", [
+    ("empty", "mesh", "empty"),
+    ("truncated", "mesh", "truncated"),
+    ("open", "mesh", ""),
+    ("huge", "placement", "plate"),
+    ("profile", "profile", "nozzle_size"),
+])
+def test_slice_broken_inputs_get_clear_errors(settings, tmp_path, case, code, words):
+    args = []
+    if case == "empty":
+        model = tmp_path / "empty.stl"
+        model.write_bytes(b"")
+    elif case == "truncated":
+        model = tmp_path / "cut.stl"
+        model.write_bytes(sample_model().read_bytes()[:3000])
+    elif case == "open":
+        model = tmp_path / "open.stl"
+        sheet = trimesh.Trimesh(vertices=[[0, 0, 0], [10, 0, 0], [0, 10, 0], [0, 0, 10]], faces=[[0, 1, 2]])
+        sheet.export(model)
+    elif case == "huge":
+        model = _box(tmp_path / "huge.stl", 300.0)
+    else:
+        model = sample_model()
+        args = ["--set", "nozzle_size=0.4"]
+    r = cli(settings, "slice", str(model), "-o", str(tmp_path / "x.gcode"), *args)
+    assert r.returncode == 1
+    assert f"error [{code}]" in r.stderr and words.lower() in r.stderr.lower(), r.stderr
+    rj = cli(settings, "slice", str(model), "-o", str(tmp_path / "x.gcode"), "--json", *args)
+    assert json.loads(rj.stdout)["error"]["code"] == code
+
+
+def test_plan_exports_rapid_and_csv(settings, gcode, tmp_path):
+    mod, table = tmp_path / "part.mod", tmp_path / "part.csv"
+    r = cli(settings, "plan", str(gcode), "--rapid", str(mod), "--csv", str(table), "--json")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads(r.stdout)["summary"]
+    assert summary["runnable"] and summary["layers"] > 10 and summary["estimate_s"] > 0
+    text = mod.read_text()
+    assert "MODULE" in text and "MoveL" in text and "ENDMODULE" in text
+    with table.open() as fh:
+        rows = list(csv.DictReader(fh))
+    for col in ("gcode_line", "x_mm", "y_mm", "z_mm", "q1_deg", "q6_deg", "speed_mm_s", "extrude", "t_s"):
+        assert col in rows[0], col
+    assert len(rows) == summary["targets"]
+    t = np.array([float(r["t_s"]) for r in rows])
+    assert np.all(np.diff(t) >= -1e-9) and t[-1] == pytest.approx(summary["estimate_s"], abs=1e-3)
+
+
+def test_plan_unreachable_names_the_line(settings, tmp_path):
+    bad = tmp_path / "far.gcode"
+    bad.write_text("G21\nG90\nM83\nG1 Z0.3 F600\nG1 X100 Y100 E1\nG1 X2000 Y100 E5 ; far off the plate\n")
+    r = cli(settings, "plan", str(bad))
+    assert r.returncode == 2
+    assert "line 6" in r.stdout and "out of reach" in r.stdout
+    r = cli(settings, "plan", str(bad), "--rapid", str(tmp_path / "x.mod"))
+    assert r.returncode == 1 and "error [unreachable]" in r.stderr and "line 6" in r.stderr
+
+
+def test_plan_garbled_gcode_names_the_line(settings, tmp_path):
+    bad = tmp_path / "bad.gcode"
+    bad.write_text("G21\nG90\nG1 X1.2.3 Y4\n")
+    r = cli(settings, "plan", str(bad))
+    assert r.returncode == 1 and "error [gcode]" in r.stderr and "line 3" in r.stderr
+
+
+def test_operator_commands_human_output(settings):
+    assert "TCP" in cli(settings, "position").stdout
+    t = cli(settings, "time")
+    assert t.returncode == 0 and "elapsed" in t.stdout and "remaining" in t.stdout
+    ready = cli(settings, "ready")
+    assert "services alive" in ready.stdout and ("READY" in ready.stdout)
+    st = cli(settings, "status")
+    assert st.returncode == 0 and "station" in st.stdout and "alive" in st.stdout
+
+
+def test_cell_show_and_export_urdf(tmp_path):
+    r = local("cell", "show", "--json")
+    assert r.returncode == 0, r.stderr
+    cell = json.loads(r.stdout)
+    assert "irb140" in json.dumps(cell).lower()
+    out = tmp_path / "cell.urdf"
+    r = local("cell", "export-urdf", str(out))
+    assert r.returncode == 0 and 'name="tcp"' in out.read_text()
+    ur5 = Path(__file__).resolve().parents[1] / "fabric" / "cells" / "ur5.toml"
+    r = local("cell", "show", "--cell-config", str(ur5))
+    assert r.returncode == 0 and "ur5" in r.stdout.lower()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(ur5.read_text() + "\n[bogus]\nx = 1\n")
+    r = local("cell", "show", "--cell-config", str(bad))
+    assert r.returncode == 1 and "error [config]" in r.stderr and "bogus" in r.stderr
