@@ -6,6 +6,7 @@ import time
 from typing import Any, Callable
 
 import zenoh
+from rich.markup import escape
 from textual import work
 from textual.app import App, ComposeResult
 from textual.binding import Binding
@@ -89,7 +90,7 @@ class FabricConsole(App):
             self._subs.append(self.client.subscribe("station", topic))
             self.feed(topic, self._subs[-1])
         self._live_sub = self.client.session.liveliness().declare_subscriber(
-            self.client.keys.alive_all(), self._on_liveliness, history=True)
+            self.client.keys.alive_all(), self._zenoh_liveliness, history=True)
         self.refresh_alive()
 
     def on_unmount(self) -> None:
@@ -108,7 +109,7 @@ class FabricConsole(App):
             except queue.Empty:
                 continue
             except FabricError as err:
-                self.call_from_thread(self.log_line, f"[red]bad {topic} message: {err}[/red]")
+                self.call_from_thread(self.log_line, f"[red]bad {topic} message: {escape(str(err))}[/red]")
                 continue
             if topic in ("pose", "extrusion", "temps"):
                 now = time.monotonic()
@@ -117,7 +118,7 @@ class FabricConsole(App):
                 self._last_ui[topic] = now
             self.post_message(Telemetry(topic, msg))
 
-    def _on_liveliness(self, sample: zenoh.Sample) -> None:
+    def _zenoh_liveliness(self, sample: zenoh.Sample) -> None:
         # Zenoh callback: only note the change and hand it to the app (non-blocking)
         name = parse_alive(str(sample.key_expr))[1]
         alive = dict(self.alive)
@@ -145,7 +146,7 @@ class FabricConsole(App):
             self.query_one(StatePanel).state = msg.payload
         elif msg.topic == "events":
             e = msg.payload
-            self.log_line(f"#{e.seq} t={e.t_sim_s:.1f}s [b]{e.kind}[/b] layer {e.layer} line {e.gcode_line}")
+            self.log_line(f"#{e.seq} t={e.t_sim_s:.1f}s [b]{escape(e.kind)}[/b] layer {e.layer} line {e.gcode_line}")
 
     def log_line(self, text: str) -> None:
         self.query_one(RichLog).write(text)
@@ -165,6 +166,7 @@ class FabricConsole(App):
         _, fn = COMMANDS[name]
         try:
             text = describe(name, fn(self.client))
-            self.call_from_thread(self.log_line, f"[green]{name}[/green]: {text}")
+            self.call_from_thread(self.log_line, f"[green]{name}[/green]: {escape(text)}")
         except FabricError as err:
-            self.call_from_thread(self.log_line, f"[red]{name} failed [{err.code}][/red]: {err.message}")
+            self.call_from_thread(self.log_line, f"[red]{name} failed {escape(f'[{err.code}]')}[/red]: "
+                                                 f"{escape(err.message)}")
