@@ -69,7 +69,7 @@ class Client:
     @contextmanager
     def connect(cls, settings: SessionSettings) -> Iterator["Client"]:
         """Open a session from ``settings`` and close it on exit."""
-        session = zenoh.open(zenoh_config(settings))
+        session = _open(settings)
         try:
             if settings.connect:
                 wait_connected(session, CONNECT_WINDOW_S)
@@ -203,6 +203,20 @@ class Client:
     def submit(self, request: s.JobSubmit) -> s.JobAccepted: return self.call("supervisor", "submit", request)
     def job(self, job_id: str) -> s.JobStatus: return self.call("supervisor", "job", s.JobQuery(job_id=job_id))
     def jobs(self) -> s.JobList: return self.call("supervisor", "jobs")
+
+
+def _open(settings: SessionSettings) -> zenoh.Session:
+    """Open a session; a client that finds no router retries briefly, then says where it looked."""
+    end = time.monotonic() + CONNECT_WINDOW_S
+    while True:
+        try:
+            return zenoh.open(zenoh_config(settings))
+        except zenoh.ZError as exc:
+            if time.monotonic() >= end:
+                raise ServiceUnavailable(f"cannot reach the fabric hub at {', '.join(settings.connect)} "
+                                         f"(is 'fabric-cli up' or 'fabric-cli router' running?)",
+                                         connect=settings.connect, reason=str(exc)) from None
+            time.sleep(0.1)
 
 
 def wait_connected(session: zenoh.Session, deadline_s: float) -> bool:

@@ -6,11 +6,11 @@ and the singularity tests; this module holds the solver that applies them to
 """
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
-from fabric.sim.kinematics import (IK_JOINT_LIMIT, IK_OK, IK_OUT_OF_REACH, IK_SINGULAR, SphericalWristArm, _LIMIT_TOL_RAD, _PI, _TWO_PI, _wrap, _wrap_diff, multi_turn_mask, wrist_q6)
+from fabric.sim.kinematics import (IK_JOINT_LIMIT, IK_OK, IK_OUT_OF_REACH, IK_SINGULAR, SphericalWristArm,
+                                   _LIMIT_TOL_RAD, _PI, _TWO_PI, _wrap, _wrap_diff, multi_turn_mask, pose_cols,
+                                   wrist_q6)
 
 __all__ = ["ClosedFormIK", "select_branches"]
 
@@ -77,6 +77,11 @@ class ClosedFormIK:
         """Flange poses for joints (N, 6) or (6,)."""
         return self.arm.fk_flange(q_rad)
 
+    @property
+    def tool_inv_T(self) -> np.ndarray:
+        """TCP -> flange transform (the inverse of ``tool_T``)."""
+        return self._tool_inv
+
     def canon(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Put single-turn joints of q (..., 6), angles in [-pi, pi], in ``[lower, lower + 2*pi)``.
 
@@ -86,67 +91,75 @@ class ClosedFormIK:
         """
         inlim = np.ones(q.shape[:-1], dtype=bool)
         for j in np.flatnonzero(~self.multi):
-            lo, col = self.lower_rad[j], q[..., j]
-            if lo > -_PI:
-                col[col < lo] += _TWO_PI
-            elif lo + _TWO_PI <= _PI:
-                col[col >= lo + _TWO_PI] -= _TWO_PI
-            inlim &= col <= self.upper_rad[j] + _LIMIT_TOL_RAD
+            inlim &= self._canon_col(j, q[..., j])
         return q, inlim
+
+    def _canon_col(self, j: int, col: np.ndarray) -> np.ndarray:
+        """:meth:`canon` of joint ``j``'s angles ``col`` (in place); returns its in-limits mask."""
+        lo = self.lower_rad[j]
+        if lo > -_PI:
+            col[col < lo] += _TWO_PI
+        elif lo + _TWO_PI <= _PI:
+            col[col >= lo + _TWO_PI] -= _TWO_PI
+        return col <= self.upper_rad[j] + _LIMIT_TOL_RAD
 
     def branches(self, T_flange: np.ndarray, q1_hold: np.ndarray | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The 8 branches in limit representation: ``q (N, 8, 6), ok, reach, singular`` (N, 8)."""
-        qb, reach, sing = self.arm.ik_branches(T_flange, q1_hold)
+        return self.branches_cols(pose_cols(T_flange), q1_hold)
+
+    def branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`branches` of flange poses given as columns (9, N) (``fabric.sim.kinematics.pose_cols``)."""
+        qb, reach, sing = self.arm.ik_branches_cols(C, q1_hold)
         qb, inlim = self.canon(qb)
         return qb, reach & inlim, reach, sing
 
     def ik_flange(self, T_flange: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Joints (N, 6) and status (N,) uint8 for flange poses (N, 4, 4), continuous from ``q_seed``."""
-        return self._ik(np.asarray(T_flange, dtype=float).reshape(-1, 4, 4), q_seed, np.eye(4))
+        return self.ik_cols(pose_cols(T_flange), q_seed)
 
     def ik(self, T_tcp: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """As :meth:`ik_flange` for TCP poses: ``tool_T`` is removed block by block (no N x 4 x 4 copy)."""
-        return self._ik(np.asarray(T_tcp, dtype=float).reshape(-1, 4, 4), q_seed, self._tool_inv)
+        """As :meth:`ik_flange` for TCP poses (``tool_T`` removed while gathering the columns)."""
+        return self.ik_cols(pose_cols(T_tcp, self._tool_inv), q_seed)
 
-    def _ik(self, T_in: np.ndarray, q_seed: np.ndarray, tool_inv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def ik_cols(self, C: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """As :meth:`ik_flange` for flange poses given as columns ``C`` (9, N): position, z, y axes.
+
+        Everything runs on contiguous per-joint rows (6, N); the result is
+        transposed to (N, 6) once at the end.
+        """
         seed = np.asarray(q_seed, dtype=float).reshape(6)
-        n = len(T_in)
-        ident = bool(np.array_equal(tool_inv, np.eye(4)))
-
-        def to_flange(Tb: np.ndarray) -> np.ndarray:
-            return Tb if ident else Tb @ tool_inv
-
-        # wrist centre = p + R (t_inv - d6 * z_inv): only what the A1 hold test needs, no full copy
-        off = tool_inv[:3, 3] - self.arm.d6_mm * tool_inv[:3, 2]
-        wx = T_in[:, 0, 3] + T_in[:, 0, 0] * off[0] + T_in[:, 0, 1] * off[1] + T_in[:, 0, 2] * off[2]
-        wy = T_in[:, 1, 3] + T_in[:, 1, 0] * off[0] + T_in[:, 1, 1] * off[1] + T_in[:, 1, 2] * off[2]
-        degen = np.hypot(wx, wy) < 1e-6                  # wrist centre on A1: hold A1
+        C = np.asarray(C, dtype=float)
+        n = C.shape[1]
+        d6 = self.arm.d6_mm
+        wx, wy = C[0] - d6 * C[3], C[1] - d6 * C[4]        # wrist centre: only what the A1 hold needs
+        degen = wx * wx + wy * wy < 1e-12                  # wrist centre on A1: hold A1
         hold = _forward_fill(np.arctan2(wy, wx), ~degen, seed[0]) if degen.any() else None
-        q = np.empty((n, 6))
+        q = np.empty((6, n))
         row_ok, reach_any, sing = (np.empty(n, dtype=bool) for _ in range(3))
-        self._track(T_in, to_flange, hold, seed, q, row_ok, reach_any, sing)
-        wdeg = reach_any & (np.abs(np.sin(q[:, 4])) < 1e-9)    # q5 == 0: hold A4, solve A6
+        self._track(C, hold, seed, q, row_ok, reach_any, sing)
+        wdeg = reach_any & (np.abs(np.sin(q[4])) < 1e-9)   # q5 == 0: hold A4, solve A6
         if wdeg.any():
             sel = np.flatnonzero(wdeg)
-            q4 = _forward_fill(q[:, 3], ~wdeg, seed[3])[sel]
-            R36 = self._r36(to_flange(T_in[sel]), q[sel])
-            q[sel, 3] = q4
-            q[sel, 5] = wrist_q6(R36[:, 0, 1], R36[:, 1, 1], R36[:, 2, 1], q4, q[sel, 4])
+            q4 = _forward_fill(q[3], ~wdeg, seed[3])[sel]
+            R36 = self._r36(C[:, sel], q[:, sel])
+            q[3, sel] = q4
+            q[5, sel] = wrist_q6(R36[:, 0, 1], R36[:, 1, 1], R36[:, 2, 1], q4, q[4, sel])
         if not reach_any.all():                           # unreachable rows hold the previous joints
             for j in range(6):
-                q[:, j] = _forward_fill(q[:, j], reach_any, seed[j])
+                q[j] = _forward_fill(q[j], reach_any, seed[j])
         self._place_multi_turn(q, seed)
         status = np.full(n, IK_OK, dtype=np.uint8)
-        status[sing & row_ok] = IK_SINGULAR
-        status[~row_ok & reach_any] = IK_JOINT_LIMIT
-        status[~reach_any] = IK_OUT_OF_REACH
-        return q, status
+        if not row_ok.all() or sing.any():
+            status[sing & row_ok] = IK_SINGULAR
+            status[~row_ok & reach_any] = IK_JOINT_LIMIT
+            status[~reach_any] = IK_OUT_OF_REACH
+        return np.ascontiguousarray(q.T), status
 
-    def _track(self, T: np.ndarray, to_flange: Callable[[np.ndarray], np.ndarray], hold: np.ndarray | None,
-               seed: np.ndarray, q: np.ndarray, row_ok: np.ndarray, reach_any: np.ndarray,
-               sing: np.ndarray) -> None:
-        """Fill the chosen branch's solution per row (module docstring: branch choice).
+    def _track(self, C: np.ndarray, hold: np.ndarray | None, seed: np.ndarray, q: np.ndarray,
+               row_ok: np.ndarray, reach_any: np.ndarray, sing: np.ndarray) -> None:
+        """Fill the chosen branch's solution per row into ``q`` (6, N) (module docstring: branch choice).
 
         Alternates two vectorised modes. *Tracking*: solve only the current
         branch for a block of rows and accept the leading rows where it stays
@@ -156,34 +169,40 @@ class ClosedFormIK:
         while tracking keeps failing at once (scattered targets), so the cost
         stays that of the full method in the worst case and ~1/4 of it on paths.
         """
-        n = len(T)
+        n = C.shape[1]
         i, b, prev = 0, -1, seed
         window, block = 32, 1024
+        single = np.flatnonzero(~self.multi)
         while i < n:
             if b < 0 or not self.tracking:
                 j = min(n, i + (window if self.tracking else self.max_rows))
-                qb, ok, reach, sg = self.branches(to_flange(T[i:j]), None if hold is None else hold[i:j])
+                qb, ok, reach, sg = self.branches_cols(C[:, i:j], None if hold is None else hold[i:j])
                 allowed = np.where(ok.any(axis=1, keepdims=True), ok, reach)
                 bidx = select_branches(qb, allowed, prev, self._quiet(qb, allowed))
                 r = np.arange(j - i)
-                q[i:j], row_ok[i:j], sing[i:j] = qb[r, bidx], ok[r, bidx], sg[r, bidx]
+                q[:, i:j] = qb[r, bidx].T
+                row_ok[i:j], sing[i:j] = ok[r, bidx], sg[r, bidx]
                 reach_any[i:j] = reach.any(axis=1)
                 b = int(bidx[-1]) if ok[-1, bidx[-1]] else -1
                 window = min(self.max_rows, window * 2) if b < 0 else window
-                prev, i = q[j - 1], j
+                prev, i = q[:, j - 1].copy(), j
                 continue
             j = min(n, i + block)
-            qt, reach_t, sg, gap = self.arm.ik_branch(to_flange(T[i:j]), b, None if hold is None else hold[i:j])
-            qt, inlim = self.canon(qt)
-            d = _wrap(np.diff(qt, axis=0, prepend=prev[None, :]))
+            qt, reach_t, sg, gap = self.arm.ik_branch_cols(C[:, i:j], b, None if hold is None else hold[i:j])
+            fine = reach_t
+            for jj in single:
+                fine &= self._canon_col(jj, qt[jj])
+            d = np.diff(qt, axis=1, prepend=prev[:, None])
+            d -= _TWO_PI * np.rint(d / _TWO_PI)
+            d *= d
             sep = np.minimum(gap, _PI)
-            fine = reach_t & inlim & (4.0 * np.einsum("ij,ij->i", d, d) < sep * sep)
+            fine &= 4.0 * d.sum(axis=0) < sep * sep
             f = int(np.argmin(fine)) if not fine.all() else j - i
-            q[i:i + f], sing[i:i + f] = qt[:f], sg[:f]
+            q[:, i:i + f], sing[i:i + f] = qt[:, :f], sg[:f]
             row_ok[i:i + f] = True
             reach_any[i:i + f] = True
             if f:
-                prev = q[i + f - 1]
+                prev = qt[:, f - 1].copy()
             i += f
             if i < j:                                      # switch to the full method at row i
                 b = -1
@@ -211,33 +230,45 @@ class ClosedFormIK:
         quiet[1:] = same & (4.0 * max_step2 < sep * sep)
         return quiet
 
-    def _r36(self, T: np.ndarray, q: np.ndarray) -> np.ndarray:
-        """Wrist rotation ``R03^T R06`` for chosen joints (rows of T and q)."""
-        R06 = np.stack([T[:, :3, 2], T[:, :3, 1], -T[:, :3, 0]], axis=-1)
-        c1, s1 = np.cos(q[:, 0]), np.sin(q[:, 0])
-        c, s = np.cos(q[:, 1] + q[:, 2]), np.sin(q[:, 1] + q[:, 2])
-        R03 = np.zeros((len(q), 3, 3))
+    def _r36(self, C: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Wrist rotation ``R03^T R06`` (M, 3, 3) for flange columns C (9, M) and joints q (6, M)."""
+        z, y = C[3:6].T, C[6:9].T
+        R06 = np.stack([z, y, -np.cross(y, z)], axis=-1)
+        c1, s1 = np.cos(q[0]), np.sin(q[0])
+        c, s = np.cos(q[1] + q[2]), np.sin(q[1] + q[2])
+        R03 = np.zeros((q.shape[1], 3, 3))
         R03[:, 0, 0], R03[:, 0, 1], R03[:, 0, 2] = c1 * c, -s1, c1 * s
         R03[:, 1, 0], R03[:, 1, 1], R03[:, 1, 2] = s1 * c, c1, s1 * s
         R03[:, 2, 0], R03[:, 2, 2] = -s, c
         return np.swapaxes(R03, 1, 2) @ R06
 
     def _place_multi_turn(self, q: np.ndarray, seed: np.ndarray) -> None:
-        """Unwrap multi-turn joints from the seed on, then shift any wind-up back into limits.
+        """Unwrap multi-turn joints (rows of q (6, N)) from the seed on, then shift any wind-up back into limits.
 
         Works on integer turn counts (exact) and adds ``2*pi*turns`` to the
         wrapped angle once, so long paths that wind a joint many times before
-        being shifted back lose no precision.
+        being shifted back lose no precision. Only rows that step by more than
+        pi (a wrap) or leave the limits are touched.
         """
         for j in np.flatnonzero(self.multi):
-            raw = q[:, j]
-            step = -np.rint(np.diff(raw, prepend=seed[j]) / _TWO_PI)
-            turns = np.cumsum(step)
+            raw = q[j]
+            d = np.diff(raw, prepend=seed[j])
+            wraps = np.flatnonzero(np.abs(d) > 0.999 * _PI)          # superset of rint(d / 2pi) != 0
             lo, hi = self.lower_rad[j], self.upper_rad[j]
-            col = raw + _TWO_PI * turns
-            turns -= np.where(col > hi + _LIMIT_TOL_RAD, np.ceil((col - hi) / _TWO_PI), 0.0)
-            turns += np.where(col < lo - _LIMIT_TOL_RAD, np.ceil((lo - col) / _TWO_PI), 0.0)
-            q[:, j] = raw + _TWO_PI * turns
+            if len(wraps):
+                step = np.zeros(len(raw))
+                step[wraps] = -np.rint(d[wraps] / _TWO_PI)
+                turns = np.cumsum(step)
+                col = raw + _TWO_PI * turns
+            else:
+                turns, col = None, raw
+            over, under = col > hi + _LIMIT_TOL_RAD, col < lo - _LIMIT_TOL_RAD
+            if over.any() or under.any():
+                turns = np.zeros(len(raw)) if turns is None else turns
+                turns -= np.where(over, np.ceil((col - hi) / _TWO_PI), 0.0)
+                turns += np.where(under, np.ceil((lo - col) / _TWO_PI), 0.0)
+            if turns is not None:
+                q[j] = raw + _TWO_PI * turns
 
 
 def _forward_fill(values: np.ndarray, valid: np.ndarray, first: float) -> np.ndarray:

@@ -49,7 +49,7 @@ import numpy as np
 __all__ = [
     "IK_OK", "IK_OUT_OF_REACH", "IK_JOINT_LIMIT", "IK_SINGULAR", "IK_JUMP", "IK_REASONS",
     "WRIST_SING_SIN", "ELBOW_SING_COS", "SHOULDER_SING_MM", "SphericalWristArm", "IRB140_ARM",
-    "multi_turn_mask", "wrist_q6",
+    "multi_turn_mask", "wrist_q6", "pose_cols",
 ]
 
 IK_OK, IK_OUT_OF_REACH, IK_JOINT_LIMIT, IK_SINGULAR, IK_JUMP = 0, 1, 2, 3, 4
@@ -146,8 +146,13 @@ class SphericalWristArm:
         is singular. ``q1_hold`` (N,) imposes A1 (and A1 + pi for the back
         shoulder) instead of ``atan2`` of the wrist centre.
         """
-        F = self._terms(T_flange, q1_hold)
-        n = len(F[0])
+        return self.ik_branches_cols(pose_cols(T_flange), q1_hold)
+
+    def ik_branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`ik_branches` of flange poses given as columns ``C`` (9, N) (see :func:`pose_cols`)."""
+        F = self._terms(C, q1_hold)
+        n = C.shape[1]
         qt = np.empty((8, 6, n))                          # filled row-contiguous, returned as (n, 8, 6)
         reach = np.empty((n, 8), dtype=bool)
         sing = np.empty((n, 8), dtype=bool)
@@ -167,18 +172,27 @@ class SphericalWristArm:
         ``elbow_gap_rad`` is the A3 distance to the other elbow branch (the
         smallest separation between this branch and any other, capped at pi).
         """
-        cols, ok, sg, gap = self._solve(self._terms(T_flange, q1_hold), branch // 4, (branch // 2) % 2)
-        return np.stack(_wrist_variant(cols, branch % 2), axis=1), ok, sg, gap
+        q, ok, sg, gap = self.ik_branch_cols(pose_cols(T_flange), branch, q1_hold)
+        return q.T, ok, sg, gap
 
-    def _terms(self, T_flange: np.ndarray, q1_hold: np.ndarray | None) -> tuple[np.ndarray, ...]:
+    def ik_branch_cols(self, C: np.ndarray, branch: int, q1_hold: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`ik_branch` of flange columns ``C`` (9, N); joints returned as columns ``(6, N)``."""
+        cols, ok, sg, gap = self._solve(self._terms(C, q1_hold), branch // 4, (branch // 2) % 2)
+        q = np.empty((6, C.shape[1]))
+        for j, col in enumerate(_wrist_variant(cols, branch % 2)):
+            q[j] = col
+        return q, ok, sg, gap
+
+    def _terms(self, C: np.ndarray, q1_hold: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """Per-row inputs of :meth:`_solve`: flange z and y columns, wrist centre, A1."""
-        T = np.asarray(T_flange, dtype=float).reshape(-1, 4, 4)
-        zx, zy, zz = T[:, 0, 2], T[:, 1, 2], T[:, 2, 2]
-        wx, wy = T[:, 0, 3] - self.d6_mm * zx, T[:, 1, 3] - self.d6_mm * zy
-        v = T[:, 2, 3] - self.d6_mm * zz - self.d1_mm
+        px, py, pz, zx, zy, zz, yx, yy, yz = C
+        d6 = self.d6_mm
+        wx, wy = px - d6 * zx, py - d6 * zy
+        v = pz - d6 * zz - self.d1_mm
         q1 = np.arctan2(wy, wx) if q1_hold is None else _wrap(np.asarray(q1_hold, dtype=float))
-        return (zx, zy, zz, T[:, 0, 1], T[:, 1, 1], T[:, 2, 1], wx, wy, v, q1,
-                np.hypot(wx, wy) < SHOULDER_SING_MM)
+        return (zx, zy, zz, yx, yy, yz, wx, wy, v, q1,
+                wx * wx + wy * wy < SHOULDER_SING_MM * SHOULDER_SING_MM)
 
     def _solve(self, F: tuple[np.ndarray, ...], shoulder: int, elbow: int
                ) -> tuple[tuple[np.ndarray, ...], np.ndarray, np.ndarray, np.ndarray]:
@@ -190,8 +204,8 @@ class SphericalWristArm:
             q1 = _flip(q1)
         c1, s1 = np.cos(q1), np.sin(q1)
         # the flange z and y columns expressed in the arm plane: Rz(-q1) applied
-        zx1, zy1 = c1 * zx + s1 * zy, -s1 * zx + c1 * zy
-        yx1, yy1 = c1 * yx + s1 * yy, -s1 * yx + c1 * yy
+        zx1, zy1 = c1 * zx + s1 * zy, c1 * zy - s1 * zx
+        yx1, yy1 = c1 * yx + s1 * yy, c1 * yy - s1 * yx
         u = c1 * wx + s1 * wy - self.a1_mm
         k = (self.a2_mm ** 2 + L * L - u * u - v * v) / (2.0 * self.a2_mm * L)
         ok = np.abs(k) <= 1.0 + 1e-12
@@ -203,11 +217,12 @@ class SphericalWristArm:
         q3 = np.arctan2(kc, cpsi)
         if phi:
             q3 = _wrap(q3 + phi)
-        c23, s23 = np.cos(q2 + q3), np.sin(q2 + q3)
+        q23 = q2 + q3
+        c23, s23 = np.cos(q23), np.sin(q23)
         # first two columns of R36 = Ry(q23)^T (Rz(q1)^T R06)
         R00, R10, R20 = c23 * zx1 - s23 * zz, zy1, s23 * zx1 + c23 * zz
         R01, R11, R21 = c23 * yx1 - s23 * yz, yy1, s23 * yx1 + c23 * yz
-        h = np.hypot(R10, R20)
+        h = np.sqrt(R10 * R10 + R20 * R20)
         q4 = np.arctan2(R10, -R20)
         q5 = np.arctan2(h, R00)
         # q6 with cos/sin q4 = -R20/h, R10/h and sin q5 = h, all scaled by h (no division)
@@ -218,6 +233,28 @@ class SphericalWristArm:
         sing = (h < WRIST_SING_SIN) | (cabs < ELBOW_SING_COS) | shoulder_sing
         gap = 2.0 * np.arctan2(cabs, np.abs(kc))        # |q3(elbow 0) - q3(elbow 1)| wrapped
         return (q1, q2, q3, q4, q5, q6), ok, sing, gap
+
+
+def pose_cols(T: np.ndarray, post_T: np.ndarray | None = None) -> np.ndarray:
+    """Poses (N, 4, 4) as columns (9, N): position, z axis, y axis of ``T @ post_T`` (mm).
+
+    The IK reads only these nine numbers per pose (the x axis is ``y x z``); one
+    matrix product over the flattened poses gathers them contiguously, applying
+    ``post_T`` (a rigid transform, e.g. TCP -> flange) on the way. With no
+    ``post_T`` the columns are copied exactly.
+    """
+    T = np.asarray(T, dtype=float).reshape(-1, 4, 4)
+    if post_T is None:
+        return np.ascontiguousarray(T.reshape(-1, 16)[:, _COLS].T)
+    K = np.asarray(post_T, dtype=float)[:, [3, 2, 1]]          # (4, 3): point, z, y of post_T
+    W = np.zeros((9, 16))
+    for c in range(3):
+        for i in range(3):
+            W[3 * c + i, 4 * i:4 * i + 4] = K[:, c]
+    return W @ T.reshape(-1, 16).T
+
+
+_COLS = np.array([3, 7, 11, 2, 6, 10, 1, 5, 9])     # flat (4, 4) indices of p, z, y
 
 
 def _wrist_variant(cols: tuple[np.ndarray, ...], wrist: int) -> tuple[np.ndarray, ...]:

@@ -1,0 +1,68 @@
+"""``fabric-cli up`` as a user runs it: five processes, a dead child reported, Ctrl-C stops them all."""
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+from dataclasses import replace
+
+import pytest
+
+from fabric.client import Client
+from fabric.keys import SERVICES
+
+from conftest import make_settings
+
+pytestmark = pytest.mark.timeout(180)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    with open(f"/proc/{pid}/stat") as fh:           # a zombie is not running
+        return fh.read().split()[2] != "Z"
+
+
+def test_up_starts_five_reports_a_dead_child_and_stops_all_on_ctrl_c():
+    st = make_settings()
+    proc = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "up", *st.to_args()],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    lines: list[str] = []
+    up, seen = threading.Event(), threading.Event()
+
+    def read() -> None:
+        for line in proc.stdout:
+            lines.append(line)
+            if "Ctrl-C" in line:
+                up.set()
+            if "exited with code" in line:
+                seen.set()
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        assert up.wait(90), "the launcher never said the cell is up"     # printed once every child is alive
+        with Client.connect(replace(st, mode="client")) as client:
+            client.wait_alive(deadline_s=30)
+            pids = {m.group(1): int(m.group(2)) for m in
+                    (re.match(r"\s+(\w+)\s+pid (\d+)", l) for l in lines) if m}
+            assert set(pids) == set(SERVICES)
+            assert all(_alive(p) for p in pids.values())
+
+            os.kill(pids["planner"], signal.SIGKILL)
+            assert seen.wait(10), "the launcher did not report the dead child"
+            assert any("planner exited with code -9" in l for l in lines)
+            assert not client.alive(timeout=0.5)["planner"]
+
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=30) == 1            # a child died: the launcher says so in its exit code
+        for name, pid in pids.items():
+            assert not _alive(pid), f"{name} still running after Ctrl-C"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
