@@ -55,6 +55,8 @@ def _ack_text(a) -> str:
 
 def cmd_status(c: Client, a: argparse.Namespace) -> int:
     """Liveliness straight from the fabric (works even when the supervisor is down)."""
+    if a.wait > 0:
+        c.wait_alive(deadline_s=a.wait)
     alive = c.alive(timeout=a.timeout)
     st = s.FabricStatus(cell=c.keys.cell, services=[s.ServiceInfo(name=n, alive=v) for n, v in alive.items()])
     if alive.get("supervisor"):
@@ -121,6 +123,8 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
 
     p = sub.add_parser("status", parents=[common], help="which services are alive")
     p.add_argument("--timeout", type=float, default=1.0)
+    p.add_argument("--wait", type=float, default=0.0, metavar="SECONDS",
+                   help="first wait (up to SECONDS) until every service is alive")
     p.set_defaults(run=cmd_status)
     simple("position", lambda c, a: c.position(), _pose_text, "TCP pose and joints of the twin now")
     simple("home", lambda c, a: c.home(), _ack_text, "collision-checked joint move to home")
