@@ -36,7 +36,7 @@ DEFAULT_FEED_MM_S = 25.0     # feed before the first F word (Marlin's 1500 mm/mi
 MAX_ABS_VALUE = 1e9          # any parameter beyond this (mm, mm/min, deg C...) is an error
 _G = {name: code for name, code in KNOWN.items()}
 X, Y, Z, E, F, I, J, R, P, S, L = range(len(PARAMS))
-_MOTION = np.array([_G["G0"], _G["G1"], _G["G2"], _G["G3"]])
+_G3 = _G["G3"]                 # G0, G1, G2, G3 are the first four codes: motion is ``code <= _G3``
 
 
 def _ffill(values: np.ndarray, present: np.ndarray, init: float) -> np.ndarray:
@@ -57,6 +57,22 @@ def _anchored(anchor: np.ndarray, anchor_val: np.ndarray, delta: np.ndarray, ini
 
 def _shift(after: np.ndarray, init: float) -> np.ndarray:
     return np.concatenate([[init], after[:-1]])
+
+
+def _modal(r_code: np.ndarray, on: tuple[int, ...], off: tuple[int, ...], init: float,
+           on_val: float = 1.0, off_val: float = 0.0) -> np.ndarray | float:
+    """A modal setting per row (``on_val`` after an ``on`` code, ``off_val`` after an ``off`` one),
+    forward-filled from ``init``; just ``init`` when the block never sets it."""
+    is_on = np.zeros(len(r_code), bool)
+    is_off = np.zeros(len(r_code), bool)
+    for c in on:
+        is_on |= r_code == c
+    for c in off:
+        is_off |= r_code == c
+    setting = is_on | is_off
+    if not setting.any():
+        return init
+    return _ffill(np.where(is_on, on_val, off_val), setting, init)
 
 
 @dataclass
@@ -127,9 +143,10 @@ class Interpreter:
         par = np.full((k, len(PARAMS)), np.nan)
         has = np.zeros((k, len(PARAMS)), bool)
         flat = w_row[sel] * len(PARAMS) + col[sel]
-        par.ravel()[flat] = lx.word_value[sel]
+        vals = lx.word_value[sel]
+        par.ravel()[flat] = vals
         has.ravel()[flat] = True
-        big = np.flatnonzero(np.abs(lx.word_value[sel]) > MAX_ABS_VALUE)
+        big = np.flatnonzero(np.abs(vals) > MAX_ABS_VALUE)
         if len(big):
             errors.append((int(lx.word_line[sel][big[0]]), f"value out of range (|v| > {MAX_ABS_VALUE:g})"))
         self._raise_first(block, lx, errors)
@@ -181,102 +198,120 @@ class Interpreter:
                  errors: list[tuple[int, str]]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
         st = self.state
         g = _G
-        units = (r_code == g["G20"]) | (r_code == g["G21"])
-        unit = _ffill(np.where(r_code == g["G20"], 25.4, 1.0), units, st.unit_mm)
-        par[:, LENGTH_COLS] *= unit[:, None]
-        absx = _ffill((r_code == g["G90"]).astype(float), (r_code == g["G90"]) | (r_code == g["G91"]), st.abs_xyz)
-        e_set = np.isin(r_code, [g["G90"], g["G91"], g["M82"], g["M83"]])
-        abse = _ffill(((r_code == g["G90"]) | (r_code == g["M82"])).astype(float), e_set, st.abs_e)
-        motion = np.isin(r_code, _MOTION)
+        k = len(r_code)
+        unit = _modal(r_code, (g["G20"],), (g["G21"],), st.unit_mm, 25.4, 1.0)
+        if np.any(unit != 1.0):                     # inches somewhere in the block
+            par[:, LENGTH_COLS] *= unit[:, None] if np.ndim(unit) else unit
+        absx = _modal(r_code, (g["G90"],), (g["G91"],), st.abs_xyz)
+        abse = _modal(r_code, (g["G90"], g["M82"]), (g["G91"], g["M83"]), st.abs_e)
+        motion = r_code <= _G3                       # G0..G3 are codes 0..3
         fset = motion & has[:, F]
         badf = np.flatnonzero(fset & ~(par[:, F] > 0))
         if len(badf):
             errors.append((int(r_line[badf[0]]), "feed rate F must be positive"))
         feed = _ffill(par[:, F] / 60.0, fset, st.feed_mm_s)
         g92 = r_code == g["G92"]
-        g92_all = g92 & ~has[:, [X, Y, Z, E]].any(axis=1)
         g28 = r_code == g["G28"]
+        plain = not (g92.any() or g28.any())
+        g92_all = g92 & ~has[:, [X, Y, Z, E]].any(axis=1)
         g28_all = g28 & ~has[:, [X, Y, Z]].any(axis=1)
-        m_after = np.empty((len(r_code), 4))
-        m_before = np.empty((len(r_code), 4))
-        e_move = np.zeros(len(r_code))
+        pos = np.empty((4, k + 1))                   # machine position before row 0, then after each row
+        pos[:, 0] = st.logical + st.offset
+        e_move = np.zeros(k)
         for a in range(4):
             v, h = par[:, a], has[:, a]
             mode = abse if a == E else absx
             mv = motion & h
-            setp = g92 & (h | g92_all)
-            home = g28 & (h | g28_all) if a != E else np.zeros_like(g28)
-            rel = mv & (mode == 0)
-            anchor = (mv & ~rel) | setp | home
-            vz = np.where(h, v, 0.0)
-            aval = np.where(home | (setp & ~h), 0.0, vz)
-            if rel.any():
-                delta = np.where(rel, vz, 0.0)
-                lg = _anchored(anchor, aval, delta, st.logical[a])
-            else:                                    # absolute only: a forward fill is enough
-                delta = None
-                lg = _ffill(aval, anchor, st.logical[a])
-            lg_before = _shift(lg, st.logical[a])
-            if setp.any() or home.any():
-                off = _anchored(home, np.zeros(len(home)), np.where(setp, lg_before - aval, 0.0), st.offset[a])
-                m_after[:, a] = lg + off
-            else:                                    # no G92 / G28 on this axis: the offset holds
-                off = None
-                m_after[:, a] = lg + st.offset[a]
-            m_before[:, a] = _shift(m_after[:, a], st.logical[a] + st.offset[a])
-            if a == E:
-                e_move = np.where(mv, np.where(rel, vz, aval - lg_before), 0.0)
-            if len(lg):
+            init = st.logical[a]
+            off = None
+            if plain and np.ndim(mode) == 0:         # one distance mode, no G92 / G28: the common case
+                if mode:                             # absolute: the last programmed value
+                    lg = _ffill(v, mv, init)
+                    if a == E:
+                        e_move = np.where(mv, v - _shift(lg, init), 0.0)
+                else:                                # relative: a running sum
+                    delta = np.where(mv, v, 0.0)
+                    lg = init + np.cumsum(delta)
+                    if a == E:
+                        e_move = delta
+                pos[a, 1:] = lg + st.offset[a]
+            else:
+                setp = g92 & (h | g92_all)
+                home = g28 & (h | g28_all) if a != E else np.zeros_like(g28)
+                rel = mv & (mode == 0)
+                anchor = (mv & ~rel) | setp | home
+                vz = np.where(h, v, 0.0)
+                aval = np.where(home | (setp & ~h), 0.0, vz)
+                if rel.any():
+                    lg = _anchored(anchor, aval, np.where(rel, vz, 0.0), init)
+                else:                                # absolute only: a forward fill is enough
+                    lg = _ffill(aval, anchor, init)
+                lg_before = _shift(lg, init)
+                if setp.any() or home.any():
+                    off = _anchored(home, np.zeros(len(home)), np.where(setp, lg_before - aval, 0.0), st.offset[a])
+                    pos[a, 1:] = lg + off
+                else:                                # no G92 / G28 on this axis: the offset holds
+                    pos[a, 1:] = lg + st.offset[a]
+                if a == E:
+                    e_move = np.where(mv, np.where(rel, vz, aval - lg_before), 0.0)
+            if k:
                 st.logical[a] = lg[-1]
                 if off is not None:
                     st.offset[a] = off[-1]
-        if len(r_code):
-            st.unit_mm, st.abs_xyz, st.abs_e, st.feed_mm_s = unit[-1], absx[-1], abse[-1], feed[-1]
-        rows, eonly = self._motion_rows(r_line, r_code, par, m_before, m_after, e_move, feed, errors)
+        if k:
+            st.feed_mm_s = feed[-1]
+            st.unit_mm, st.abs_xyz, st.abs_e = (float(m[-1]) if np.ndim(m) else m for m in (unit, absx, abse))
+        rows, eonly = self._motion_rows(r_line, r_code, par, pos, e_move, feed, errors)
         events = self._events(r_line, r_code, par, has, rows["line"], eonly, errors)
         return rows, events
 
-    def _motion_rows(self, r_line: np.ndarray, r_code: np.ndarray, par: np.ndarray,
-                     m_before: np.ndarray, m_after: np.ndarray, e_move: np.ndarray,
-                     feed: np.ndarray, errors: list[tuple[int, str]]
+    def _motion_rows(self, r_line: np.ndarray, r_code: np.ndarray, par: np.ndarray, pos: np.ndarray,
+                     e_move: np.ndarray, feed: np.ndarray, errors: list[tuple[int, str]]
                      ) -> tuple[dict[str, np.ndarray], tuple[np.ndarray, np.ndarray]]:
-        mi = np.flatnonzero(np.isin(r_code, _MOTION))
-        s, e, em = m_before[mi, :3], m_after[mi, :3], e_move[mi]
-        lin = r_code[mi] <= _G["G1"]
-        moved = (e != s).any(axis=1)
+        """Toolpath rows of the motion commands; ``pos`` (4, k + 1) holds the positions before/after rows.
+
+        Masks run over all k command rows (non-motion rows neither move nor extrude), so
+        no gather of the motion rows is needed.
+        """
+        s, e = pos[:3, :-1], pos[:3, 1:]                              # (3, k) start and end points
+        lin = r_code <= _G["G1"]
+        moved = (e[0] != s[0]) | (e[1] != s[1]) | (e[2] != s[2])
         lin_row = lin & moved
-        eonly = lin & ~moved & (em != 0)
+        eonly = lin & ~moved & (e_move != 0)
         count = lin_row.astype(np.int64)
-        arc = np.flatnonzero(~lin)
+        arc = np.flatnonzero((r_code > _G["G1"]) & (r_code <= _G3))
         if len(arc):
             ac, pts, pe, status = arcs.expand_arcs(
-                s[arc], e[arc], r_code[mi[arc]] == _G["G2"], par[mi[arc]][:, [I, J]],
-                par[mi[arc], R], em[arc], self.chord_tol_mm)
+                np.ascontiguousarray(s[:, arc].T), np.ascontiguousarray(e[:, arc].T), r_code[arc] == _G["G2"],
+                par[arc][:, [I, J]], par[arc, R], e_move[arc], self.chord_tol_mm)
             badk = np.flatnonzero(status)
             if len(badk):
-                errors.append((int(r_line[mi[arc[badk[0]]]]), arcs.ARC_REASONS[int(status[badk[0]])]))
+                errors.append((int(r_line[arc[badk[0]]]), arcs.ARC_REASONS[int(status[badk[0]])]))
             count[arc] = ac
-        first = np.cumsum(count) - count
         total = int(count.sum())
-        xyz = np.empty((total, 3))
-        e_rows = np.empty(total)
-        xyz[first[lin_row]] = e[lin_row]
-        e_rows[first[lin_row]] = em[lin_row]
-        if len(arc) and total:
-            ac = count[arc]
-            pos = np.repeat(first[arc], ac) + (np.arange(int(ac.sum())) - np.repeat(np.cumsum(ac) - ac, ac))
-            xyz[pos] = pts
-            e_rows[pos] = pe
+        if not len(arc):                             # straight moves only: one row per moving move
+            xyz, e_rows = e[:, lin_row].T, e_move[lin_row]
+        else:
+            first = np.cumsum(count) - count
+            xyz = np.empty((total, 3))
+            e_rows = np.empty(total)
+            xyz[first[lin_row]] = e[:, lin_row].T
+            e_rows[first[lin_row]] = e_move[lin_row]
+            if total:
+                ac = count[arc]
+                at = np.repeat(first[arc], ac) + (np.arange(int(ac.sum())) - np.repeat(np.cumsum(ac) - ac, ac))
+                xyz[at] = pts
+                e_rows[at] = pe
         if self._start is None and total:
-            self._start = s[np.flatnonzero(count)[0]].copy()
-        rows = {"xyz": xyz, "e": e_rows, "feed": np.repeat(feed[mi], count),
-                "line": np.repeat(r_line[mi], count)}
-        return rows, (r_line[mi[eonly]], em[eonly])
+            self._start = s[:, np.flatnonzero(count)[0]].copy()
+        rows = {"xyz": xyz, "e": e_rows, "feed": np.repeat(feed, count), "line": np.repeat(r_line, count)}
+        return rows, (r_line[eonly], e_move[eonly])
 
     def _events(self, r_line: np.ndarray, r_code: np.ndarray, par: np.ndarray, has: np.ndarray,
                 row_line: np.ndarray, eonly: tuple[np.ndarray, np.ndarray],
                 errors: list[tuple[int, str]]) -> dict[str, np.ndarray]:
-        lines, kinds, values, auxs, n_cnc = command_events(r_line, r_code, par, has, eonly, errors)
+        sub = np.flatnonzero(r_code > _G3)          # the few non-motion commands
+        lines, kinds, values, auxs, n_cnc = command_events(r_line[sub], r_code[sub], par[sub], has[sub], eonly, errors)
         if n_cnc:
             self._unknown["G10"] = self._unknown.get("G10", 0) + n_cnc
         st = self.state

@@ -26,7 +26,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 
 __all__ = ["Lexed", "lex_block", "W_OK", "W_EMPTY", "W_BAD"]
 
@@ -118,15 +117,14 @@ def parse_numbers(buf: np.ndarray, start: np.ndarray, end: np.ndarray) -> tuple[
     wide = body > _MAX_DIGITS                    # too long for the exact path
     nb = np.minimum(body, _MAX_DIGITS)
     two = bool(nb.max() > 8)
-    width = 16 if two else 8
-    win = sliding_window_view(buf, width)[end - width].view(np.uint64)
-    lo_d, lo_dot, lo_bad = _lane(np.ascontiguousarray(win[:, -1]), np.minimum(nb, 8))
+    words = np.ndarray((len(buf) - 7,), np.uint64, buffer=buf, strides=(1,))   # every unaligned 8-byte word
+    lo_d, lo_dot, lo_bad = _lane(words.take(end - 8), np.minimum(nb, 8))
     raw = _eight_digits(lo_d)
     ndot = np.bitwise_count(lo_dot)
     bad = lo_bad != 0
     dotk = (np.uint64(7) - (np.bitwise_count(lo_dot - np.uint64(1)) >> np.uint64(3))).astype(np.int64)
     if two:
-        hi_d, hi_dot, hi_bad = _lane(np.ascontiguousarray(win[:, 0]), np.maximum(nb - 8, 0))
+        hi_d, hi_dot, hi_bad = _lane(words.take(end - 16), np.maximum(nb - 8, 0))
         raw = raw + _eight_digits(hi_d) * np.uint64(100000000)
         ndot = ndot + np.bitwise_count(hi_dot)
         bad |= hi_bad != 0
@@ -190,12 +188,14 @@ def lex_block(block: bytes | memoryview) -> Lexed:
     sep_pos = np.flatnonzero(cls != 0)
     sep_cls = cls[sep_pos]
     is_nl = sep_cls == C_NL
-    nl_pos = sep_pos[is_nl]
+    nl_k = np.flatnonzero(is_nl)
+    nl_pos = sep_pos[nl_k]
     if bytes(block[-1:]) == b"\n":
         nl_pos = nl_pos[:-1]                      # the pad newline closes no line of its own
     n_lines = len(nl_pos)
     line_start = np.concatenate([[_PAD], nl_pos[:-1] + 1]) if n_lines else np.zeros(0, np.int64)
-    line_of_sep = np.cumsum(is_nl, dtype=np.int64) - is_nl
+    per_line = np.diff(nl_k, prepend=-1, append=len(sep_pos) - 1)
+    line_of_sep = np.repeat(np.arange(len(per_line), dtype=np.int64), per_line)   # a newline ends its line
     # Where each line's comment starts (first ';' or '*').
     code_end = nl_pos.copy()
     cs = np.flatnonzero((sep_cls == C_SEMI) | (sep_cls == C_STAR))

@@ -92,7 +92,7 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0) -
     if n == 0:
         raise ValidationError("the G-code has no moves", field="gcode", n_lines=tp.n_lines)
     off = np.asarray(opt.offset_mm)
-    pts = tp.xyz_mm + off
+    pts = tp.xyz_mm + off if off.any() else tp.xyz_mm        # read only
     d = np.diff(tp.xyz_mm, axis=0, prepend=tp.start_xyz_mm[None])
     seg = np.sqrt(np.einsum("ij,ij->i", d, d))
     e = tp.e_mm
@@ -113,8 +113,8 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0) -
     lifted = np.zeros(m, bool)
     if opt.travel_lift_mm > 0 and run_start.any():
         run_id = np.cumsum(run_start) - 1
-        xy = np.hypot(d[sl, 0], d[sl, 1])
-        run_xy = np.bincount(run_id[travel], weights=xy[travel], minlength=int(run_start.sum()))
+        tr = np.flatnonzero(travel) + k0
+        run_xy = np.bincount(run_id[tr - k0], weights=np.hypot(d[tr, 0], d[tr, 1]), minlength=int(run_start.sum()))
         lifted = travel & (run_xy[np.maximum(run_id, 0)] >= opt.lift_min_travel_mm)
     ui = np.flatnonzero(run_start & lifted)
     di = np.flatnonzero(run_end & lifted)

@@ -110,7 +110,8 @@ def _assemble(tp: Toolpath, cell: Any, opt: PlanOptions) -> tuple[Program, int]:
     # non-motion rows (temperatures, waits, retractions) hold the TCP where the last motion row left it
     motion = prog.op <= MOVEL
     last_motion = np.maximum.accumulate(np.where(motion, np.arange(n), 0))
-    prog.xyz_mm[:] = prog.xyz_mm[last_motion]
+    rest = np.flatnonzero(~motion)
+    prog.xyz_mm[rest] = prog.xyz_mm[last_motion[rest]]
     prog.meta.update(travel_lifts=pr.n_lifts, fan_events_dropped=pr.n_fan_events, approach_speed_mm_s=v_app)
     return prog, len(pr)
 
@@ -129,20 +130,25 @@ def _solve(prog: Program, cell: Any, opt: PlanOptions, progress: Progress | None
     rot = np.zeros(n)
     seed = home
     q_wobj_inv = quat_from_R(wobj[:3, :3].T)
+    plate_is_base = bool(np.array_equal(wobj[:3, :3], np.eye(3)))     # a shifted plate: no rotation to apply
     block = opt.ik_block_rows
     for a in range(0, len(motion), block):
         idx = motion[a:a + block]
+        put = _putter(idx)
         p = prog.xyz_mm[idx]
-        xyz_b = np.einsum("ij,kj->ik", p, wobj[:3, :3]) + wobj[:3, 3]     # no BLAS: (N,3)x(3,3)
+        if plate_is_base:
+            xyz_b = p + wobj[:3, 3]
+        else:
+            xyz_b = np.einsum("ij,kj->ik", p, wobj[:3, :3]) + wobj[:3, 3]     # no BLAS: (N,3)x(3,3)
         res = solve_path(robot, xyz_b, np.broadcast_to(axis_b, xyz_b.shape), seed,
                          rot_range_deg=opt.rot_range_deg, rot_step_deg=opt.rot_step_deg, jump_deg=JUMP_DEG)
-        prog.q_rad[idx] = res.q_rad
+        put(prog.q_rad, res.q_rad)
         st = res.status.copy()
         if a > 0 and len(st) and st[0] == IK_OK and np.max(np.abs(res.q_rad[0] - seed)) > np.radians(JUMP_DEG):
             st[0] = IK_JUMP                      # across the block boundary, as solve_path does inside
-        prog.quat_wxyz[idx] = _quat_in_plate(q_wobj_inv, res.quat_wxyz)
-        status[idx] = st
-        rot[idx] = res.rot_deg
+        put(prog.quat_wxyz, res.quat_wxyz if plate_is_base else _quat_in_plate(q_wobj_inv, res.quat_wxyz))
+        put(status, st)
+        put(rot, res.rot_deg)
         good = np.flatnonzero(st == IK_OK)
         if len(good):
             seed = res.q_rad[good[-1]]
@@ -164,6 +170,21 @@ def _solve(prog: Program, cell: Any, opt: PlanOptions, progress: Progress | None
         arr[rest] = arr[fill[rest]]
     status[rest], rot[rest] = status[fill[rest]], rot[fill[rest]]
     return status, rot
+
+
+def _putter(idx: np.ndarray) -> Callable[[np.ndarray, np.ndarray], None]:
+    """``put(dst, src)`` doing ``dst[idx] = src`` for sorted ``idx``: by slices when ``idx`` is a
+    few long runs of consecutive rows (motion rows between rare events), else by fancy indexing."""
+    cut = np.flatnonzero(np.diff(idx) != 1) + 1
+    if len(cut) > 64 + len(idx) // 4096:
+        return lambda dst, src: dst.__setitem__(idx, src)
+    starts = np.concatenate([[0], cut]).tolist()
+    runs = list(zip(starts, idx[starts].tolist() if len(idx) else [], np.diff(starts + [len(idx)]).tolist()))
+
+    def put(dst: np.ndarray, src: np.ndarray) -> None:
+        for k, row, m in runs:
+            dst[row:row + m] = src[k:k + m]
+    return put
 
 
 def _quat_in_plate(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:

@@ -171,7 +171,7 @@ class ClosedFormIK:
         """
         n = C.shape[1]
         i, b, prev = 0, -1, seed
-        window, block = 32, 1024
+        window, block = 32, 2048
         single = np.flatnonzero(~self.multi)
         while i < n:
             if b < 0 or not self.tracking:
@@ -193,10 +193,13 @@ class ClosedFormIK:
             for jj in single:
                 fine &= self._canon_col(jj, qt[jj])
             d = np.diff(qt, axis=1, prepend=prev[:, None])
-            d -= _TWO_PI * np.rint(d / _TWO_PI)
-            d *= d
-            sep = np.minimum(gap, _PI)
-            fine &= 4.0 * d.sum(axis=0) < sep * sep
+            sep2 = np.minimum(gap, _PI) ** 2
+            quiet = 4.0 * np.einsum("ji,ji->i", d, d) < sep2      # unwrapped steps: all < pi/2 if it passes
+            loud = np.flatnonzero(~quiet)
+            if len(loud):                                        # compare those modulo 2*pi
+                dw = _wrap(d[:, loud])
+                quiet[loud] = 4.0 * np.einsum("ji,ji->i", dw, dw) < sep2[loud]
+            fine &= quiet
             f = int(np.argmin(fine)) if not fine.all() else j - i
             q[:, i:i + f], sing[i:i + f] = qt[:, :f], sg[:f]
             row_ok[i:i + f] = True
@@ -207,7 +210,7 @@ class ClosedFormIK:
             if i < j:                                      # switch to the full method at row i
                 b = -1
                 window = 32 if f >= 256 else min(self.max_rows, window * 4)
-                block = 1024
+                block = 2048
             else:
                 block = min(self.max_rows, block * 2)
 

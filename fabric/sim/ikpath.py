@@ -49,13 +49,14 @@ smooth move between two points of one configuration stays well under 25 %.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from fabric.errors import ValidationError
 from fabric.sim import frames
-from fabric.sim.kinematics import IK_JUMP, IK_OK
+from fabric.sim.kinematics import IK_JUMP, IK_OK, pose_cols
 from fabric.sim.robot import RobotModel
 
 __all__ = ["PathIK", "solve_path", "candidate_rotations_deg", "joint_jumps"]
@@ -100,7 +101,7 @@ def candidate_rotations_deg(rot_range_deg: tuple[float, float], rot_step_deg: fl
 def solve_path(robot: RobotModel, xyz_mm: np.ndarray, z_axis: np.ndarray, q_start: np.ndarray,
                rot_range_deg: tuple[float, float] = (-180.0, 180.0), rot_step_deg: float = 15.0,
                x_ref: np.ndarray | None = None, jump_deg: float = 10.0) -> PathIK:
-    """Joints for TCP positions ``xyz_mm`` (N, 3) with nozzle axes ``z_axis`` (N, 3), robot base frame.
+    """Joints for TCP positions ``xyz_mm`` (N, 3) with nozzle axes ``z_axis`` ((3,) or (N, 3)), robot base frame.
 
     ``q_start`` seeds continuity (the approach ends there); ``x_ref`` ((3,) or
     (N, 3)) overrides the theta = 0 reference direction.
@@ -109,37 +110,144 @@ def solve_path(robot: RobotModel, xyz_mm: np.ndarray, z_axis: np.ndarray, q_star
     if xyz.ndim != 2 or xyz.shape[1] != 3 or not np.all(np.isfinite(xyz)):
         raise ValidationError("xyz_mm must be a finite (N, 3) array", field="xyz_mm")
     n = len(xyz)
-    z = np.broadcast_to(np.asarray(z_axis, dtype=float), (n, 3))
-    zn = np.linalg.norm(z, axis=1)
-    if n and (not np.all(np.isfinite(zn)) or np.any(zn < 1e-9)):
-        bad = int(np.argmax(~np.isfinite(zn) | (zn < 1e-9)))
-        raise ValidationError(f"z_axis row {bad} is not a direction", field="z_axis", row=bad)
+    z0 = _unit_axes(z_axis, n)
     q_start = np.asarray(q_start, dtype=float).reshape(-1)
     if q_start.shape != (robot.nq,):
         raise ValidationError(f"q_start needs {robot.nq} joints", field="q_start")
     thetas = candidate_rotations_deg(rot_range_deg, rot_step_deg)
     if n == 0:
         return PathIK(np.zeros((0, robot.nq)), np.zeros(0, np.uint8), np.zeros(0), np.zeros((0, 4)), 1.0)
-    if x_ref is None:
-        x_ref = np.column_stack([-xyz[:, 0], -xyz[:, 1], np.zeros(n)])   # towards the A1 axis
-    R0 = frames.frame_from_z_axis(z / zn[:, None], x_ref)
-    solver = _PathSolver(robot, xyz, R0, q_start, thetas, np.radians(jump_deg))
+    p = np.ascontiguousarray(xyz.T)
+    if x_ref is None:                                   # towards the A1 axis
+        xr = np.stack([-p[0], -p[1], np.zeros(n)])
+    else:
+        xr = np.array(np.broadcast_to(np.asarray(x_ref, dtype=float), (n, 3)).T)
+    solver = _PathSolver(robot, p, _Frames(z0, xr), q_start, thetas, np.radians(jump_deg))
     return solver.solve()
+
+
+def _unit_axes(z_axis: np.ndarray, n: int) -> np.ndarray:
+    """Nozzle axes as unit columns: (3, 1) when one axis serves every row (also a broadcast one), else (3, N)."""
+    z = np.asarray(z_axis, dtype=float)
+    if z.ndim == 2 and z.shape[1] == 3 and (len(z) == 1 or z.strides[0] == 0):
+        z = z[0]                                        # a broadcast (N, 3) of one axis
+    z = np.broadcast_to(z, (1 if z.ndim == 1 else n, 3))
+    zn = np.linalg.norm(z, axis=1)
+    if n and (not np.all(np.isfinite(zn)) or np.any(zn < 1e-9)):
+        bad = int(np.argmax(~np.isfinite(zn) | (zn < 1e-9)))
+        raise ValidationError(f"z_axis row {bad} is not a direction", field="z_axis", row=bad)
+    return np.ascontiguousarray((z / zn[:, None]).T)
+
+
+class _Frames:
+    """The nozzle frames ``R0_i`` (theta = 0) as columns ``x0, y0`` (3, N) and ``z0`` ((3, 1) or (3, N)).
+
+    Built like :func:`fabric.sim.frames.frame_from_z_axis`: ``x_ref`` projected
+    onto the plane normal to z (base x, then base y where it is parallel to z),
+    ``y = z x x``. Columns keep every operation on contiguous rows of N numbers.
+    """
+
+    def __init__(self, z0: np.ndarray, xr: np.ndarray) -> None:
+        n = xr.shape[1]
+        bad = np.zeros(n, dtype=bool)
+        for fallback in (None, (1.0, 0.0, 0.0), (0.0, 1.0, 0.0)):
+            if fallback is not None:
+                xr[:, bad] = np.asarray(fallback)[:, None]
+            x = xr - (xr * z0).sum(axis=0) * z0
+            nx = np.sqrt((x * x).sum(axis=0))
+            bad = nx < 1e-6
+            if not bad.any():
+                break
+        x /= nx
+        self.x0, self.z0 = x, z0
+        self.y0 = np.stack([z0[1] * x[2] - z0[2] * x[1], z0[2] * x[0] - z0[0] * x[2], z0[0] * x[1] - z0[1] * x[0]])
+        self.const = z0.shape[1] == 1
+
+    def cols(self, rows: slice | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``x0, y0, z0`` of some rows (z0 stays (3, 1) when constant)."""
+        return self.x0[:, rows], self.y0[:, rows], self.z0 if self.const else self.z0[:, rows]
+
+    def quats(self, theta_rad: np.ndarray) -> np.ndarray:
+        """(N, 4) quaternions ``(w, x, y, z)``, w >= 0, of ``R0_i @ Rz(theta_i)``.
+
+        With one nozzle axis every frame is ``B @ Rz(alpha_i)`` for a fixed ``B``
+        (z column the axis), so the quaternion is ``q_B * (cos h, 0, 0, sin h)``
+        with ``h = (alpha_i + theta_i) / 2``: no per-row matrix. Otherwise
+        Shepperd's method on ``R0`` and the same product with ``h = theta_i / 2``.
+        """
+        if self.const:
+            B = frames.frame_from_z_axis(self.z0[:, 0], np.array([1.0, 0.0, 0.0]))[0]
+            qa = frames.quat_from_R(B)
+            half = 0.5 * (np.arctan2(B[:, 1] @ self.x0, B[:, 0] @ self.x0) + theta_rad)
+            w1, x1, y1, z1 = qa
+        else:
+            qa = frames.quat_from_R(np.stack([self.x0.T, self.y0.T, self.z0.T], axis=-1))
+            half = 0.5 * np.broadcast_to(theta_rad, self.x0.shape[1:])
+            w1, x1, y1, z1 = qa.T
+        c, s = np.cos(half), np.sin(half)
+        cols = (w1 * c - z1 * s, x1 * c + y1 * s, y1 * c - x1 * s, z1 * c + w1 * s)
+        flip = cols[0] < 0.0
+        zero = np.flatnonzero(cols[0] == 0.0)              # w = 0: largest component positive, as Shepperd's
+        if len(zero):
+            sub = [col if len(zero) == len(c) else col[zero] for col in cols[1:]]
+            a = [np.abs(col) for col in sub]
+            big = np.where((a[0] >= a[1]) & (a[0] >= a[2]), sub[0], np.where(a[1] >= a[2], sub[1], sub[2]))
+            flip[zero] = big < 0.0
+        q = np.stack(cols, axis=1)
+        return np.negative(q, out=q, where=flip[:, None])
 
 
 class _PathSolver:
     """The three steps of the module docstring over one path."""
 
-    def __init__(self, robot: RobotModel, xyz: np.ndarray, R0: np.ndarray, q_start: np.ndarray,
+    def __init__(self, robot: RobotModel, p: np.ndarray, fr: _Frames, q_start: np.ndarray,
                  thetas_deg: np.ndarray, jump_rad: float) -> None:
-        self.robot, self.xyz, self.R0, self.q_start = robot, xyz, R0, q_start
-        self.thetas = thetas_deg
-        self.jump_rad = jump_rad
-        self.n = len(xyz)
+        self.robot, self.p, self.fr, self.q_start, self.cf = robot, p, fr, q_start, robot.closed_form
+        self.thetas, self.jump_rad, self.n = thetas_deg, jump_rad, p.shape[1]
 
-    def poses(self, rows: np.ndarray | slice, theta_deg: np.ndarray | float) -> np.ndarray:
-        R = frames.rot_about_z(self.R0[rows], np.radians(theta_deg))
-        return frames.make_T(R, self.xyz[rows])
+    def poses(self, rows: slice | np.ndarray, theta_deg: np.ndarray | float) -> np.ndarray:
+        """TCP poses (M, 4, 4) of some rows at rotation(s) ``theta_deg``."""
+        x0, y0, z0 = self.fr.cols(rows)
+        th = np.radians(theta_deg)
+        c, s = np.cos(th), np.sin(th)
+        p = self.p[:, rows]
+        T = np.zeros((p.shape[1], 4, 4))
+        T[:, :3, 0] = (c * x0 + s * y0).T
+        T[:, :3, 1] = (c * y0 - s * x0).T
+        T[:, :3, 2] = np.broadcast_to(z0, p.shape).T
+        T[:, :3, 3] = p.T
+        T[:, 3, 3] = 1.0
+        return T
+
+    def flange_cols(self, rows: slice | np.ndarray, theta_deg: np.ndarray | float) -> np.ndarray:
+        """Flange poses of some rows as IK columns (9, M): ``R0 Rz(theta) tool_inv``, no 4x4 per row.
+
+        Each flange column is ``R0 @ (Rz(theta) @ m)`` for a column ``m`` of the
+        TCP -> flange transform: ``x0 * a + y0 * b + z0 * m_z`` with
+        ``a, b = Rz(theta) (m_x, m_y)``, zero terms skipped.
+        """
+        x0, y0, z0 = self.fr.cols(rows)
+        th = np.radians(theta_deg)
+        c, s = np.cos(th), np.sin(th)
+        ti = self.cf.tool_inv_T
+        p = self.p[:, rows]
+        out = np.empty((9, p.shape[1]))
+        for k, m in enumerate((ti[:3, 3], ti[:3, 2], ti[:3, 1])):
+            o = out[3 * k:3 * k + 3]
+            o[...] = p if k == 0 else 0.0
+            if m[0] != 0.0 or m[1] != 0.0:
+                o += x0 * (c * m[0] - s * m[1])
+                o += y0 * (s * m[0] + c * m[1])
+            if m[2] != 0.0:
+                o += z0 * m[2]
+        return out
+
+    def ik(self, rows: slice | np.ndarray, theta_deg: np.ndarray | float,
+           seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """IK of some rows at rotation(s) ``theta_deg``, continuous from ``seed``."""
+        if self.cf is not None:
+            return self.cf.ik_cols(self.flange_cols(rows, theta_deg), seed)
+        return self.robot.ik(self.poses(rows, theta_deg), seed)
 
     def row_cost(self, q: np.ndarray, status: np.ndarray) -> np.ndarray:
         """Per-row cost of a joint solution (inf when infeasible)."""
@@ -160,39 +268,39 @@ class _PathSolver:
             rot = self._repair(rot)
             q, status = self._final(rot)
         else:
-            rot, q, status = found
-        R = frames.rot_about_z(self.R0, np.radians(rot))
-        return PathIK(q, status, rot, frames.quat_from_R(R), float(np.mean(status == IK_OK)), strategy)
+            th, q, status = found
+            rot = np.full(self.n, th)
+        quat = self.fr.quats(np.radians(rot))
+        return PathIK(q, status, rot, quat, float(np.mean(status == IK_OK)), strategy)
 
-    def _final(self, rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        T = self.poses(slice(None), rot)
-        q, status = self.robot.ik(T, self.q_start)
-        jump = joint_jumps(self.robot, q, T, self.jump_rad)
-        status = np.where(jump & (status == IK_OK), np.uint8(IK_JUMP), status).astype(np.uint8)
+    def _final(self, rot: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """IK of the whole path at rotation(s) ``rot`` (deg) with the jump test."""
+        q, status = self.ik(slice(None), rot, self.q_start)
+        jump = joint_jumps(self.robot, q, lambda r: self.poses(r, rot if np.ndim(rot) == 0 else rot[r]), self.jump_rad)
+        status[jump & (status == IK_OK)] = IK_JUMP
         return q, status
 
-    def _constant(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """Step 1: the best constant rotation verified on every row (rot, q, status), or None."""
+    def _constant(self) -> tuple[float, np.ndarray, np.ndarray] | None:
+        """Step 1: the best constant rotation verified on every row (theta, q, status), or None."""
         m = SAMPLE_ROWS if self.robot.closed_form is not None else SAMPLE_ROWS_NUMERIC
         rows = np.unique(np.linspace(0, self.n - 1, min(self.n, m)).round().astype(int))
         keys = []
         for k, th in enumerate(self.thetas):
-            q, st = self.robot.ik(self.poses(rows, th), self.q_start)
+            q, st = self.ik(rows, th, self.q_start)
             c = self.row_cost(q, st)
             if np.all(np.isfinite(c)):
                 keys.append((float(c.max()), float(c.mean()), abs(float(th)), k))
         for _, _, _, k in sorted(keys)[:VERIFY_TOP]:
-            rot = np.full(self.n, self.thetas[k])
-            q, status = self._final(rot)
+            q, status = self._final(float(self.thetas[k]))
             if np.all(status == IK_OK):
-                return rot, q, status
+                return float(self.thetas[k]), q, status
         return None
 
     def _costs(self) -> np.ndarray:
         """Row costs (N, K) of every candidate (finite; infeasible = INFEASIBLE_COST)."""
         C = np.empty((self.n, len(self.thetas)), dtype=np.float32)
         for k, th in enumerate(self.thetas):
-            q, st = self.robot.ik(self.poses(slice(None), th), self.q_start)
+            q, st = self.ik(slice(None), th, self.q_start)
             C[:, k] = np.minimum(self.row_cost(q, st), INFEASIBLE_COST)
         return C
 
@@ -223,7 +331,7 @@ class _PathSolver:
 
     def _repair(self, rot: np.ndarray) -> np.ndarray:
         """Step 3: infeasible rows take the nearest feasible candidate rotation."""
-        q, status = self.robot.ik(self.poses(slice(None), rot), self.q_start)
+        q, status = self.ik(slice(None), rot, self.q_start)
         bad = np.flatnonzero(status != IK_OK)
         if not len(bad):
             return rot
@@ -234,7 +342,7 @@ class _PathSolver:
                 feas = np.flatnonzero(C[i] < INFEASIBLE_COST)
             else:
                 feas = [k for k, th in enumerate(self.thetas)
-                        if self.robot.ik(self.poses([i], th), q[max(i - 1, 0)])[1][0] == IK_OK]
+                        if self.ik(np.array([i]), th, q[max(i - 1, 0)])[1][0] == IK_OK]
                 feas = np.asarray(feas, dtype=int)
             if len(feas):
                 rot[i] = self.thetas[feas[np.argmin(np.abs(self.thetas[feas] - rot[i]))]]
@@ -251,7 +359,7 @@ def _nearest_solution(robot: RobotModel, T: np.ndarray, q_prev: np.ndarray) -> t
             qi, st = robot.ik(T[i], q_prev[i])
             out[i], ok[i] = qi[0], st[0] == IK_OK
         return out, ok
-    qb, valid, _, _ = cf.branches(T @ frames.inv_T(robot.tool_T))
+    qb, valid, _, _ = cf.branches_cols(pose_cols(T, cf.tool_inv_T))
     d = qb - q_prev[:, None, :]
     d -= 2.0 * np.pi * np.rint(d / (2.0 * np.pi))       # compare modulo 2*pi ...
     dist = np.where(valid, np.einsum("ijk,ijk->ij", d, d), np.inf)
@@ -260,24 +368,30 @@ def _nearest_solution(robot: RobotModel, T: np.ndarray, q_prev: np.ndarray) -> t
     return q_prev + d[rows, best], valid[rows, best]     # ... and place next to q_prev
 
 
-def joint_jumps(robot: RobotModel, q: np.ndarray, T: np.ndarray, check_rad: float = np.radians(10.0)) -> np.ndarray:
+def joint_jumps(robot: RobotModel, q: np.ndarray, T: np.ndarray | Callable[[np.ndarray], np.ndarray],
+                check_rad: float = np.radians(10.0)) -> np.ndarray:
     """Rows (N,) whose move from the previous row is not continuous (module docstring: jump test).
 
-    ``q`` (N, nq) joints and ``T`` (N, 4, 4) the TCP poses they reach (mm).
+    ``q`` (N, nq) joints and ``T`` (N, 4, 4) the TCP poses they reach (mm), or
+    a function giving the poses of some rows (only the rows tested are built).
     """
+    poses = T if callable(T) else (lambda rows: T[rows])
     n = len(q)
     jump = np.zeros(n, dtype=bool)
     if n < 2:
         return jump
-    dq = np.diff(q, axis=0)
-    step = np.max(np.abs(dq), axis=1)
+    dq = np.abs(q[1:] - q[:-1])
+    step = dq[:, 0].copy()
+    for j in range(1, dq.shape[1]):                      # column by column: a row max over 6 is slow
+        np.maximum(step, dq[:, j], out=step)
     rows = np.flatnonzero(step > check_rad) + 1
     if not len(rows):
         return jump
-    qa = frames.quat_from_R(T[rows - 1, :3, :3])
-    qb = frames.quat_from_R(T[rows, :3, :3])
+    Ta, Tb = poses(rows - 1), poses(rows)
+    qa = frames.quat_from_R(Ta[:, :3, :3])
+    qb = frames.quat_from_R(Tb[:, :3, :3])
     qb *= np.where(np.sum(qa * qb, axis=1) < 0.0, -1.0, 1.0)[:, None]
-    T_mid = frames.make_T(frames.R_from_quat(qa + qb), 0.5 * (T[rows - 1, :3, 3] + T[rows, :3, 3]))
+    T_mid = frames.make_T(frames.R_from_quat(qa + qb), 0.5 * (Ta[:, :3, 3] + Tb[:, :3, 3]))
     q_mid, ok = _nearest_solution(robot, T_mid, q[rows - 1])
     dev = np.max(np.abs(q_mid - 0.5 * (q[rows - 1] + q[rows])), axis=1)
     jump[rows] = ~ok | (dev > JUMP_RATIO * step[rows - 1] + JUMP_SLACK_RAD)

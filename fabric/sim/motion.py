@@ -87,23 +87,6 @@ class StartState:
         return cls(q, Tp[:3, 3].copy(), quat_from_R(Tp[:3, :3]), thermal=thermal, t0_s=t0_s)
 
 
-@dataclass
-class _Rows:
-    """The slice of the program being timed, with every row's full-row starting point."""
-
-    op: np.ndarray
-    q: np.ndarray
-    from_q: np.ndarray
-    xyz: np.ndarray
-    from_xyz: np.ndarray
-    L: np.ndarray
-
-
-def _default_start(program: Program, start_row: int) -> StartState:
-    k = max(start_row - 1, 0)
-    return StartState(program.q_rad[k].copy(), program.xyz_mm[k].copy(), program.quat_wxyz[k].copy())
-
-
 def time_program(program: Program, robot: Any, speed_r: float = 1.0, start_row: int = 0,
                  start_state: StartState | None = None, *, accel_mm_s2: float = DEFAULT_ACCEL_MM_S2,
                  flow_r: float = 1.0, retract_speed_mm_s: float = DEFAULT_RETRACT_SPEED_MM_S) -> Timeline:
@@ -119,7 +102,8 @@ def time_program(program: Program, robot: Any, speed_r: float = 1.0, start_row: 
     for name, val in (("speed_r", speed_r), ("accel_mm_s2", accel_mm_s2), ("retract_speed_mm_s", retract_speed_mm_s)):
         if not np.isfinite(val) or val <= 0:
             raise ValidationError(f"{name} must be a positive number, got {val}", field=name)
-    ss = start_state or _default_start(program, start_row)
+    k = max(start_row - 1, 0)
+    ss = start_state or StartState(program.q_rad[k].copy(), program.xyz_mm[k].copy(), program.quat_wxyz[k].copy())
     sl = slice(start_row, n_all)
     op = program.op[sl]
     n = len(op)
@@ -127,107 +111,81 @@ def time_program(program: Program, robot: Any, speed_r: float = 1.0, start_row: 
     src = (program.q_rad[start_row - 1], program.xyz_mm[start_row - 1]) if partial else (ss.q_rad, ss.xyz_mm)
     first_quat = program.quat_wxyz[start_row - 1] if partial else np.asarray(ss.quat_wxyz, dtype=float)
     q, xyz = program.q_rad[sl], program.xyz_mm[sl]
-    from_q = np.concatenate([np.asarray(src[0], dtype=float)[None], q[:-1]])
-    from_xyz = np.concatenate([np.asarray(src[1], dtype=float)[None], xyz[:-1]])
-    L = np.where(op == MOVEL, np.linalg.norm(xyz - from_xyz, axis=1), 0.0)
+    q0, xyz0 = np.asarray(src[0], dtype=float), np.asarray(src[1], dtype=float)
+    d = np.stack([np.diff(xyz[:, k], prepend=xyz0[k]) for k in range(3)])    # (3, N) TCP steps, by column
+    L = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    L[op != MOVEL] = 0.0
     s0 = float(np.clip(ss.s_mm, 0.0, L[0])) if partial else 0.0
     D = L.copy()
     D[0] -= s0
-    rows = _Rows(op, q, from_q, xyz, from_xyz, L)
-
     vlim = np.asarray(robot.vel_limit_rad_s, dtype=float)
     dur = np.zeros(n)
-    prof = _linear_profiles(program, sl, rows, D, vlim, speed_r, accel_mm_s2, float(ss.v_mm_s))
+    prof = _linear_profiles(program, sl, (op, q, q0, d, L), D, vlim, speed_r, accel_mm_s2, float(ss.v_mm_s))
     seg = prof["seg"]
     dur[seg] = prof["t1"] + prof["tc"] + prof["t3"]
-    turn = (op == MOVEL) & (D <= _EPS_MM) & prof["reorient"]
-    dur[turn] = np.max(np.abs(q[turn] - from_q[turn]) / vlim, axis=1)
+    turn = np.flatnonzero((op == MOVEL) & (D <= _EPS_MM) & prof["reorient"])
+    q_from = np.where((turn > 0)[:, None], q[np.maximum(turn - 1, 0)], q0[None])      # previous row's joints
+    dur[turn] = np.max(np.abs(q[turn] - q_from) / vlim, axis=1)
     value = program.value[sl]
     dur[op == WAIT] = np.maximum(value[op == WAIT], 0.0)
     dur[op == RETRACT] = np.abs(value[op == RETRACT]) / retract_speed_mm_s
-    trajs = _joint_moves(program, sl, rows, robot, speed_r, start_row)
+    trajs = _joint_moves(program, sl, q, q0, robot, speed_r, start_row)
     for i, tr in trajs.items():
         dur[i] = tr.duration
     _thermal_pass(program, sl, op, dur, ss)
-
     t_end = np.cumsum(dur)
     t_start = np.concatenate([[0.0], t_end[:-1]])
+    del dur
     full = {k: np.zeros(n) for k in ("v0", "vc", "v1", "t1", "tc", "t3")}
     for k in full:
-        full[k][seg] = prof[k]
+        full[k][seg] = prof.pop(k)                             # drop each profile once it is placed
     slowed = prof["slowed"]
     return Timeline(program=program, robot=robot, start_row=start_row, t_start_s=t_start, t_end_s=t_end,
                     v0_mm_s=full["v0"], vc_mm_s=full["vc"], v1_mm_s=full["v1"], t1_s=full["t1"],
                     tc_s=full["tc"], t3_s=full["t3"], len_mm=np.where(op == MOVEL, np.maximum(D, 0.0), 0.0),
-                    accel_mm_s2=float(accel_mm_s2), first_from_q_rad=from_q[0].copy(),
-                    first_from_xyz_mm=from_xyz[0].copy(), first_from_quat_wxyz=np.asarray(first_quat, float).copy(),
+                    accel_mm_s2=float(accel_mm_s2), first_from_q_rad=q0.copy(),
+                    first_from_xyz_mm=xyz0.copy(), first_from_quat_wxyz=np.asarray(first_quat, float).copy(),
                     s0_mm=s0, speed_r=float(speed_r), flow_r=float(flow_r), joint_traj=trajs,
                     slowed_rows=start_row + slowed, slowed_joint=prof["slowed_joint"])
 
 
-def _linear_profiles(program: Program, sl: slice, rows: _Rows, D: np.ndarray, vlim: np.ndarray,
+def _linear_profiles(program: Program, sl: slice, rows: tuple[np.ndarray, ...], D: np.ndarray, vlim: np.ndarray,
                      speed_r: float, a: float, v_start: float) -> dict[str, np.ndarray]:
-    """Caps, junction speeds, look-ahead passes and trapezoids of every linear row (vectorised)."""
-    op, L = rows.op, rows.L
-    lin = op == MOVEL
-    dq = np.abs(rows.q - rows.from_q)
-    reorient = np.max(dq, axis=1) > 1e-12
-    segmask = lin & (D > _EPS_MM)
+    """Caps, junction speeds, look-ahead passes and trapezoids of every linear row (vectorised; each
+    step its own function, so its temporaries are freed before the next). ``rows``: op, q, q0, d, L."""
+    op, q, q0, d, L = rows
+    segmask = (op == MOVEL) & (D > _EPS_MM)
     seg = np.flatnonzero(segmask)
-    speed = program.speed_mm_s[sl][seg]
-    zone = program.zone_mm[sl]
-    # 1. cruise caps: programmed speed, and the joint velocity limits along the row
-    rate = dq[seg] / (vlim * L[seg, None])                    # rad/s per mm/s of TCP speed
-    worst = np.argmax(rate, axis=1)
-    cap_joint = 1.0 / np.maximum(rate[np.arange(len(seg)), worst], 1e-300)
-    cap_prog = speed * speed_r
-    cap = np.minimum(cap_prog, cap_joint)
-    slow = cap_joint < cap_prog * (1.0 - 1e-12)
-    # 2. junctions: connected when only transparent rows lie between two segments
-    blocking = ~(segmask | (op == SET_TEMP) | (lin & ~reorient))
-    cb = np.cumsum(blocking)
-    fine0 = lin & (D <= _EPS_MM) & (zone <= 0)
-    cf = np.cumsum(fine0)
-    m = len(seg)
-    conn = np.zeros(m, dtype=bool)
-    if m > 1:
-        conn[1:] = cb[seg[1:] - 1] - cb[seg[:-1]] == 0
-    u_dir = (rows.xyz[seg] - rows.from_xyz[seg]) / L[seg, None]
-    J = np.zeros(m)
-    if m > 1:
-        cos_j = -np.sum(u_dir[:-1] * u_dir[1:], axis=1)
-        sin_h = np.sqrt(np.clip(0.5 * (1.0 - cos_j), 0.0, 1.0))
-        R = sin_h / np.maximum(1.0 - sin_h, 1e-12)
-        z = np.where(cf[seg[1:] - 1] - cf[seg[:-1]] > 0, 0.0, zone[seg[:-1]])
-        J[1:] = np.minimum(a * z * R, np.minimum(cap[:-1], cap[1:]) ** 2)
-    J[~conn] = 0.0
-    forced = bool(m > 0 and v_start > 0 and cb[seg[0]] == 0)   # entry speed imposed by the caller
-    # 3. look-ahead passes on squared speeds, as cumulative minima along the path
+    cap, slow, worst, reorient = _caps(program.speed_mm_s[sl][seg] * speed_r, q, q0, L[seg], seg, vlim)
+    J, conn, forced = _junctions(op, d, L, D, seg, segmask, reorient, program.zone_mm[sl], cap, a, v_start)
     Dseg = D[seg]
+    # 3. look-ahead passes on squared speeds, as cumulative minima along the path
     P = 2.0 * a * np.concatenate([[0.0], np.cumsum(Dseg)])
-    M = np.minimum(J, cap ** 2)
-    T = M + P[:-1]
-    end = np.ones(m, dtype=bool)
+    T = np.minimum(J, cap ** 2) + P[:-1]
+    end = np.ones(len(seg), dtype=bool)
     end[:-1] = ~conn[1:]
     T[end] = np.minimum(T[end], P[1:][end])
     w = np.minimum.accumulate(T[::-1])[::-1] - P[:-1]
-    w0 = w.copy()
+    del T, J
     if forced:
-        w0[0] = v_start ** 2
-    u = np.minimum.accumulate(w0 - P[:-1]) + P[:-1]
-    if forced and m:
+        w[0] = v_start ** 2
+    u = np.minimum.accumulate(w - P[:-1]) + P[:-1]
+    del w
+    if forced and len(seg):
         chain = np.cumsum(~conn) == np.cumsum(~conn)[0]
         chain[0] = True
         u = np.where(chain, np.maximum(u, v_start ** 2 - P[:-1]), u)
         u[0] = v_start ** 2
     u = np.maximum(u, 0.0)
-    ex = np.zeros(m)
+    ex = np.zeros(len(seg))
     ex[:-1] = np.where(conn[1:], u[1:], 0.0)
     # 4. trapezoids (general: each phase may speed up or slow down)
     v0, v1 = np.sqrt(u), np.sqrt(ex)
     peak = np.sqrt(0.5 * (u + ex) + a * Dseg)
     valley = np.sqrt(np.maximum(0.5 * (u + ex) - a * Dseg, 0.0))
+    del u, ex
     vc = np.where(cap >= np.maximum(v0, v1), np.minimum(cap, peak), np.maximum(cap, valley))
+    del peak, valley, cap
     t1 = np.abs(vc - v0) / a
     t3 = np.abs(v1 - vc) / a
     dc = np.maximum(Dseg - 0.5 * (v0 + vc) * t1 - 0.5 * (vc + v1) * t3, 0.0)
@@ -236,14 +194,58 @@ def _linear_profiles(program: Program, sl: slice, rows: _Rows, D: np.ndarray, vl
             "slowed": seg[slow], "slowed_joint": worst[slow]}
 
 
-def _joint_moves(program: Program, sl: slice, rows: _Rows, robot: Any, speed_r: float,
+def _caps(cap_prog: np.ndarray, q: np.ndarray, q0: np.ndarray, Ls: np.ndarray, seg: np.ndarray,
+          vlim: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """1. Cruise caps: programmed speed and, joint by joint, the velocity limits (``|dq_j| / (vlim_j L)``
+    is joint j's rad/s per mm/s of TCP speed). Returns caps, slowed mask and joint, moving-joint rows."""
+    reorient = np.zeros(len(q), dtype=bool)
+    worst = np.zeros(len(seg), dtype=np.intp)
+    top = np.full(len(seg), -np.inf)
+    for j in range(q.shape[1]):
+        dq = np.abs(np.diff(q[:, j], prepend=q0[j]))
+        reorient |= dq > 1e-12
+        rate = dq[seg] / (vlim[j] * Ls)
+        better = rate > top
+        worst[better] = j
+        top[better] = rate[better]
+    cap_joint = 1.0 / np.maximum(top, 1e-300)
+    return np.minimum(cap_prog, cap_joint), cap_joint < cap_prog * (1.0 - 1e-12), worst, reorient
+
+
+def _junctions(op: np.ndarray, d: np.ndarray, L: np.ndarray, D: np.ndarray, seg: np.ndarray,
+               segmask: np.ndarray, reorient: np.ndarray, zone: np.ndarray, cap: np.ndarray, a: float,
+               v_start: float) -> tuple[np.ndarray, np.ndarray, bool]:
+    """2. Squared junction speeds into each segment, whether it is connected to the previous one
+    (only transparent rows between), and whether the caller imposes the entry speed."""
+    lin = op == MOVEL
+    blocking = ~(segmask | (op == SET_TEMP) | (lin & ~reorient))
+    cb = np.cumsum(blocking)
+    cf = np.cumsum(lin & (D <= _EPS_MM) & (zone <= 0))
+    m = len(seg)
+    conn = np.zeros(m, dtype=bool)
+    J = np.zeros(m)
+    if m > 1:
+        conn[1:] = cb[seg[1:] - 1] - cb[seg[:-1]] == 0
+        Ls = L[seg]
+        u = [d[k][seg] / Ls for k in range(3)]                  # unit directions, column by column
+        cos_j = -(u[0][:-1] * u[0][1:] + u[1][:-1] * u[1][1:] + u[2][:-1] * u[2][1:])
+        del u, Ls
+        sin_h = np.sqrt(np.clip(0.5 * (1.0 - cos_j), 0.0, 1.0))
+        R = sin_h / np.maximum(1.0 - sin_h, 1e-12)
+        z = np.where(cf[seg[1:] - 1] - cf[seg[:-1]] > 0, 0.0, zone[seg[:-1]])
+        J[1:] = np.minimum(a * z * R, np.minimum(cap[:-1], cap[1:]) ** 2)
+    J[~conn] = 0.0
+    return J, conn, bool(m > 0 and v_start > 0 and cb[seg[0]] == 0)
+
+
+def _joint_moves(program: Program, sl: slice, q: np.ndarray, q0: np.ndarray, robot: Any, speed_r: float,
                  start_row: int) -> dict[int, Trajectory]:
     """Ruckig rest-to-rest trajectories of every MOVEJ row (keyed by local row index)."""
-    idx = np.flatnonzero(rows.op == MOVEJ)
+    idx = np.flatnonzero(program.op[sl] == MOVEJ)
     out: dict[int, Trajectory] = {}
     if not len(idx):
         return out
-    dof = rows.q.shape[1]
+    dof = q.shape[1]
     otg = Ruckig(dof)
     inp = InputParameter(dof)
     vlim = np.asarray(robot.vel_limit_rad_s, dtype=float)
@@ -253,8 +255,8 @@ def _joint_moves(program: Program, sl: slice, rows: _Rows, robot: Any, speed_r: 
     for i in idx.tolist():
         r = float(np.clip(vel_r[i] * speed_r, 1e-3, 1.0))
         inp.max_velocity = (vlim * r).tolist()
-        inp.current_position = rows.from_q[i].tolist()
-        inp.target_position = rows.q[i].tolist()
+        inp.current_position = (q[i - 1] if i > 0 else q0).tolist()
+        inp.target_position = q[i].tolist()
         traj = Trajectory(dof)
         res = otg.calculate(inp, traj)
         if res not in (Result.Working, Result.Finished):
