@@ -28,7 +28,7 @@ from fabric.gcode.commands import COL, FLAG_OK, KNOWN, LENGTH_COLS, PARAMS, code
 from fabric.gcode.dialects import MK_FEATURE, MK_LAYER, MK_Z, find_markers
 from fabric.gcode.lexer import W_BAD, W_EMPTY, W_OK, Lexed, lex_block
 from fabric.gcode.events import command_events
-from fabric.gcode.toolpath import Toolpath
+from fabric.gcode.toolpath import RowColumns, Toolpath
 
 __all__ = ["Interpreter", "DEFAULT_FEED_MM_S"]
 
@@ -93,12 +93,12 @@ class _State:
 class Interpreter:
     """Feed blocks of whole lines with :meth:`feed`, then take the :class:`Toolpath` from :meth:`finish`."""
 
-    def __init__(self, chord_tol_mm: float = 0.01) -> None:
+    def __init__(self, chord_tol_mm: float = 0.01, rows_hint: int = 0) -> None:   # rows_hint: a capacity
         self.chord_tol_mm = float(chord_tol_mm)
         self.state = _State()
-        self._out: dict[str, list[np.ndarray]] = {k: [] for k in (
-            "xyz", "e", "feed", "line", "layer", "feature",
-            "ev_row", "ev_kind", "ev_value", "ev_aux", "ev_line")}
+        self._rows = RowColumns({"xyz": ("f8", (3,)), "e": ("f8", ()), "feed": ("f8", ()), "line": ("i8", ()),
+                                 "layer": ("i4", ()), "feature": ("i2", ())}, rows_hint)
+        self._out: dict[str, list[np.ndarray]] = {k: [] for k in ("ev_row", "ev_kind", "ev_value", "ev_aux", "ev_line")}
         self._layer_z: dict[int, float] = {}
         self._features: dict[str, int] = {"none": 0}
         self._unknown: dict[str, int] = {}
@@ -156,8 +156,7 @@ class Interpreter:
         rows["line"] = st.lines + rows["line"] + 1
         st.rows += len(rows["line"])
         st.lines += lx.n_lines
-        for name, arr in rows.items():
-            self._out[name].append(arr)
+        self._rows.append(rows)
         for name, arr in events.items():
             self._out[name].append(arr)
 
@@ -358,11 +357,12 @@ class Interpreter:
         def cat(name: str, dtype: str, *shape: int) -> np.ndarray:
             return np.concatenate(o[name]).astype(dtype, copy=False) if o[name] else np.zeros((0, *shape), dtype)
 
-        xyz, e = cat("xyz", "f8", 3), cat("e", "f8")
+        rows = self._rows.take()
+        xyz, e = rows["xyz"], rows["e"]
         if self.state.layer_count == 0:
             layer, layer_z = _infer_layers(xyz, e)
         else:
-            layer = cat("layer", "i4")
+            layer = rows["layer"]
             layer_z = np.full(self.state.layer_count, np.nan)
             ext = np.flatnonzero((e > 0) & (layer >= 0))
             u, first = np.unique(layer[ext], return_index=True)
@@ -372,8 +372,8 @@ class Interpreter:
         end = self.state.logical[:3] + self.state.offset[:3]
         return Toolpath(
             start_xyz_mm=self._start if self._start is not None else end.copy(),
-            xyz_mm=xyz, e_mm=e, feed_mm_s=cat("feed", "f8"), line=cat("line", "i8"),
-            layer=layer.astype(np.int32), feature=cat("feature", "i2"),
+            xyz_mm=xyz, e_mm=e, feed_mm_s=rows["feed"], line=rows["line"],
+            layer=layer.astype(np.int32, copy=False), feature=rows["feature"],
             feature_names=list(self._features), event_row=cat("ev_row", "i8"),
             event_kind=cat("ev_kind", "u1"), event_value=cat("ev_value", "f8"),
             event_aux=cat("ev_aux", "i2"), event_line=cat("ev_line", "i8"),

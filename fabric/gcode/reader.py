@@ -55,7 +55,7 @@ def parse_gcode(source: str | bytes | bytearray | memoryview, *, chord_tol_mm: f
     else:
         data = source if isinstance(source, (bytes, bytearray)) else bytes(source)
     view = memoryview(data).cast("B")
-    interp = Interpreter(chord_tol_mm)
+    interp = Interpreter(chord_tol_mm, rows_hint=len(data) // 12)
     n, pos = len(view), 0
     while pos < n:
         stop = min(pos + block_bytes, n)
@@ -81,7 +81,7 @@ def parse_gcode_file(path: str | os.PathLike[str], *, chord_tol_mm: float = 0.01
         stream = open(path, "rb")
     except FileNotFoundError as exc:
         raise NotFound(f"G-code file not found: {path}", file=str(path)) from exc
-    interp = Interpreter(chord_tol_mm)
+    interp = Interpreter(chord_tol_mm, rows_hint=size // 12)      # moves take >= ~12 bytes of text
     done = 0
     with stream:
         head = stream.read(8192)

@@ -25,7 +25,7 @@ import numpy as np
 
 __all__ = [
     "Toolpath", "EV_NOZZLE_TEMP", "EV_BED_TEMP", "EV_FAN", "EV_DWELL", "EV_FW_RETRACT",
-    "EV_FW_UNRETRACT", "EV_EXTRUDE", "EVENT_NAMES", "WAIT_NONE", "WAIT_HEAT", "WAIT_ANY",
+    "EV_FW_UNRETRACT", "EV_EXTRUDE", "EVENT_NAMES", "WAIT_NONE", "WAIT_HEAT", "WAIT_ANY", "RowColumns",
 ]
 
 # Event kinds (``event_kind``) and what ``event_value`` / ``event_aux`` hold.
@@ -122,3 +122,37 @@ class Toolpath:
             event_line=self.event_line[sel], layer_z_mm=self.layer_z_mm,
             unknown_commands=self.unknown_commands, n_lines=self.n_lines,
             slicer=self.slicer)
+
+
+class RowColumns:
+    """Columns filled block by block (the interpreter's output rows), without a final concatenation.
+
+    Each column is allocated once with a capacity (a size hint, grown by half
+    when exceeded); pages of the capacity that are never written are never
+    touched, so a generous hint costs address space, not memory. :meth:`take`
+    shrinks the columns in place to the rows written.
+    """
+
+    def __init__(self, spec: dict[str, tuple[str, tuple[int, ...]]], capacity: int) -> None:
+        self.n = 0
+        self.cap = max(int(capacity), 1024)
+        self.cols = {k: np.empty((self.cap, *shape), dtype) for k, (dtype, shape) in spec.items()}
+
+    def append(self, rows: dict[str, np.ndarray]) -> None:
+        """Append a block of rows (every column, same length)."""
+        m = len(rows["line"])
+        if self.n + m > self.cap:
+            self.cap = max(self.n + m, self.cap + self.cap // 2)
+            for k, a in self.cols.items():
+                grown = np.empty((self.cap, *a.shape[1:]), a.dtype)
+                grown[:self.n] = a[:self.n]
+                self.cols[k] = grown
+        for k, v in rows.items():
+            self.cols[k][self.n:self.n + m] = v
+        self.n += m
+
+    def take(self) -> dict[str, np.ndarray]:
+        """The columns trimmed to the rows written (a shrinking reallocation, no copy)."""
+        for a in self.cols.values():
+            a.resize((self.n, *a.shape[1:]), refcheck=False)
+        return self.cols

@@ -93,7 +93,9 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0) -
         raise ValidationError("the G-code has no moves", field="gcode", n_lines=tp.n_lines)
     off = np.asarray(opt.offset_mm)
     pts = tp.xyz_mm + off if off.any() else tp.xyz_mm        # read only
-    d = np.diff(tp.xyz_mm, axis=0, prepend=tp.start_xyz_mm[None])
+    d = np.empty_like(tp.xyz_mm)                  # segment vectors, without a prepended copy
+    d[0] = tp.xyz_mm[0] - tp.start_xyz_mm
+    np.subtract(tp.xyz_mm[1:], tp.xyz_mm[:-1], out=d[1:])
     seg = np.sqrt(np.einsum("ij,ij->i", d, d))
     e = tp.e_mm
     ext = (e > 0) & (seg > 1e-9)
@@ -116,6 +118,8 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0) -
         tr = np.flatnonzero(travel) + k0
         run_xy = np.bincount(run_id[tr - k0], weights=np.hypot(d[tr, 0], d[tr, 1]), minlength=int(run_start.sum()))
         lifted = travel & (run_xy[np.maximum(run_id, 0)] >= opt.lift_min_travel_mm)
+        del run_id
+    del d, seg, travel, prev_t, next_t                # temporaries go before the columns are allocated
     ui = np.flatnonzero(run_start & lifted)
     di = np.flatnonzero(run_end & lifted)
     # block layout: [events, up, move, down] per toolpath row, trailing events at the end
@@ -124,12 +128,18 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0) -
     block = nev[:m] + 1
     block[ui] += 1
     block[di] += 1
-    offs = np.cumsum(block) - block
+    offs = np.cumsum(block)
+    offs -= block
     total = int(block.sum() + nev[m])
+    del block
     main = offs + nev[:m]
     main[ui] += 1
     ev_first = np.cumsum(nev) - nev
-    ev_pos = np.concatenate([offs, [total - nev[m]]])[slot] + (np.arange(len(slot)) - ev_first[slot])
+    ev_pos = np.full(len(slot), total - nev[m])          # events after the last move go at the end
+    inner = slot < m
+    ev_pos[inner] = offs[slot[inner]]
+    ev_pos += np.arange(len(slot)) - ev_first[slot]
+    del offs
     # columns (views into arrays with room for the approach and return rows)
     size = head + total + tail
     full = {"op": np.full(size, MOVEL, np.uint8), "xyz_mm": np.zeros((size, 3)), "speed_mm_s": np.zeros(size),
@@ -148,15 +158,15 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0) -
         xyz[main[ui] - 1, 2] += opt.travel_lift_mm
         xyz[main[di] + 1] = pts[k0 + di]
     # an event row repeats the pose of the motion row before it (the first point if none)
-    last_motion = main.copy()
-    last_motion[di] += 1
-    prev_pos = np.concatenate([[-1], last_motion])[slot]
+    prev_pos = np.full(len(slot), -1)
+    after = np.flatnonzero(slot > 0)              # events after some toolpath row: that row's move (or down)
+    prev_pos[after] = main[slot[after] - 1] + np.isin(slot[after] - 1, di)
     xyz[ev_pos] = np.where((prev_pos >= 0)[:, None], xyz[np.maximum(prev_pos, 0)], first[None])
     motion = op == MOVEL
     speed_col, line, layer = view["speed_mm_s"], view["gcode_line"], view["layer"]
     t_line, t_layer = tp.line[sl], tp.layer[sl]
     for shift, rows in ((0, slice(None)), (-1, ui), (1, di)):
-        at = main[rows] + shift
+        at = main if shift == 0 else main[rows] + shift
         speed_col[at] = speed[rows]
         line[at] = t_line[rows]
         layer[at] = t_layer[rows]

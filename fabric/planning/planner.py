@@ -176,12 +176,14 @@ def _putter(idx: np.ndarray) -> Callable[[np.ndarray, np.ndarray], None]:
     """``put(dst, src)`` doing ``dst[idx] = src`` for sorted ``idx``: by slices when ``idx`` is a
     few long runs of consecutive rows (motion rows between rare events), else by fancy indexing."""
     cut = np.flatnonzero(np.diff(idx) != 1) + 1
-    if len(cut) > 64 + len(idx) // 4096:
-        return lambda dst, src: dst.__setitem__(idx, src)
-    starts = np.concatenate([[0], cut]).tolist()
+    scattered = len(cut) >= 64 + len(idx) // 4096
+    starts = [] if scattered else np.concatenate([[0], cut]).tolist()
     runs = list(zip(starts, idx[starts].tolist() if len(idx) else [], np.diff(starts + [len(idx)]).tolist()))
 
     def put(dst: np.ndarray, src: np.ndarray) -> None:
+        if scattered:
+            dst[idx] = src
+            return
         for k, row, m in runs:
             dst[row:row + m] = src[k:k + m]
     return put
@@ -238,8 +240,10 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
     timing_s = time.perf_counter() - t2
     if progress is not None:
         progress(1.0)
-    step = np.diff(prog.xyz_mm, axis=0, prepend=prog.xyz_mm[:1])
+    step = np.zeros_like(prog.xyz_mm)
+    np.subtract(prog.xyz_mm[1:], prog.xyz_mm[:-1], out=step[1:])
     d = np.sqrt(np.einsum("ij,ij->i", step, step))
+    del step
     pm = (prog.section == PRINT) & (prog.op == MOVEL)
     lin = prog.op == MOVEL
     stats = PlanStats(

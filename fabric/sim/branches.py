@@ -3,6 +3,8 @@
 See ``fabric/sim/kinematics.py`` for the geometry, the branch-selection argument
 and the singularity tests; this module holds the solver that applies them to
 (N, 4, 4) TCP poses within joint limits, with joint continuity along the rows.
+Internally a pose is the nine numbers the IK reads (flange position, z and y
+axes, ``pose_cols``) and joints are per-joint rows (6, N): contiguous arrays.
 """
 from __future__ import annotations
 

@@ -139,14 +139,13 @@ def time_program(program: Program, robot: Any, speed_r: float = 1.0, start_row: 
     full = {k: np.zeros(n) for k in ("v0", "vc", "v1", "t1", "tc", "t3")}
     for k in full:
         full[k][seg] = prof.pop(k)                             # drop each profile once it is placed
-    slowed = prof["slowed"]
     return Timeline(program=program, robot=robot, start_row=start_row, t_start_s=t_start, t_end_s=t_end,
                     v0_mm_s=full["v0"], vc_mm_s=full["vc"], v1_mm_s=full["v1"], t1_s=full["t1"],
                     tc_s=full["tc"], t3_s=full["t3"], len_mm=np.where(op == MOVEL, np.maximum(D, 0.0), 0.0),
                     accel_mm_s2=float(accel_mm_s2), first_from_q_rad=q0.copy(),
                     first_from_xyz_mm=xyz0.copy(), first_from_quat_wxyz=np.asarray(first_quat, float).copy(),
                     s0_mm=s0, speed_r=float(speed_r), flow_r=float(flow_r), joint_traj=trajs,
-                    slowed_rows=start_row + slowed, slowed_joint=prof["slowed_joint"])
+                    slowed_rows=start_row + prof["slowed"], slowed_joint=prof["slowed_joint"])
 
 
 def _linear_profiles(program: Program, sl: slice, rows: tuple[np.ndarray, ...], D: np.ndarray, vlim: np.ndarray,

@@ -4,12 +4,14 @@ Generates a layered serpentine raster over the IRB 140 plate (>= 1,000,000
 moves, PrusaSlicer-style markers, relative E), plans it with
 :func:`fabric.planning.plan_gcode_file` (parse, map, IK with the free nozzle
 rotation, reachability, cycle time from the motion model) and, in the same
-run, solves a sample of the *same* planned TCP poses with the per-point
-Pinocchio damped-least-squares IK of ``tools/bench/ik_baseline.py``. Reports
-moves/s of both, the ratio (target >= 20x), the parser alone in lines/s, and
-the peak resident memory, to ``docs/bench/planning.md`` and ``planning.json``.
+process, solves a sample of the *same* planned TCP poses with the per-point
+Pinocchio damped-least-squares IK of ``tools/bench/ik_baseline.py``. Both are
+timed ``n_runs`` times (default 2) and the best of each is compared; every
+run is reported. Reports moves/s of both, the ratio (target >= 20x), the
+parser alone in lines/s, and the peak resident memory, to
+``docs/bench/planning.md`` and ``planning.json``.
 
-    .venv/bin/python tools/bench/plan_bench.py [n_moves] [n_dls]
+    .venv/bin/python tools/bench/plan_bench.py [n_moves] [n_dls] [n_runs]
 """
 from __future__ import annotations
 
@@ -76,9 +78,23 @@ def write_raster(path: Path, n_moves: int, x0: float = 30.0, x1: float = 220.0, 
     return moves
 
 
+def _plan_run(path: Path, cell: Cell) -> tuple[dict, object]:
+    """One timed ``plan_gcode_file`` of the big file: figures and the result."""
+    t0 = time.perf_counter()
+    res = plan_gcode_file(path, cell, PlanOptions())
+    plan_s = time.perf_counter() - t0
+    st = res.stats
+    verified_s = plan_s - st.timing_s
+    return {"plan_s": plan_s, "verified_s": verified_s, "plan_moves_per_s": st.moves / plan_s,
+            "verified_moves_per_s": st.moves / verified_s, "parse": st.parse_s, "ik": st.ik_s,
+            "cycle_time_estimate": st.timing_s,
+            "map_and_rest": plan_s - st.parse_s - st.ik_s - st.timing_s}, res
+
+
 def main(argv: list[str]) -> dict:
     n_moves = int(argv[1]) if len(argv) > 1 else 1_000_000
     n_dls = int(argv[2]) if len(argv) > 2 else 3000
+    n_runs = int(argv[3]) if len(argv) > 3 else 2
     cell = Cell.builtin("irb140")
     out: dict = {"machine": {"python": platform.python_version(), "numpy": np.__version__,
                              "cpus": os.cpu_count(), "platform": platform.platform()}}
@@ -92,36 +108,47 @@ def main(argv: list[str]) -> dict:
         write_raster(warm, 20_000)
         plan_gcode_file(warm, cell, PlanOptions())          # imports, caches, code paths
         rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-        # the whole planner: text -> verified joint program (+ cycle-time estimate)
-        t0 = time.perf_counter()
-        res = plan_gcode_file(path, cell, PlanOptions())
-        plan_s = time.perf_counter() - t0
+        # the whole planner: text -> verified joint program (+ cycle-time estimate), n_runs times
+        plan_runs = []
+        for _ in range(n_runs):
+            res = None                                      # the previous result goes before the next run
+            fig, res = _plan_run(path, cell)
+            plan_runs.append(fig)
         rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-        # the parser alone
-        t0 = time.perf_counter()
-        n_lines = parse_gcode_file(path).n_lines
-        parse_s = time.perf_counter() - t0
+        # the parser alone (best of n_runs)
+        parse_s = np.inf
+        for _ in range(n_runs):
+            t0 = time.perf_counter()
+            n_lines = parse_gcode_file(path).n_lines
+            parse_s = min(parse_s, time.perf_counter() - t0)
     prog = res.program
     st = res.stats
-    verified_s = plan_s - st.timing_s
+    best = min(plan_runs, key=lambda r: r["verified_s"])
     out.update(moves=st.moves, gcode_lines=n_lines, file_mb=size / 1e6,
                parse_s=parse_s, parse_lines_per_s=n_lines / parse_s, parse_mb_per_s=size / 1e6 / parse_s,
-               plan_s=plan_s, plan_moves_per_s=st.moves / plan_s,
-               verified_s=verified_s, verified_moves_per_s=st.moves / verified_s, plan_breakdown_s={
-                   "parse": st.parse_s, "ik": st.ik_s, "cycle_time_estimate": st.timing_s,
-                   "map_and_rest": plan_s - st.parse_s - st.ik_s - st.timing_s},
+               runs=n_runs, plan_runs=plan_runs,
+               plan_s=min(r["plan_s"] for r in plan_runs),
+               plan_moves_per_s=max(r["plan_moves_per_s"] for r in plan_runs),
+               verified_s=best["verified_s"], verified_moves_per_s=best["verified_moves_per_s"],
+               plan_breakdown_s={k: best[k] for k in ("parse", "ik", "cycle_time_estimate", "map_and_rest")},
                program_rows=st.rows, targets=st.targets, layers=st.layers, reachable=res.report.reachable,
                feasible_r=res.report.feasible_r, ik_counts=res.report.counts, estimate_s=res.estimate_s,
                extruded_volume_mm3=st.extruded_volume_mm3, peak_rss_mb=rss1 / 1024.0,
                rss_before_plan_mb=rss0 / 1024.0)
-    # per-point DLS IK on samples of the same planned poses (base frame), warm-started
+    # per-point DLS IK on samples of the same planned poses (base frame), warm-started; as many runs,
+    # best of each kept (a faster baseline only lowers the ratio)
     motion = np.flatnonzero(prog.op <= 1)[1:-1]
-    runs = _dls_runs(cell, prog, motion, n_dls)
+    dls_runs = [_dls_runs(cell, prog, motion, n_dls) for _ in range(n_runs)]
+    runs = max(dls_runs, key=lambda r: r["dls_targets_per_s"])
+    runs.update({k: v for k, v in max(dls_runs, key=lambda r: r["dls_spread_targets_per_s"]).items()
+                 if k.startswith("dls_spread")})
     out.update(runs)
+    out["dls_runs_targets_per_s"] = [r["dls_targets_per_s"] for r in dls_runs]
     out["ratio_verified"] = out["verified_moves_per_s"] / out["dls_targets_per_s"]
+    out["ratio_verified_runs"] = [r["verified_moves_per_s"] / out["dls_targets_per_s"] for r in plan_runs]
     out["ratio_verified_vs_spread"] = out["verified_moves_per_s"] / out["dls_spread_targets_per_s"]
     out["ratio_with_estimate"] = out["plan_moves_per_s"] / out["dls_targets_per_s"]
-    out["ratio_ik_only"] = (st.targets / st.ik_s) / out["dls_targets_per_s"]
+    out["ratio_ik_only"] = (st.targets / min(r["ik"] for r in plan_runs)) / out["dls_targets_per_s"]
     _write(out)
     return out
 
@@ -168,25 +195,35 @@ def _write(r: dict) -> None:
     (docs / "planning.json").write_text(json.dumps(r, indent=2, default=float) + "\n")
     b = r["plan_breakdown_s"]
     status = "met" if r["ratio_verified"] >= 20.0 else f"not met ({r['ratio_verified']:.1f}x)"
+    first = r["ratio_verified_runs"][0]
+    first_status = "also meets" if first >= 20.0 else "does not meet"
     share_ik, share_parse = b["ik"] / r["verified_s"], b["parse"] / r["verified_s"]
+    run_rows = "\n".join(
+        f"| {i + 1} | {x['verified_s']:.2f} s = {x['verified_moves_per_s']:,.0f} moves/s | {x['parse']:.2f} / "
+        f"{x['ik']:.2f} / {x['map_and_rest']:.2f} s | {x['cycle_time_estimate']:.2f} s | "
+        f"{r['ratio_verified_runs'][i]:.1f}x |" for i, x in enumerate(r["plan_runs"]))
+    dls_all = ", ".join(f"{v:,.0f}" for v in r["dls_runs_targets_per_s"])
     md = f"""# Planning benchmark
 
-Generated by `tools/bench/plan_bench.py` (one run on this machine: {r['machine']['cpus']} CPUs shared with
+Generated by `tools/bench/plan_bench.py` (one process on this machine: {r['machine']['cpus']} CPUs shared with
 other work, Python {r['machine']['python']}, numpy {r['machine']['numpy']}). Raw figures: `planning.json`.
-Timings on a shared machine vary by about +-30 % between runs; the ratio compares two measurements of
-the same run.
+Timings on a shared machine vary by about +-30 % between runs, so the planner and the baseline are each
+measured {r['runs']} times in the same process and the best of each is compared (a faster baseline only
+lowers the ratio). Every run is listed: the first big run of a process also pays for the first touch
+of its working memory, which this VM makes expensive after it has idled (measured: 320 MB of fresh
+pages take 0.2-0.65 s, pages the process already used 0.05 s).
 
 **Input**: a layered serpentine raster over the IRB 140 plate (5 mm infill segments, relative E,
 PrusaSlicer-style markers), {r['moves']:,} moves, {r['gcode_lines']:,} lines, {r['file_mb']:.1f} MB,
 {r['layers']} layers.
 
 **Planner** (`plan_gcode_file`): G-code text -> verified joint program (streamed parse, mapping with
-travel lifts, IK of every target with the free nozzle rotation, reachability by G-code line), then the
-cycle-time estimate from the motion model the station executes.
+travel lifts, IK of every target with the free nozzle rotation, status and joint-jump checks,
+reachability by G-code line), then the cycle-time estimate from the motion model the station executes.
 
 | figure | value |
 |---|---|
-| text -> verified joint program | {r['verified_s']:.2f} s = **{r['verified_moves_per_s']:,.0f} moves/s** |
+| text -> verified joint program (best run) | {r['verified_s']:.2f} s = **{r['verified_moves_per_s']:,.0f} moves/s** |
 | ... plus the cycle-time estimate (whole `plan_gcode_file`) | {r['plan_s']:.2f} s = {r['plan_moves_per_s']:,.0f} moves/s |
 | parse / IK / cycle-time estimate / mapping and the rest | {b['parse']:.2f} / {b['ik']:.2f} / {b['cycle_time_estimate']:.2f} / {b['map_and_rest']:.2f} s |
 | program rows / targets | {r['program_rows']:,} / {r['targets']:,} |
@@ -194,31 +231,37 @@ cycle-time estimate from the motion model the station executes.
 | cycle-time estimate of the job | {r['estimate_s'] / 3600:.1f} h |
 | peak resident memory of the process | {r['peak_rss_mb']:.0f} MB (before planning: {r['rss_before_plan_mb']:.0f} MB) |
 
-**Parser alone** (`parse_gcode_file`): {r['parse_s']:.2f} s = **{r['parse_lines_per_s']:,.0f} lines/s**
+| run | text -> verified joint program | parse / IK / mapping and rest | + cycle-time estimate | ratio |
+|---|---|---|---|---|
+{run_rows}
+
+**Parser alone** (`parse_gcode_file`, best run): {r['parse_s']:.2f} s = **{r['parse_lines_per_s']:,.0f} lines/s**
 ({r['parse_mb_per_s']:.0f} MB/s).
 
 **Baseline**: per-point Pinocchio damped-least-squares IK (`dls_ik` of `tools/bench/ik_baseline.py`,
-1e-6 m / 1e-6 rad) on the same planned TCP poses:
+1e-6 m / 1e-6 rad) on the same planned TCP poses (best of {r['runs']} runs; consecutive sample in every run:
+{dls_all} targets/s):
 
 | sample | targets/s |
 |---|---|
 | {r['dls_targets']:,} consecutive targets (3 runs along the path, warm-started from the previous target, as a per-point planner walks it) | **{r['dls_targets_per_s']:,.0f}** ({r['dls_converged_r']:.1%} converged) |
 | {r['dls_spread_targets']:,} targets evenly spread over the path (bigger jumps, more iterations) | {r['dls_spread_targets_per_s']:,.0f} ({r['dls_spread_converged_r']:.1%} converged) |
 
-**Ratios** (target >= 20x), against the consecutive baseline unless said:
+**Ratios** (target >= 20x), best planner run against the best consecutive baseline unless said:
 
 | comparison | ratio |
 |---|---|
 | text -> verified joint program vs per-point DLS IK | **{r['ratio_verified']:.1f}x** |
+| the same, first run of the process (fresh memory) | {first:.1f}x |
 | the same including the cycle-time estimate | {r['ratio_with_estimate']:.1f}x |
 | text -> verified joint program vs the spread DLS sample | {r['ratio_verified_vs_spread']:.1f}x |
 | the planner's IK step alone (rotation search + reachability) vs DLS | {r['ratio_ik_only']:.1f}x |
 
 **Status**: the 20x target is {status} for text -> verified joint program against the consecutive
-per-point baseline. Of the {r['verified_s']:.2f} s, the IK step (`fabric.sim.ikpath.solve_path`, run in
-blocks of 200,000 targets) takes {share_ik:.0%}, parsing {share_parse:.0%}, mapping and assembling the
-program the rest. The cycle-time estimate (`fabric.sim.motion.time_program`) adds
-{b['cycle_time_estimate']:.2f} s and most of the peak memory.
+per-point baseline; the first run of the process ({first:.1f}x) {first_status} it. Of the
+{r['verified_s']:.2f} s, the IK step (`fabric.sim.ikpath.solve_path`, run in blocks of 200,000 targets)
+takes {share_ik:.0%}, parsing {share_parse:.0%}, mapping and assembling the program the rest. The
+cycle-time estimate (`fabric.sim.motion.time_program`) adds {b['cycle_time_estimate']:.2f} s.
 """
     (docs / "planning.md").write_text(md)
 
