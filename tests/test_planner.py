@@ -244,3 +244,18 @@ def test_options_are_validated(kw: dict) -> None:
 def test_empty_gcode_is_an_error(cell: Cell) -> None:
     with pytest.raises(ValidationError):
         plan_gcode("; nothing to print\nM104 S200\n", cell)
+
+
+def test_joint_speed_limits_slow_linear_moves_and_say_where() -> None:
+    """A fast move the (deliberately slow) A1 cannot follow is slowed, and the plan names its line."""
+    slow = Cell.builtin("irb140")
+    vel = slow.robot.vel_limit_rad_s.copy()
+    vel[0] = np.radians(5.0)                           # A1 at 5 deg/s
+    slow.robot.with_limits(vel_limit_rad_s=vel)
+    text = "G21\nG90\nM83\nG1 Z0.5 F600\nG1 X60 Y125 F3000\nG1 X190 Y60 E5 F12000\nG1 X190 Y190 E5\n"
+    res = plan_gcode(text, slow, PlanOptions())
+    assert res.slowed_rows is not None and len(res.slowed_rows) > 0
+    lines = res.program.gcode_line[res.slowed_rows]
+    assert 6 in lines.tolist() and 0 in res.slowed_joint.tolist()     # the sweep across the plate, A1
+    fast = plan_gcode(text, Cell.builtin("irb140"), PlanOptions())
+    assert res.estimate_s > fast.estimate_s

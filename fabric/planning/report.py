@@ -92,6 +92,8 @@ class PlanResult:
     estimate_s: float
     stats: PlanStats
     toolpath: Toolpath | None = None
+    slowed_rows: np.ndarray | None = None     # rows whose speed a joint velocity limit capped
+    slowed_joint: np.ndarray | None = None    # the limiting joint (0-based) of each
 
     def require_runnable(self) -> "PlanResult":
         """Raise :class:`UnreachableError` naming the first unreachable G-code line, else return self."""

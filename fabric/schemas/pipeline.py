@@ -74,6 +74,8 @@ class PlanSummary:
     first_unreachable: dict[str, Any] | None = None
     unreachable_by_reason: dict[str, int] = f(factory=dict)
     elapsed_s: float = 0.0
+    slowed_targets: int = 0                    # linear moves slowed to respect a joint velocity limit
+    first_slowed: dict[str, Any] | None = None  # gcode_line, joint (1-based), row
 
 
 @schema("planner.ProgramMsg")

@@ -83,7 +83,8 @@ class PlannerService(Service):
             feasible_r=float(rep.feasible_r), runnable=first is None, estimate_s=estimate,
             extruded_mm3=float(st.extruded_volume_mm3), path_mm=float(st.path_length_mm), first_unreachable=first,
             unreachable_by_reason={str(k): int(v) for k, v in rep.counts.items() if k != "ok"},
-            elapsed_s=float(st.total_s))
+            elapsed_s=float(st.total_s), slowed_targets=0 if result.slowed_rows is None else len(result.slowed_rows),
+            first_slowed=_first_slowed(result, program))
         return pid
 
     def on_summary(self, req: s.ArtifactQuery) -> s.PlanSummary:
@@ -108,6 +109,13 @@ class PlannerService(Service):
         data = buf.getvalue().encode()
         name = f"{program.meta.get('name', 'program')}.{SUFFIX[req.fmt]}"
         return s.Artifact(artifact_id=content_id(data), name=name, media_type=MEDIA[req.fmt], data=data)
+
+
+def _first_slowed(result, program) -> dict | None:
+    if result.slowed_rows is None or len(result.slowed_rows) == 0:
+        return None
+    row = int(result.slowed_rows[0])
+    return {"gcode_line": int(program.gcode_line[row]), "joint": int(result.slowed_joint[0]) + 1, "row": row}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
