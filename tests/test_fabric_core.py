@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import queue
 import threading
+import time
 
 import msgpack
 import pytest
@@ -87,23 +88,27 @@ def test_liveliness_reports_alive_and_gone(session, settings, client):
     svc.start()
     client.wait_alive(("supervisor",), deadline_s=10)
     assert client.alive()["supervisor"]
-    svc.close()
+    svc.close()                                  # undeclares the token: gone for everyone, promptly
+    deadline = time.monotonic() + 5.0
+    while client.alive(timeout=0.3)["supervisor"]:
+        assert time.monotonic() < deadline, "token still visible 5 s after the service closed"
     with pytest.raises(ServiceUnavailable, match="supervisor"):
         client.wait_alive(("supervisor",), deadline_s=0.5)
 
 
 def test_supervisor_tracks_liveliness(supervisor, session, settings, client):
+    def planner_alive() -> bool:
+        return {i.name: i.alive for i in client.status().services}["planner"]
+
+    assert not planner_alive()
     token = session.liveliness().declare_token(Keys(settings.cell).alive("planner"))
-    sub = client.subscribe("supervisor", "progress")  # any handle; we wait on the status itself below
-    try:
-        for _ in range(100):
-            if {i.name: i.alive for i in client.status().services}["planner"]:
-                break
-            threading.Event().wait(0.02)
-        assert {i.name: i.alive for i in client.status().services}["planner"]
-    finally:
-        sub.close()
-        token.undeclare()
+    deadline = time.monotonic() + 5.0
+    while not planner_alive():                    # the supervisor's liveliness subscriber saw it appear
+        assert time.monotonic() < deadline
+    token.undeclare()
+    deadline = time.monotonic() + 5.0
+    while planner_alive():                        # ... and disappear
+        assert time.monotonic() < deadline
 
 
 def test_subscription_decodes_and_validates(session, settings, client):

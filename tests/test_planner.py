@@ -167,19 +167,22 @@ def test_program_structure_speeds_flow_events(cell: Cell) -> None:
     opt = PlanOptions(offset_mm=(20, 20, 0), max_tcp_speed_mm_s=100.0, speed_r=0.5, zone_mm=0.3)
     res = plan_gcode(GCODE, cell, opt).require_runnable()
     p = res.program
-    assert p.section_bounds() == {"Approach": (0, 2), "Print": (2, len(p) - 2), "ReturnHome": (len(p) - 2, len(p))}
-    assert p.op[[0, 1, -2, -1]].tolist() == [MOVEJ, MOVEL, MOVEL, MOVEJ]
-    assert np.allclose(p.xyz_mm[0], [20, 20, 5 + cell.approach_height_mm])     # above the first point (G1 Z5)
-    assert np.allclose(p.xyz_mm[1], [20, 20, 5]) and p.zone_mm[1] == 0.0
-    assert p.speed_mm_s[1] == min(cell.approach_speed_mm_s, 100.0) and p.gcode_line[1] == 8
+    # Approach: joint move above the first bead, heat and wait there, linear move down to the bead's start
+    assert p.section_bounds() == {"Approach": (0, 6), "Print": (6, len(p) - 2), "ReturnHome": (len(p) - 2, len(p))}
+    assert p.op[[0, 5, -2, -1]].tolist() == [MOVEJ, MOVEL, MOVEL, MOVEJ]
+    assert [(int(o), int(ln)) for o, ln in zip(p.op[1:5], p.gcode_line[1:5])] == [
+        (SET_TEMP, 2), (SET_TEMP, 3), (WAIT_TEMP, 9), (WAIT_TEMP, 10)]
+    assert np.allclose(p.xyz_mm[0:5], [30, 30, 0.3 + cell.approach_height_mm])   # heating up there, clear
+    assert np.allclose(p.xyz_mm[5], [30, 30, 0.3]) and p.zone_mm[5] == 0.0        # where line 14's bead starts
+    assert p.speed_mm_s[5] == min(cell.approach_speed_mm_s, 100.0) and p.gcode_line[5] == 13
+    assert p.meta["leading_travels_dropped"] > 0
     assert np.allclose(p.q_rad[-1], cell.home_q_rad)
     assert np.allclose(p.xyz_mm[-2], p.xyz_mm[-3] + [0, 0, cell.approach_height_mm])
     assert (p.vel_r[[0, -1]] > 0).all() and (p.vel_r[[0, -1]] <= 1).all()
     # events became rows before their moves, with their G-code lines
-    ev = p.op[2:-2]
-    lines = p.gcode_line[2:-2]
-    assert [(int(o), int(ln)) for o, ln in zip(ev, lines) if o > MOVEL] == [
-        (SET_TEMP, 2), (SET_TEMP, 3), (WAIT_TEMP, 9), (WAIT_TEMP, 10), (RETRACT, 16), (RETRACT, 18), (SET_TEMP, 26)]
+    ev = p.op[6:-2]
+    lines = p.gcode_line[6:-2]
+    assert [(int(o), int(ln)) for o, ln in zip(ev, lines) if o > MOVEL] == [(RETRACT, 16), (RETRACT, 18), (SET_TEMP, 26)]
     assert p.value[(p.op == RETRACT)].tolist() == [-0.8, 0.8]
     # speeds: feed * speed_r, capped; flow per mm from E
     row = int(np.flatnonzero(p.gcode_line == 14)[0])
@@ -192,7 +195,7 @@ def test_program_structure_speeds_flow_events(cell: Cell) -> None:
     trav = np.flatnonzero(p.gcode_line == 17)
     assert len(trav) == 3 and np.allclose(p.xyz_mm[trav, 2], [1.3, 1.3, 0.3])
     assert len(np.flatnonzero(p.gcode_line == 20)) == 1
-    assert res.stats.travel_lifts == 2                               # this one and the first approach travel
+    assert res.stats.travel_lifts == 1                   # this one; the travel to the first bead became the approach
     assert np.isclose(res.stats.extruded_volume_mm3, 8.0 * np.pi * 1.75 ** 2 / 4)
     assert res.stats.layers == 2 and set(p.layer[p.section == PRINT]) >= {0, 1}
     # the estimate is the motion model's, with the heat-up waits in it

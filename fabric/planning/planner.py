@@ -34,7 +34,7 @@ from fabric.planning.options import PlanOptions
 from fabric.planning.report import PlanResult, PlanStats, Reachability
 from fabric.sim.frames import inv_T, quat_from_R
 from fabric.sim.kinematics import IK_JUMP, IK_OK
-from fabric.sim.program import APPROACH, MOVEJ, MOVEL, PRINT, RETURN_HOME, Program
+from fabric.sim.program import APPROACH, MOVEJ, MOVEL, PRINT, RETURN_HOME, SET_TEMP, WAIT, WAIT_TEMP, Program
 
 __all__ = ["plan_gcode", "plan_gcode_file", "plan_toolpath"]
 
@@ -107,13 +107,47 @@ def _assemble(tp: Toolpath, cell: Any, opt: PlanOptions) -> tuple[Program, int]:
     prog.speed_mm_s[[0, 1, -2, -1]] = v_app
     prog.zone_mm[[0, 1, -2, -1]] = 0.0
     prog.gcode_line[1] = pr.first_line
+    prog, dropped, dropped_lifts = _start_at_first_bead(prog, pr.stop)
+    n = len(prog)
     # non-motion rows (temperatures, waits, retractions) hold the TCP where the last motion row left it
     motion = prog.op <= MOVEL
     last_motion = np.maximum.accumulate(np.where(motion, np.arange(n), 0))
     rest = np.flatnonzero(~motion)
     prog.xyz_mm[rest] = prog.xyz_mm[last_motion[rest]]
-    prog.meta.update(travel_lifts=pr.n_lifts, fan_events_dropped=pr.n_fan_events, approach_speed_mm_s=v_app)
-    return prog, len(pr)
+    prog.meta.update(travel_lifts=pr.n_lifts - dropped_lifts, fan_events_dropped=pr.n_fan_events, approach_speed_mm_s=v_app,
+                     leading_travels_dropped=dropped)
+    return prog, len(pr) - dropped
+
+
+def _start_at_first_bead(prog: Program, stop: int) -> tuple[Program, int, int]:
+    """Approach the first bead directly, heating at the approach height.
+
+    A slicer's file starts at the bed origin: heat, then travel to the part. A
+    robot should not park its nozzle 0.3 mm over the plate corner while it
+    heats: the travel moves before the first extruding move are dropped (the
+    approach's linear move goes straight down to where the first bead starts),
+    and the leading temperature and wait rows run between the approach's joint
+    move and that linear move, i.e. at the approach height. Returns the new
+    program, how many travel rows were dropped and how many lifted travels they
+    held (a lifted travel is three rows of one G-code line: up, across, down).
+    """
+    body = np.arange(2, stop)
+    extruding = body[(prog.op[body] == MOVEL) & (prog.flow_mm3_mm[body] > 0)]
+    if len(extruding) == 0:
+        return prog, 0, 0
+    lead = np.arange(2, int(extruding[0]))
+    travel = lead[prog.op[lead] <= MOVEL]
+    heat = lead[np.isin(prog.op[lead], (WAIT, SET_TEMP, WAIT_TEMP))]
+    other = lead[(prog.op[lead] > MOVEL) & ~np.isin(prog.op[lead], (WAIT, SET_TEMP, WAIT_TEMP))]
+    if len(travel):
+        prog.xyz_mm[0] = prog.xyz_mm[travel[-1]] + (prog.xyz_mm[0] - prog.xyz_mm[1])
+        prog.xyz_mm[1] = prog.xyz_mm[travel[-1]]
+        prog.gcode_line[1] = prog.gcode_line[travel[-1]]
+    prog.section[heat] = APPROACH
+    order = np.concatenate([[0], heat, [1], other, np.arange(int(extruding[0]), len(prog))])
+    cols = {name: col[order] for name, col in prog.columns().items()}
+    lifts = (len(travel) - len(np.unique(prog.gcode_line[travel]))) // 2
+    return Program(**cols, wobj=prog.wobj, meta=prog.meta), len(travel), lifts
 
 
 def _solve(prog: Program, cell: Any, opt: PlanOptions, progress: Progress | None) -> tuple[np.ndarray, np.ndarray]:
