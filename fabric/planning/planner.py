@@ -144,10 +144,16 @@ def _start_at_first_bead(prog: Program, stop: int) -> tuple[Program, int, int]:
         prog.xyz_mm[1] = prog.xyz_mm[travel[-1]]
         prog.gcode_line[1] = prog.gcode_line[travel[-1]]
     prog.section[heat] = APPROACH
-    order = np.concatenate([[0], heat, [1], other, np.arange(int(extruding[0]), len(prog))])
-    cols = {name: col[order] for name, col in prog.columns().items()}
     lifts = (len(travel) - len(np.unique(prog.gcode_line[travel]))) // 2
-    return Program(**cols, wobj=prog.wobj, meta=prog.meta), len(travel), lifts
+    # rewrite only the short prefix [0, f): its new rows land in [k, f) and the program becomes the view [k:],
+    # so a million-row program is not copied
+    f, k = int(extruding[0]), len(travel)
+    order = np.concatenate([[0], heat, [1], other]).astype(np.intp)
+    cols = {}
+    for name, col in prog.columns().items():
+        col[k:f] = col[order].copy()
+        cols[name] = col[k:]
+    return Program(**cols, wobj=prog.wobj, meta=prog.meta), k, lifts
 
 
 def _solve(prog: Program, cell: Any, opt: PlanOptions, progress: Progress | None) -> tuple[np.ndarray, np.ndarray]:

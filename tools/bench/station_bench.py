@@ -26,6 +26,7 @@ import queue
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -60,6 +61,34 @@ def pure_twin(cell: Cell, program, step_s: float | None) -> dict:
         twin.pose(), twin.extrusion(), twin.temps()
     wall = time.perf_counter() - t0
     return {"sim_s": total, "wall_s": wall, "speedup": total / wall, "step_s": step_s}
+
+
+def round_trips(client: Client, session: zenoh.Session, n: int = 500) -> dict:
+    """Command round trips: ``position`` through the client (encode, query the station process, decode,
+    validate) against the named baseline, a bare Zenoh get on an empty in-process queryable."""
+    key = f"{client.keys.prefix}/bench/echo"
+    q = session.declare_queryable(key, handler=zenoh.handlers.FifoChannel(64))
+
+    def echo() -> None:                      # served from a channel, like every service (no work in callbacks)
+        for query in q:
+            with query:
+                query.reply(key, b"")
+    threading.Thread(target=echo, daemon=True).start()
+    try:
+        def timed(fn) -> list[float]:
+            out = []
+            for _ in range(n):
+                t0 = time.perf_counter()
+                fn()
+                out.append((time.perf_counter() - t0) * 1e3)
+            return sorted(out)
+        bare = timed(lambda: list(session.get(key, timeout=5.0)))
+        pos = timed(client.position)
+    finally:
+        q.undeclare()
+    pct = lambda xs, p: xs[min(len(xs) - 1, int(p * len(xs)))]  # noqa: E731
+    return {"n": n, "bare_get_ms": {"p50": pct(bare, 0.5), "p99": pct(bare, 0.99)},
+            "position_ms": {"p50": pct(pos, 0.5), "p99": pct(pos, 0.99)}}
 
 
 def station_run(client: Client, monitors: list[Client], rtf: float, pid: str) -> dict:
@@ -127,6 +156,7 @@ def main() -> int:
     try:
         client = Client(session, st.cell)
         client.wait_alive(("station", "planner"), deadline_s=60)
+        rtt = round_trips(client, session)
         runs = [station_run(client, monitors, 0.0, pid), station_run(client, monitors, 50.0, pid)]
     finally:
         proc.terminate()
@@ -138,7 +168,7 @@ def main() -> int:
         hub.close()
     fast = runs[0]
     result = {"python": platform.python_version(), "rows": len(program), "monitors": a.monitors,
-              "baseline_pure_twin": base, "pure_twin_20ms_steps": stepped, "station": runs,
+              "round_trips": rtt, "baseline_pure_twin": base, "pure_twin_20ms_steps": stepped, "station": runs,
               "ratio_station_to_pure_twin": fast["speedup"] / base["speedup"]}
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "station.json").write_text(json.dumps(result, indent=2))
@@ -159,6 +189,10 @@ def main() -> int:
     lines += ["", f"Station at max speed / baseline: **{result['ratio_station_to_pure_twin']:.2f}** "
               "(what the fabric, the 50 Hz telemetry to every monitor and the wall-clock tick cost; "
               "1.0 would be free).", "",
+              f"**Command round trip** ({rtt['n']} calls, from this process to the station process through "
+              f"the hub): `position` p50 {rtt['position_ms']['p50']:.3f} ms, p99 {rtt['position_ms']['p99']:.3f} ms; "
+              f"baseline, a bare Zenoh get on an empty queryable in this process: p50 "
+              f"{rtt['bare_get_ms']['p50']:.3f} ms, p99 {rtt['bare_get_ms']['p99']:.3f} ms.", "",
               "The rtf 50 run follows the first on the same station, so the nozzle starts hot and the heat-up "
               "wait is shorter: its simulated total is smaller, and equals its own estimate at load.", ""]
     (a.out / "station.md").write_text("\n".join(lines))
