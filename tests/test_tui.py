@@ -15,7 +15,7 @@ from fabric.tui.widgets.telemetry import PosePanel
 pytestmark = pytest.mark.timeout(120)
 
 
-async def until(pilot, predicate, timeout_s: float = 20.0) -> None:
+async def until(pilot, predicate, timeout_s: float = 60.0) -> None:
     """Let the app run until ``predicate()`` holds (bounded)."""
     loop = asyncio.get_running_loop()
     end = loop.time() + timeout_s
