@@ -118,21 +118,27 @@ class Client:
         return {name: name in found for name in SERVICES}
 
     def wait_alive(self, services: tuple[str, ...] = SERVICES, deadline_s: float = 30.0) -> None:
-        """Block until every service is alive, or raise ServiceUnavailable naming the missing ones."""
+        """Block until every service is alive, or raise ServiceUnavailable naming the missing ones.
+
+        The truth is a liveliness query (answered by the hub); liveliness changes only wake the wait
+        up early. (A subscriber's history can replay a token that was undeclared while no subscriber
+        was listening, so it is not trusted on its own.)
+        """
         end = time.monotonic() + deadline_s
-        with _liveliness_queue(self.session, self.keys.alive_all()) as events:
-            alive = {k for k, v in self.alive(timeout=0.5).items() if v}
-            while not set(services) <= alive:
+        with _liveliness_queue(self.session, self.keys.alive_all()) as changes:
+            while True:
+                alive = {k for k, v in self.alive(timeout=0.5).items() if v}
+                if set(services) <= alive:
+                    return
                 left = end - time.monotonic()
                 if left <= 0:
                     missing = sorted(set(services) - alive)
-                    raise ServiceUnavailable(f"not alive after {deadline_s:g} s: {', '.join(missing)}", missing=missing)
+                    raise ServiceUnavailable(f"not alive after {deadline_s:g} s: {', '.join(missing)}",
+                                             missing=missing)
                 try:
-                    kind, name = events.get(timeout=min(left, 1.0))
-                except queue.Empty:  # a link still coming up can hide a token: ask again, bounded
-                    alive |= {k for k, v in self.alive(timeout=0.5).items() if v}
-                    continue
-                (alive.add if kind == "put" else alive.discard)(name)
+                    changes.get(timeout=min(left, 1.0))
+                except queue.Empty:
+                    pass
 
     def artifact(self, service: str, artifact_id: str, timeout: float = 60.0) -> s.Artifact:
         return self._get_one(self.keys.artifact(service, artifact_id), None, s.Artifact, timeout,
@@ -246,7 +252,7 @@ def _liveliness_queue(session: zenoh.Session, key: str) -> Iterator["queue.Queue
         kind = "put" if sample.kind == zenoh.SampleKind.PUT else "delete"
         events.put((kind, parse_alive(str(sample.key_expr))[1]))
 
-    sub = session.liveliness().declare_subscriber(key, on_sample, history=True)
+    sub = session.liveliness().declare_subscriber(key, on_sample)
     try:
         yield events
     finally:

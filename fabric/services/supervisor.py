@@ -72,10 +72,13 @@ class SupervisorService(Service):
     # --- handlers -----------------------------------------------------------
 
     def on_status(self, _: s.Empty) -> s.FabricStatus:
+        # who is alive: the hub's answer now; since when: what the liveliness subscriber tracked
+        now = self.client.alive(timeout=0.5)
+        now["supervisor"] = True
         with self._alive_lock:
-            alive = dict(self._alive)
-        alive.setdefault("supervisor", self.started_s)
-        infos = [s.ServiceInfo(name=n, alive=n in alive, since_s=alive.get(n, 0.0)) for n in SERVICES]
+            since = dict(self._alive)
+        since.setdefault("supervisor", self.started_s)
+        infos = [s.ServiceInfo(name=n, alive=now[n], since_s=since.get(n, 0.0) if now[n] else 0.0) for n in SERVICES]
         jobs = self.jobs.all()
         current = self._records.get(jobs[-1].job_id) if jobs else None
         return s.FabricStatus(cell=self.keys.cell, services=infos, job=current)

@@ -90,7 +90,7 @@ class FabricConsole(App):
             self._subs.append(self.client.subscribe("station", topic))
             self.feed(topic, self._subs[-1])
         self._live_sub = self.client.session.liveliness().declare_subscriber(
-            self.client.keys.alive_all(), self._zenoh_liveliness, history=True)
+            self.client.keys.alive_all(), self._zenoh_liveliness)
         self.refresh_alive()
 
     def on_unmount(self) -> None:
