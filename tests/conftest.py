@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from fabric.client import wait_connected
 from fabric.config import SessionSettings, zenoh_config
 from fabric.cli.up import Cell as CellProcesses, hub_settings
 
@@ -48,6 +49,7 @@ def peers():
     ep = f"tcp/127.0.0.1:{free_port()}"
     a = zenoh.open(zenoh_config(SessionSettings(listen=[ep], connect=[])))
     b = zenoh.open(zenoh_config(SessionSettings(connect=[ep])))
+    assert wait_connected(b, 30.0), "the second peer never linked to the first"
     yield a, b
     b.close()
     a.close()

@@ -39,17 +39,24 @@ def test_peers_exchange_queries_and_samples(peers):
     q = a.declare_queryable("am/x/ping", handler=zenoh.handlers.FifoChannel(8))
 
     def serve():
-        with q.recv() as query:
-            query.reply(query.key_expr, b"pong")
-    t = threading.Thread(target=serve)
+        for query in q:                                   # ends when the queryable is undeclared
+            with query:
+                query.reply(query.key_expr, b"pong")
+    t = threading.Thread(target=serve, daemon=True)
     t.start()
-    replies = []
-    for _ in range(50):  # discovery between two fresh peers takes a moment: retry, bounded
-        replies = [r.ok.payload.to_bytes() for r in b.get("am/x/ping", timeout=0.2) if r.ok]
-        if replies:
-            break
-    t.join(timeout=5)
+    sub = b.declare_subscriber("am/x/sample", handler=zenoh.handlers.FifoChannel(8))
+    replies: list[bytes] = []
+    deadline = time.monotonic() + 30.0
+    while not replies:          # the queryable's declaration reaches b shortly after the link is up
+        assert time.monotonic() < deadline
+        replies = [r.ok.payload.to_bytes() for r in b.get("am/x/ping", timeout=0.5) if r.ok]
     assert replies == [b"pong"]
+    while (got := sub.try_recv()) is None:               # and samples flow the other way
+        assert time.monotonic() < deadline
+        a.put("am/x/sample", b"hello")
+        list(b.get("am/x/ping", timeout=0.5))            # a round trip paces the loop (no sleep)
+    assert got.payload.to_bytes() == b"hello"
+    q.undeclare()
 
 
 def test_garbage_gets_an_error_reply_and_the_service_keeps_serving(supervisor, client):
