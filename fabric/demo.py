@@ -100,7 +100,7 @@ def print_summary(sm: dict, say=print) -> None:
     say(f"  layers            {sm['layers']}")
     say(f"  moves             {sm['moves']} ({sm['targets']} robot targets)")
     say(f"  print time        {sm['print_time_s']:.1f} s simulated (estimate {sm['estimate_s']:.1f} s), "
-        f"{sm['wall_s']:.1f} s wall")
+        f"{sm['wall_s']:.1f} s wall for the whole job")
     say(f"  collisions        {'none' if sm['collision_free'] else 'FOUND'} "
         f"({sm['collision_configs']} configurations, min clearance {sm['min_clearance_mm']:.1f} mm)")
     say(f"  extruded volume   {sm['extruded_mm3']:.0f} mm3 (planned {sm['planned_mm3']:.0f}, "
