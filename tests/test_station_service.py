@@ -182,3 +182,27 @@ def test_real_time_then_max_speed_gives_the_same_print_as_max_speed(fabric):
     assert b.data["elapsed_s"] == pytest.approx(a.data["elapsed_s"], rel=1e-9)
     assert b.data["extruded_mm3"] == pytest.approx(a.data["extruded_mm3"], rel=1e-9)
     assert b.data["beads"] == a.data["beads"]
+
+
+def test_a_simulation_failure_faults_the_job_and_the_station_keeps_serving(fabric, monkeypatch):
+    client, station, pid, _ = fabric
+    client.load(pid)
+    real_advance = station.twin.advance
+    calls = {"n": 0}
+
+    def broken(dt_s):
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise RuntimeError("planted")
+        return real_advance(dt_s)
+
+    events = client.subscribe("station", "events")
+    try:
+        monkeypatch.setattr(station.twin, "advance", broken)
+        client.start(rtf=0)
+        ev = wait_event(events, ("fault", "finished"))
+    finally:
+        events.close()
+    assert ev.kind == "fault" and "planted" in client.state().reason
+    assert station.degraded and "planted" in station.degraded
+    assert len(client.position().q_deg) == 6                  # still serving

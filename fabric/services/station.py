@@ -15,6 +15,7 @@ import argparse
 import collections
 import threading
 import time
+import traceback
 
 import numpy as np
 import zenoh
@@ -74,6 +75,17 @@ class StationService(Service):
     # --- simulation clock ------------------------------------------------------
 
     def _sim_loop(self) -> None:
+        """Run the clock; a failure inside the simulation faults the twin and is logged, never silent."""
+        while not self.closed.is_set():
+            try:
+                self._run_clock()
+            except Exception as exc:  # a bug in the simulation: fault the job, keep the station serving
+                self.degraded = f"simulation: {type(exc).__name__}: {exc}"
+                self.log.error("simulation failed:\n%s", traceback.format_exc())
+                with self.lock:
+                    self.twin.trip(f"simulation error: {type(exc).__name__}: {exc}")
+
+    def _run_clock(self) -> None:
         last = time.monotonic()
         next_pose = last
         chunk_s = 1.0
