@@ -48,9 +48,16 @@ def _default_text(value: Any, indent: str = "") -> str:
                 lines.append(f"{indent}{k}: {_fmt(v)}")
         return "\n".join(lines)
     if isinstance(value, list):
-        return "\n".join(_default_text(v, indent + "- ") if isinstance(v, dict) else f"{indent}- {_fmt(v)}"
-                         for v in value)
+        return "\n".join(_list_item(v, indent) for v in value)
     return f"{indent}{_fmt(value)}"
+
+
+def _list_item(v: Any, indent: str) -> str:
+    """A list entry: '- ' before its first line, its other lines aligned under it."""
+    if not isinstance(v, dict):
+        return f"{indent}- {_fmt(v)}"
+    text = _default_text(v, indent + "  ")
+    return indent + "- " + text[len(indent) + 2:]
 
 
 def _flat_list(v: Any) -> bool:
