@@ -190,9 +190,9 @@ def test_a_simulation_failure_faults_the_job_and_the_station_keeps_serving(fabri
     real_advance = station.twin.advance
     calls = {"n": 0}
 
-    def broken(dt_s):
-        calls["n"] += 1
-        if calls["n"] == 1:
+    def broken(dt_s):                          # the clock ticks in every state: fail once, mid-print
+        if station.twin.state == "printing" and calls["n"] == 0:
+            calls["n"] += 1
             raise RuntimeError("planted")
         return real_advance(dt_s)
 
