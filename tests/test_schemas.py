@@ -145,3 +145,13 @@ def test_lying_array_header_is_rejected():
                        "columns": {"a": {"nd": True, "dtype": "|O", "shape": [1], "data": b"\0" * 8}}})
     with pytest.raises(DecodeError, match="dtype"):
         codec.decode(evil, ProgramMsg)
+
+
+def test_decode_any_reads_the_type_tag():
+    from fabric.schemas import Pose, StationState
+    msg = codec.decode_any(codec.encode(StationState(state="paused", reason="operator")))
+    assert isinstance(msg, StationState) and msg.state == "paused"
+    with pytest.raises(DecodeError, match="type tag"):
+        codec.decode_any(codec.pack({"_t": "no.Such", "_v": 1}))
+    with pytest.raises(ValidationError):
+        codec.decode_any(codec.pack({"_t": Pose.TYPE, "_v": 1, "seq": 1}))

@@ -1,5 +1,5 @@
 """All message schemas; importing this package registers every type in ``REGISTRY``."""
-from fabric.schemas.base import REGISTRY, Schema, f, schema, to_plain, validate_into
+from fabric.schemas.base import REGISTRY, f, schema, to_plain, validate_into
 from fabric.schemas.common import (Ack, Artifact, ArtifactQuery, Empty, ErrorReply, JobAccepted,
                                    JobQuery, JobStatus)
 from fabric.schemas.pipeline import (Backends, CollisionReport, CollisionRequest, ExportRequest,
@@ -10,7 +10,7 @@ from fabric.schemas.station import (CalibrationReport, Check, Event, EventList, 
                                     ReadyReport, StartRequest, StationState, Temps, TimeInfo)
 
 __all__ = [
-    "REGISTRY", "Schema", "f", "schema", "to_plain", "validate_into",
+    "REGISTRY", "f", "schema", "to_plain", "validate_into",
     "Ack", "Artifact", "ArtifactQuery", "Empty", "ErrorReply", "JobAccepted", "JobQuery", "JobStatus",
     "Backends", "CollisionReport", "CollisionRequest", "ExportRequest", "FabricStatus", "JobList",
     "JobSubmit", "PlanRequest", "PlanSummary", "ProgramMsg", "ServiceInfo", "SliceRequest", "SliceResult",

@@ -16,25 +16,17 @@ import dataclasses
 import math
 import types
 import typing
-from typing import Any, Callable, ClassVar, TypeVar, Union
+from typing import Any, Callable, TypeVar, Union
 
 import numpy as np
 
 from fabric.errors import ValidationError
 
-__all__ = ["schema", "f", "Schema", "REGISTRY", "validate_into", "to_plain"]
+__all__ = ["schema", "f", "REGISTRY", "validate_into", "to_plain"]
 
 REGISTRY: dict[str, type] = {}
 T = TypeVar("T")
 _MISSING = dataclasses.MISSING
-
-
-class Schema:
-    """Marker base class for all messages (``TYPE`` and ``VERSION`` set by ``@schema``)."""
-
-    TYPE: ClassVar[str]
-    VERSION: ClassVar[int]
-    _SPECS: ClassVar[dict[str, "FieldSpec"]]
 
 
 def f(default: Any = _MISSING, *, ge: float | None = None, le: float | None = None,

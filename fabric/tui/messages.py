@@ -1,7 +1,6 @@
 """Messages the telemetry feed posts to the console (small dataclasses; attributes down, messages up)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 from textual.message import Message
@@ -21,10 +20,3 @@ class Liveliness(Message):
     def __init__(self, alive: dict[str, bool]) -> None:
         super().__init__()
         self.alive = alive
-
-
-@dataclass
-class CommandResult:
-    command: str
-    ok: bool
-    text: str
