@@ -133,7 +133,7 @@ def station_run(client: Client, monitors: list[Client], rtf: float, pid: str) ->
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--monitors", type=int, default=12)
+    p.add_argument("--monitors", type=int, default=24)
     p.add_argument("--out", type=Path, default=Path("docs/bench"))
     p.add_argument("--profile", default="robot-1.2mm")
     a = p.parse_args()
