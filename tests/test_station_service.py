@@ -97,20 +97,24 @@ def test_pause_resume_and_stop_over_the_fabric(fabric):
     client.load(pid)
     events = client.subscribe("station", "events")
     try:
-        client.start(rtf=30.0)
+        client.start(rtf=30.0)                      # heat up quickly ...
         wait_event(events, ("layer",))
+        client.set_rtf(1.0)                         # ... then print in real time: seconds to pause mid-layer
         ack = client.pause()
         assert ack.state == "paused"
-        paused_at = client.position()
+        paused = wait_event(events, ("paused",))    # once the controlled stop, retract and lift are done
+        lifted = client.position()
         with pytest.raises(StateError):
             client.start()
         client.resume(rtf=0)
-        assert wait_event(events, ("finished", "fault")).kind == "finished"
+        assert wait_event(events, ("resumed", "fault")).kind == "resumed"
+        end = wait_event(events, ("finished", "fault"))
     finally:
         events.close()
-    assert paused_at.xyz_mm[2] > 0
+    assert end.kind == "finished"
+    assert lifted.xyz_mm[2] == pytest.approx(paused.data["xyz_mm"][2] + 5.0, abs=1e-6)   # lifted clear by 5 mm
     st = client.state()
-    assert st.state in ("idle", "ready", "stopped") or st.progress_r == pytest.approx(1.0)
+    assert st.state == "idle" and st.reason == "finished"
 
 
 def test_overrides_calibrate_ready_and_home(fabric, cell):
