@@ -109,8 +109,11 @@ class Client:
     def subscribe(self, service: str, topic: str) -> Subscription:
         return Subscription(self.session, self.keys.topic(service, topic), TOPICS[(service, topic)])
 
-    def alive(self, timeout: float = 1.0) -> dict[str, bool]:
-        """Which services hold a liveliness token now (answers without the supervisor)."""
+    def alive(self, timeout: float = 2.0) -> dict[str, bool]:
+        """Which services hold a liveliness token now (answers without the supervisor).
+
+        The hub answers and the query returns at once; ``timeout`` only bounds the wait when
+        no one answers (or a starved machine delays the answer)."""
         found = set()
         for reply in self.session.liveliness().get(self.keys.alive_all(), timeout=timeout):
             if reply.ok is not None:
@@ -127,7 +130,7 @@ class Client:
         end = time.monotonic() + deadline_s
         with _liveliness_queue(self.session, self.keys.alive_all()) as changes:
             while True:
-                alive = {k for k, v in self.alive(timeout=0.5).items() if v}
+                alive = {k for k, v in self.alive(timeout=2.0).items() if v}
                 if set(services) <= alive:
                     return
                 left = end - time.monotonic()

@@ -122,7 +122,7 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
         return p
 
     p = sub.add_parser("status", parents=[common], help="which services are alive")
-    p.add_argument("--timeout", type=float, default=1.0)
+    p.add_argument("--timeout", type=float, default=2.0, help="how long to wait for the hub's answer")
     p.add_argument("--wait", type=float, default=0.0, metavar="SECONDS",
                    help="first wait (up to SECONDS) until every service is alive")
     p.set_defaults(run=cmd_status)

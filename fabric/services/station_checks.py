@@ -19,7 +19,7 @@ TEMP_TOLERANCE_C = 5.0
 def ready_report(svc: "StationService") -> s.ReadyReport:
     """Services alive, program planned and collision-free, robot at a known pose, extruder hot, no fault."""
     checks: list[s.Check] = []
-    alive = svc.client.alive(timeout=0.5)
+    alive = svc.client.alive(timeout=2.0)
     dead = [n for n in SERVICES if not alive.get(n)]
     checks.append(s.Check(name="services alive", ok=not dead,
                           detail="all " + str(len(SERVICES)) if not dead else "down: " + ", ".join(dead)))

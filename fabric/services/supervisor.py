@@ -73,7 +73,7 @@ class SupervisorService(Service):
 
     def on_status(self, _: s.Empty) -> s.FabricStatus:
         # who is alive: the hub's answer now; since when: what the liveliness subscriber tracked
-        now = self.client.alive(timeout=0.5)
+        now = self.client.alive(timeout=2.0)
         now["supervisor"] = True
         with self._alive_lock:
             since = dict(self._alive)

@@ -127,7 +127,7 @@ class FabricConsole(App):
 
     @work(thread=True, group="alive")
     def refresh_alive(self) -> None:
-        self.post_message(Liveliness(self.client.alive(timeout=0.5)))
+        self.post_message(Liveliness(self.client.alive(timeout=2.0)))
 
     # --- messages up -------------------------------------------------------------
 
