@@ -29,6 +29,8 @@ __all__ = ["Client", "Subscription", "wait_connected"]
 
 DISCOVERY_WINDOW_S = 1.0   # retry a get that found no queryable for this long (declarations in flight)
 CONNECT_WINDOW_S = 3.0     # how long connect() waits for the first link
+ALIVE_ATTEMPTS = 5         # liveliness queries merged when an answer is incomplete (see Client.alive)
+ALIVE_BACKOFF_S = 0.01     # pause between those attempts
 
 
 class Subscription:
@@ -113,11 +115,24 @@ class Client:
         """Which services hold a liveliness token now (answers without the supervisor).
 
         The hub answers and the query returns at once; ``timeout`` only bounds the wait when
-        no one answers (or a starved machine delays the answer)."""
-        found = set()
-        for reply in self.session.liveliness().get(self.keys.alive_all(), timeout=timeout):
-            if reply.ok is not None:
-                found.add(parse_alive(str(reply.ok.key_expr))[1])
+        no one answers. A *peer* session's liveliness query sometimes returns at once with an
+        empty or partial answer while links to other peers are busy (measured here: 53 of 300
+        queries under load; 0 of 300 for a client session), so an incomplete answer is asked
+        again, up to ``ALIVE_ATTEMPTS`` times within ``timeout`` (10 ms apart), and the answers are
+        merged: a service that is really gone costs some 50 ms more to report.
+        """
+        found: set[str] = set()
+        end = time.monotonic() + timeout
+        for _ in range(ALIVE_ATTEMPTS):
+            left = end - time.monotonic()
+            if left <= 0:
+                break
+            for reply in self.session.liveliness().get(self.keys.alive_all(), timeout=left):
+                if reply.ok is not None:
+                    found.add(parse_alive(str(reply.ok.key_expr))[1])
+            if found >= set(SERVICES):
+                break
+            time.sleep(ALIVE_BACKOFF_S)
         return {name: name in found for name in SERVICES}
 
     def wait_alive(self, services: tuple[str, ...] = SERVICES, deadline_s: float = 30.0) -> None:
