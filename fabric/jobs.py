@@ -32,7 +32,6 @@ class Job:
     def __init__(self, runner: "JobRunner", status: JobStatus) -> None:
         self._runner, self.status = runner, status
         self._last_pub = 0.0
-        self.cancelled = threading.Event()
 
     @property
     def job_id(self) -> str:

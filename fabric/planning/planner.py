@@ -56,29 +56,26 @@ def plan_gcode(text: str | bytes, cell: Any, options: PlanOptions | None = None,
     ``filename`` (optional) names the job: the program's ``meta`` gets
     ``filename`` and ``name`` (its stem), which exports use.
     """
+    return _parse_and_plan(parse_gcode, text, cell, options, progress, filename)
+
+
+def _parse_and_plan(parse: Callable[..., Toolpath], source: Any, cell: Any, options: PlanOptions | None,
+                    progress: Progress | None, filename: str | os.PathLike[str] | None) -> PlanResult:
+    """Parse (first quarter of the progress), plan the rest, name the program after ``filename``."""
     opt = options or PlanOptions()
     t0 = time.perf_counter()
-    tp = parse_gcode(text, chord_tol_mm=opt.chord_tol_mm, progress=_sub(progress, 0.0, 0.25))
+    tp = parse(source, chord_tol_mm=opt.chord_tol_mm, progress=_sub(progress, 0.0, 0.25))
     res = plan_toolpath(tp, cell, opt, _sub(progress, 0.25, 1.0), parse_s=time.perf_counter() - t0)
-    _name(res, filename)
-    return res
-
-
-def _name(res: PlanResult, filename: str | os.PathLike[str] | None) -> None:
     if filename:
         path = Path(filename)
         res.program.meta.update(filename=path.name, name=path.stem)
+    return res
 
 
 def plan_gcode_file(path: str | os.PathLike[str], cell: Any, options: PlanOptions | None = None,
                     progress: Progress | None = None) -> PlanResult:
     """Plan a G-code file, streaming it in blocks."""
-    opt = options or PlanOptions()
-    t0 = time.perf_counter()
-    tp = parse_gcode_file(path, chord_tol_mm=opt.chord_tol_mm, progress=_sub(progress, 0.0, 0.25))
-    res = plan_toolpath(tp, cell, opt, _sub(progress, 0.25, 1.0), parse_s=time.perf_counter() - t0)
-    _name(res, path)
-    return res
+    return _parse_and_plan(parse_gcode_file, path, cell, options, progress, path)
 
 
 def _assemble(tp: Toolpath, cell: Any, opt: PlanOptions) -> tuple[Program, int]:

@@ -5,7 +5,7 @@ from typing import Any
 
 from fabric.schemas.base import f, schema
 
-JOB_STATES = ("queued", "running", "done", "failed", "cancelled")
+JOB_STATES = ("queued", "running", "done", "failed")
 
 
 @schema("common.Empty")
