@@ -8,7 +8,7 @@ import numpy as np
 from fabric import codec
 from fabric import schemas as s
 from fabric.errors import DecodeError, ValidationError
-from fabric.sim.program import COLUMNS, Program
+from fabric.motion.program import COLUMNS, Program
 
 __all__ = ["program_to_msg", "program_from_msg", "program_artifact", "program_from_artifact", "content_id",
            "PROGRAM_MEDIA_TYPE"]

@@ -5,7 +5,7 @@ import io
 
 import numpy as np
 
-from fabric.sim.program import MOVEL, PRINT, Program
+from fabric.motion.program import MOVEL, PRINT, Program
 
 __all__ = ["toolpath_png"]
 

@@ -6,9 +6,9 @@ import pytest
 
 from fabric.errors import ConfigError, StateError, ValidationError
 from fabric.sim.calibration import calibrate_plate
-from fabric.sim.cell import Cell
-from fabric.sim.frames import inv_T, xyzrpy_to_T
-from fabric.sim.testprog import square_program
+from fabric.robot.cell import Cell
+from fabric.robot.frames import inv_T, xyzrpy_to_T
+from fabric.motion.testprog import square_program
 from fabric.sim.twin import Twin
 
 LO, HI = np.array([0.0, 0.0, -10.0]), np.array([250.0, 250.0, 0.0])

@@ -9,9 +9,9 @@ import pinocchio as pin
 import pytest
 
 from fabric.errors import ConfigError, NotFound
-from fabric.sim.cell import CELLS_DIR, Cell
-from fabric.sim.ikpath import solve_path
-from fabric.sim.kinematics import IK_OK
+from fabric.robot.cell import CELLS_DIR, Cell
+from fabric.robot.path_ik import solve_path
+from fabric.robot.kinematics import IK_OK
 
 IRB_TEXT = (CELLS_DIR / "irb140.toml").read_text()
 
@@ -75,7 +75,7 @@ def test_unknown_keys_are_config_errors_naming_them(edit: tuple[str, str], key: 
     (("size_mm = [250.0, 250.0, 10.0]", "size_mm = [250.0, 250.0]"), "plate.size_mm"),
     (("joints_deg = [0.0, 0.0, 0.0, 0.0, 90.0, 0.0]", "joints_deg = [0.0, 0.0, 0.0, 0.0, 130.0, 0.0]"),
      "home.joints_deg"),
-    (("urdf = \"sim/robots/irb140.urdf\"", "urdf = \"sim/robots/nope.urdf\""), "robot.urdf"),
+    (("urdf = \"robot/urdf/irb140.urdf\"", "urdf = \"robot/urdf/nope.urdf\""), "robot.urdf"),
     (("[approach]", "[limits]\nupper_deg = [180.0, 110.0, 50.0, 200.0, 130.0, 400.0]\n\n[approach]"),
      "limits.upper_deg"),
 ])

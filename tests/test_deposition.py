@@ -9,7 +9,7 @@ import trimesh
 
 from fabric.errors import ValidationError
 from fabric.sim.deposition import Deposition, bead_area_mm2
-from fabric.sim.program import MOVEL, Program
+from fabric.motion.program import MOVEL, Program
 
 
 def layered_program(heights: list[float], flow: float = 0.3, meta: dict | None = None) -> Program:

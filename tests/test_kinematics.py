@@ -6,13 +6,13 @@ import time
 import numpy as np
 import pytest
 
-from fabric.sim import frames
-from fabric.sim.cell import Cell
-from fabric.sim.ikpath import joint_jumps, solve_path
-from fabric.sim.branches import ClosedFormIK
-from fabric.sim.kinematics import (IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR,
+from fabric.robot import frames
+from fabric.robot.cell import Cell
+from fabric.robot.path_ik import joint_jumps, solve_path
+from fabric.robot.closed_form import ClosedFormIK
+from fabric.robot.kinematics import (IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR,
                                    IRB140_ARM, SphericalWristArm)
-from fabric.sim.robot import IRB140_URDF, RobotModel
+from fabric.robot.model import IRB140_URDF, RobotModel
 
 
 @pytest.fixture(scope="module")

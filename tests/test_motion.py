@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from fabric.errors import UnreachableError, ValidationError
-from fabric.sim.frames import make_T
-from fabric.sim.motion import StartState, stop_timeline, time_program, validate_program
-from fabric.sim.program import MOVEJ, MOVEL, WAIT, Program
-from fabric.sim.robot import IRB140_URDF, RobotModel
+from fabric.robot.frames import make_T
+from fabric.motion.timing import StartState, stop_timeline, time_program, validate_program
+from fabric.motion.program import MOVEJ, MOVEL, WAIT, Program
+from fabric.robot.model import IRB140_URDF, RobotModel
 
 A = 2000.0
 

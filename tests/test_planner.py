@@ -11,9 +11,9 @@ import pytest
 
 from fabric.errors import UnreachableError, ValidationError
 from fabric.planning import PlanOptions, plan_gcode, plan_gcode_file
-from fabric.sim.cell import Cell
-from fabric.sim.kinematics import IK_OK
-from fabric.sim.program import (MOVEJ, MOVEL, PRINT, RETRACT, SET_TEMP,
+from fabric.robot.cell import Cell
+from fabric.robot.kinematics import IK_OK
+from fabric.motion.program import (MOVEJ, MOVEL, PRINT, RETRACT, SET_TEMP,
                                 WAIT_TEMP)
 
 
@@ -199,7 +199,7 @@ def test_program_structure_speeds_flow_events(cell: Cell) -> None:
     assert np.isclose(res.stats.extruded_volume_mm3, 8.0 * np.pi * 1.75 ** 2 / 4)
     assert res.stats.layers == 2 and set(p.layer[p.section == PRINT]) >= {0, 1}
     # the estimate is the motion model's, with the heat-up waits in it
-    from fabric.sim.motion import StartState, time_program
+    from fabric.motion.timing import StartState, time_program
     tl = time_program(p, cell.robot, 1.0, start_state=StartState.at_joints(cell.robot, p.wobj, cell.home_q_rad))
     assert np.isclose(res.estimate_s, tl.total_s)
     assert res.estimate_s > res.stats.path_length_mm / 100.0

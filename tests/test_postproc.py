@@ -12,9 +12,9 @@ from fabric.errors import ValidationError
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.post import (CSV_COLUMNS, RapidOptions, export_program, write_csv, write_export, write_krl,
                                   write_rapid, write_urscript)
-from fabric.sim.cell import Cell
-from fabric.sim.frames import R_from_quat, rot_x, rot_y, rot_z
-from fabric.sim.program import MOVEJ, MOVEL, PRINT, RETRACT, WAIT_TEMP
+from fabric.robot.cell import Cell
+from fabric.robot.frames import R_from_quat, rot_x, rot_y, rot_z
+from fabric.motion.program import MOVEJ, MOVEL, PRINT, RETRACT, WAIT_TEMP
 
 
 @pytest.fixture(scope="module")
@@ -154,7 +154,7 @@ def test_urscript_poses_in_metres_and_radians(plan) -> None:
 
 
 def test_csv_columns_rows_and_times(plan, cell: Cell) -> None:
-    from fabric.sim.motion import StartState, time_program
+    from fabric.motion.timing import StartState, time_program
     prog = plan.program
     tl = time_program(prog, cell.robot, 1.0, start_state=StartState.at_joints(cell.robot, prog.wobj, cell.home_q_rad))
     out = io.StringIO()

@@ -11,8 +11,8 @@ from fabric.programs import program_artifact
 from fabric.services.collision import CollisionService
 from fabric.services.planner import PlannerService
 from fabric.services.station import StationService
-from fabric.sim.cell import Cell
-from fabric.sim.testprog import square_program
+from fabric.robot.cell import Cell
+from fabric.motion.testprog import square_program
 
 pytestmark = pytest.mark.timeout(180)
 

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from fabric.errors import ValidationError
-from fabric.sim.program import BED, NOZZLE, SET_TEMP, WAIT, WAIT_TEMP, Program
-from fabric.sim.thermal import HeaterParams, Thermal
-from fabric.sim.motion import StartState, time_program
+from fabric.motion.program import BED, NOZZLE, SET_TEMP, WAIT, WAIT_TEMP, Program
+from fabric.motion.thermal import HeaterParams, Thermal
+from fabric.motion.timing import StartState, time_program
 
 
 class PointRobot:

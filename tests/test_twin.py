@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from fabric.errors import CollisionError, StateError, UnreachableError, ValidationError
-from fabric.sim.cell import Cell
-from fabric.sim.program import BED, Program
-from fabric.sim.testprog import square_program
-from fabric.sim.thermal import Thermal
+from fabric.robot.cell import Cell
+from fabric.motion.program import BED, Program
+from fabric.motion.testprog import square_program
+from fabric.motion.thermal import Thermal
 from fabric.sim.twin import Twin
 
 

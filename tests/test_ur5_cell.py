@@ -9,8 +9,8 @@ import pytest
 from fabric.demo import sample_model
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.services.collision import sweep_program
-from fabric.sim.cell import Cell
-from fabric.sim.collision import CollisionChecker
+from fabric.robot.cell import Cell
+from fabric.collision.sweep import CollisionChecker
 from fabric.sim.twin import Twin
 from fabric.slicing import load_profile, slice_model
 

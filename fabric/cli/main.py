@@ -65,7 +65,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _load_cell(path: str | None):
-    from fabric.sim.cell import Cell
+    from fabric.robot.cell import Cell
     return Cell.load(path) if path else Cell.builtin("irb140")
 
 

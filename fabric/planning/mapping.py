@@ -26,7 +26,7 @@ from fabric.errors import ValidationError
 from fabric.gcode.toolpath import (EV_BED_TEMP, EV_DWELL, EV_EXTRUDE, EV_FAN, EV_FW_RETRACT,
                                    EV_FW_UNRETRACT, EV_NOZZLE_TEMP, WAIT_NONE, Toolpath)
 from fabric.planning.options import PlanOptions
-from fabric.sim.program import BED, MOVEL, NOZZLE, RETRACT, SET_TEMP, WAIT, WAIT_TEMP
+from fabric.motion.program import BED, MOVEL, NOZZLE, RETRACT, SET_TEMP, WAIT, WAIT_TEMP
 
 __all__ = ["PrintRows", "map_toolpath"]
 
@@ -37,7 +37,7 @@ class PrintRows:
 
     The arrays are allocated with ``head`` rows before and ``tail`` rows after
     the print rows, so the caller fills in the approach and return rows and
-    builds the :class:`~fabric.sim.program.Program` on them without a copy.
+    builds the :class:`~fabric.motion.program.Program` on them without a copy.
     ``first_xyz_mm`` is where the approach lands.
     """
 

@@ -6,10 +6,10 @@ plate frame (:mod:`fabric.planning.mapping`) -> frame the print with an
 point, then a linear move down, at the cell's approach speed, fine zones) and a
 *Return home* (a linear move up, a joint move to the home joints) -> inverse
 kinematics of every motion row with the free rotation about the nozzle axis
-(``fabric.sim.ikpath.solve_path``), solved in blocks of ``ik_block_rows``
+(``fabric.robot.path_ik.solve_path``), solved in blocks of ``ik_block_rows``
 seeded with the previous block's last joints so memory stays bounded and
 progress can be reported -> the cycle time from the motion model the station
-executes (``fabric.sim.motion.time_program``).
+executes (``fabric.motion.timing.time_program``).
 
 Frames: program targets are the TCP in the plate frame (the work object
 ``cell.wobj_T()``); IK takes them in the robot base frame, ``wobj_T @ p``, with
@@ -32,9 +32,9 @@ from fabric.gcode import Toolpath, parse_gcode, parse_gcode_file
 from fabric.planning.mapping import map_toolpath
 from fabric.planning.options import PlanOptions
 from fabric.planning.report import PlanResult, PlanStats, Reachability
-from fabric.sim.frames import inv_T, quat_from_R
-from fabric.sim.kinematics import IK_JUMP, IK_OK
-from fabric.sim.program import APPROACH, MOVEJ, MOVEL, PRINT, RETURN_HOME, SET_TEMP, WAIT, WAIT_TEMP, Program
+from fabric.robot.frames import inv_T, quat_from_R
+from fabric.robot.kinematics import IK_JUMP, IK_OK
+from fabric.motion.program import APPROACH, MOVEJ, MOVEL, PRINT, RETURN_HOME, SET_TEMP, WAIT, WAIT_TEMP, Program
 
 __all__ = ["plan_gcode", "plan_gcode_file", "plan_toolpath"]
 
@@ -51,7 +51,7 @@ def _sub(progress: Progress | None, a: float, b: float) -> Progress | None:
 
 def plan_gcode(text: str | bytes, cell: Any, options: PlanOptions | None = None,
                progress: Progress | None = None, filename: str | None = None) -> PlanResult:
-    """Plan G-code held in memory for ``cell`` (a :class:`fabric.sim.cell.Cell`).
+    """Plan G-code held in memory for ``cell`` (a :class:`fabric.robot.cell.Cell`).
 
     ``filename`` (optional) names the job: the program's ``meta`` gets
     ``filename`` and ``name`` (its stem), which exports use.
@@ -155,7 +155,7 @@ def _start_at_first_bead(prog: Program, stop: int) -> tuple[Program, int, int]:
 
 def _solve(prog: Program, cell: Any, opt: PlanOptions, progress: Progress | None) -> tuple[np.ndarray, np.ndarray]:
     """IK of every motion row but the final home move, in blocks; fills q and quat. Returns (status, rot_deg)."""
-    from fabric.sim.ikpath import solve_path
+    from fabric.robot.path_ik import solve_path
 
     robot = cell.robot
     wobj = prog.wobj
@@ -272,7 +272,7 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
     estimate = float("nan")
     slowed_rows = slowed_joint = None
     if report.reachable:
-        from fabric.sim.motion import StartState, time_program
+        from fabric.motion.timing import StartState, time_program
         start = StartState.at_joints(cell.robot, prog.wobj, np.asarray(cell.home_q_rad, dtype=float))
         timeline = time_program(prog, cell.robot, 1.0, start_state=start)
         estimate = float(timeline.total_s)

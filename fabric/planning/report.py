@@ -8,8 +8,8 @@ import numpy as np
 
 from fabric.errors import UnreachableError
 from fabric.gcode.toolpath import Toolpath
-from fabric.sim.kinematics import IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR
-from fabric.sim.program import Program
+from fabric.robot.kinematics import IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR
+from fabric.motion.program import Program
 
 __all__ = ["Reachability", "PlanStats", "PlanResult", "UNREACHABLE_CODES"]
 
@@ -22,7 +22,7 @@ UNREACHABLE_CODES = (IK_OUT_OF_REACH, IK_JOINT_LIMIT, IK_JUMP)
 class Reachability:
     """Per-row IK status of a program (non-motion rows repeat the previous row's status)."""
 
-    status: np.ndarray                        # (N,) uint8, fabric.sim.kinematics IK_* codes
+    status: np.ndarray                        # (N,) uint8, fabric.robot.kinematics IK_* codes
     rot_deg: np.ndarray                       # (N,) chosen rotation about the nozzle axis
     feasible_r: float                         # fraction of motion rows that are reachable
     counts: dict[str, int] = field(default_factory=dict)   # motion rows by reason

@@ -80,7 +80,7 @@ class PlanSummary:
 
 @schema("planner.ProgramMsg")
 class ProgramMsg:
-    """A whole robot program: its columns as packed arrays (see fabric.sim.program).
+    """A whole robot program: its columns as packed arrays (see fabric.motion.program).
 
     Stored as a planner artifact whose id is the sha256 of this message's bytes."""
     columns: dict[str, np.ndarray]

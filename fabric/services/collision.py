@@ -13,10 +13,10 @@ from fabric.client import Client
 from fabric.errors import BadRequest
 from fabric.programs import program_from_artifact
 from fabric.runtime import Service
-from fabric.sim.cell import Cell
-from fabric.sim.collision import CollisionChecker, layer_boxes
-from fabric.sim.motion import time_program
-from fabric.sim.program import Program
+from fabric.robot.cell import Cell
+from fabric.collision.sweep import CollisionChecker, layer_boxes
+from fabric.motion.timing import time_program
+from fabric.motion.program import Program
 
 __all__ = ["CollisionService", "build", "add_arguments", "sweep_program"]
 

@@ -19,9 +19,9 @@ from fabric.errors import BadRequest, NotFound, UnreachableError
 from fabric.jobs import Job, JobRunner
 from fabric.programs import content_id, program_artifact, program_from_artifact
 from fabric.runtime import Service
-from fabric.sim.cell import Cell
-from fabric.sim.frames import xyzrpy_to_T
-from fabric.sim.motion import StartState, time_program
+from fabric.robot.cell import Cell
+from fabric.robot.frames import xyzrpy_to_T
+from fabric.motion.timing import StartState, time_program
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.post import write_export
 

@@ -10,7 +10,7 @@ from fabric.errors import NotFound
 from fabric.jobs import Job, JobRunner
 from fabric.programs import content_id
 from fabric.runtime import Service
-from fabric.sim.cell import Cell
+from fabric.robot.cell import Cell
 from fabric.slicing import Placement, available_backends, list_profiles, load_profile, slice_model
 
 __all__ = ["SlicerService", "build", "add_arguments"]

@@ -26,8 +26,8 @@ from fabric.errors import CollisionError, NotFound, StateError
 from fabric.programs import content_id, program_from_artifact
 from fabric.runtime import Service
 from fabric.services.station_checks import ready_report
-from fabric.sim.cell import Cell
-from fabric.sim.frames import T_to_xyzrpy
+from fabric.robot.cell import Cell
+from fabric.robot.frames import T_to_xyzrpy
 from fabric.sim.twin import Twin
 
 __all__ = ["StationService", "build", "add_arguments"]

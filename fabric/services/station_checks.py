@@ -8,7 +8,7 @@ import numpy as np
 from fabric import schemas as s
 from fabric.errors import FabricError
 from fabric.keys import SERVICES
-from fabric.sim.program import SET_TEMP, NOZZLE
+from fabric.motion.program import SET_TEMP, NOZZLE
 
 if TYPE_CHECKING:
     from fabric.services.station import StationService

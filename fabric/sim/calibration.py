@@ -27,7 +27,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from fabric.errors import ConfigError
-from fabric.sim.frames import T_to_xyzrpy, inv_T, xyzrpy_to_T
+from fabric.robot.frames import T_to_xyzrpy, inv_T, xyzrpy_to_T
 
 __all__ = ["CalibrationResult", "ProbePlan", "probe_plan", "simulate_touches", "fit_plate", "top_plane_frame",
            "calibrate_plate", "TOP", "SIDE_X", "SIDE_Y"]

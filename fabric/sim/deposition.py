@@ -23,7 +23,7 @@ import numpy as np
 import trimesh
 
 from fabric.errors import ValidationError
-from fabric.sim.program import MOVEL, Program
+from fabric.motion.program import MOVEL, Program
 
 __all__ = ["Deposition", "VolumeReport", "bead_area_mm2"]
 

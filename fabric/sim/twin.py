@@ -7,8 +7,8 @@ simulated time, and :meth:`Twin.advance` reports what physically happened as
 :class:`Event` s, in order, with their exact times (never rounded to a step).
 
 The motion itself (the queue of legs, the controlled stop, pause, resume and
-override re-timing) lives in :mod:`fabric.sim.twin_legs`; the value types
-reported here in :mod:`fabric.sim.twin_types`.
+override re-timing) lives in :mod:`fabric.sim.legs`; the value types
+reported here in :mod:`fabric.sim.types`.
 """
 from __future__ import annotations
 
@@ -27,19 +27,19 @@ from fabric.errors import (
 )
 from fabric.sim.calibration import CalibrationResult, calibrate_plate
 from fabric.sim.deposition import Deposition
-from fabric.sim.frames import R_from_quat, inv_T, make_T, quat_from_R, rot_x
-from fabric.sim.motion import (
+from fabric.robot.frames import R_from_quat, inv_T, make_T, quat_from_R, rot_x
+from fabric.motion.timing import (
     DEFAULT_RETRACT_SPEED_MM_S,
     StartState,
     mini_program,
     time_program,
     validate_program,
 )
-from fabric.sim.program import MOVEJ, Program
-from fabric.sim.thermal import Thermal
-from fabric.sim.timeline import Leg, Sample
-from fabric.sim.twin_legs import TwinLegs
-from fabric.sim.twin_types import (
+from fabric.motion.program import MOVEJ, Program
+from fabric.motion.thermal import Thermal
+from fabric.motion.timeline import Leg, Sample
+from fabric.sim.legs import TwinLegs
+from fabric.sim.types import (
     EVENT_KINDS,
     STATES,
     Event,
@@ -48,13 +48,13 @@ from fabric.sim.twin_types import (
     Temps,
     TimeInfo,
 )
-from fabric.sim.twin_types import IK_ACCEPT as _IK_ACCEPT
+from fabric.sim.types import IK_ACCEPT as _IK_ACCEPT
 
 __all__ = ["EVENT_KINDS", "STATES", "Event", "ExtrusionState", "Pose", "Temps", "TimeInfo", "Twin"]
 
 
 class Twin(TwinLegs):
-    """A simulated cell running one job at a time (see this module's and :mod:`fabric.sim.twin_legs`' docstrings)."""
+    """A simulated cell running one job at a time (see this module's and :mod:`fabric.sim.legs`' docstrings)."""
 
     def __init__(self, cell: Any, *, accel_mm_s2: float = 2000.0, retract_mm: float = 1.0, lift_mm: float = 5.0,
                  resume_speed_mm_s: float = 50.0, probe_noise_mm: float = 0.01, rng_seed: int = 0,

@@ -54,7 +54,7 @@ def dls_ik(robot, T: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.nda
 
 def _raster_targets(robot, n: int) -> np.ndarray:
     """n TCP poses along a serpentine raster over the IRB 140 plate, nozzle down."""
-    from fabric.sim.frames import make_T
+    from fabric.robot.frames import make_T
     side = max(2, int(np.sqrt(n)))
     t = np.arange(n)
     row, col = t // side, t % side
@@ -67,7 +67,7 @@ def _raster_targets(robot, n: int) -> np.ndarray:
 
 
 def main(argv: list[str]) -> None:
-    from fabric.sim.robot import IRB140_URDF, RobotModel
+    from fabric.robot.model import IRB140_URDF, RobotModel
     n_dls = int(argv[1]) if len(argv) > 1 else 2000
     n_cf = int(argv[2]) if len(argv) > 2 else 1_000_000
     robot = RobotModel.from_urdf(IRB140_URDF)

@@ -32,8 +32,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from fabric.gcode import parse_gcode_file                   # noqa: E402
 from fabric.planning import PlanOptions, plan_gcode_file    # noqa: E402
-from fabric.sim.cell import Cell                            # noqa: E402
-from fabric.sim.frames import R_from_quat, make_T           # noqa: E402
+from fabric.robot.cell import Cell                            # noqa: E402
+from fabric.robot.frames import R_from_quat, make_T           # noqa: E402
 
 try:
     from ik_baseline import dls_ik                          # the IK engineer's baseline
@@ -259,9 +259,9 @@ reachability by G-code line), then the cycle-time estimate from the motion model
 
 **Status**: the 20x target is {status} for text -> verified joint program against the consecutive
 per-point baseline; the first run of the process ({first:.1f}x) {first_status} it. Of the
-{r['verified_s']:.2f} s, the IK step (`fabric.sim.ikpath.solve_path`, run in blocks of 200,000 targets)
+{r['verified_s']:.2f} s, the IK step (`fabric.robot.path_ik.solve_path`, run in blocks of 200,000 targets)
 takes {share_ik:.0%}, parsing {share_parse:.0%}, mapping and assembling the program the rest. The
-cycle-time estimate (`fabric.sim.motion.time_program`) adds {b['cycle_time_estimate']:.2f} s.
+cycle-time estimate (`fabric.motion.timing.time_program`) adds {b['cycle_time_estimate']:.2f} s.
 """
     (docs / "planning.md").write_text(md)
 

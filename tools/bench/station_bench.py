@@ -39,7 +39,7 @@ from fabric.demo import sample_model
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.programs import program_artifact
 from fabric.services.planner import PlannerService
-from fabric.sim.cell import Cell
+from fabric.robot.cell import Cell
 from fabric.sim.twin import Twin
 from fabric.slicing import load_profile, slice_model
 

@@ -4,7 +4,7 @@ Run: ``.venv/bin/python tools/bench/twin_bench.py [--moves 1000000] [--out docs/
 Writes ``twin.md`` and ``twin.json`` to ``--out``. The Zenoh telemetry part is
 added by the station service's benchmark; this one measures the twin alone:
 
-* the sample print (a square tower with heat-up, ``fabric.sim.testprog``) run
+* the sample print (a square tower with heat-up, ``fabric.motion.testprog``) run
   to the end with ``advance`` steps of 1 ms, 20 ms and one single call, with
   a telemetry read (pose, extrusion, temperatures) after every step, as the
   station service does;
@@ -21,11 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from fabric.sim.cell import Cell
-from fabric.sim.frames import make_T, rot_x
-from fabric.sim.motion import StartState, time_program
-from fabric.sim.program import MOVEL, PRINT, Program
-from fabric.sim.testprog import square_program
+from fabric.robot.cell import Cell
+from fabric.robot.frames import make_T, rot_x
+from fabric.motion.timing import StartState, time_program
+from fabric.motion.program import MOVEL, PRINT, Program
+from fabric.motion.testprog import square_program
 from fabric.sim.twin import Twin
 
 

@@ -1,4 +1,4 @@
-"""Post-processors: a planned :class:`~fabric.sim.program.Program` -> controller code or CSV."""
+"""Post-processors: a planned :class:`~fabric.motion.program.Program` -> controller code or CSV."""
 from fabric.planning.post.csv import CSV_COLUMNS, write_csv
 from fabric.planning.post.files import FORMATS, export_program, write_export
 from fabric.planning.post.krl import write_krl

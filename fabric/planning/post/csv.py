@@ -6,7 +6,7 @@ from typing import TextIO
 import numpy as np
 
 from fabric.planning.post.common import check_program, row_blocks
-from fabric.sim.program import MOVEL, Program
+from fabric.motion.program import MOVEL, Program
 
 __all__ = ["write_csv", "CSV_COLUMNS"]
 

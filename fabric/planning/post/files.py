@@ -11,7 +11,7 @@ from fabric.planning.post.csv import write_csv
 from fabric.planning.post.krl import write_krl
 from fabric.planning.post.rapid import RapidOptions, write_rapid
 from fabric.planning.post.urscript import write_urscript
-from fabric.sim.program import Program
+from fabric.motion.program import Program
 
 __all__ = ["export_program", "write_export", "FORMATS"]
 

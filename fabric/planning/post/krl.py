@@ -22,7 +22,7 @@ import numpy as np
 from fabric.errors import ValidationError
 from fabric.planning.post.common import (check_program, extrusion_rate, quat_to_zyx_deg, row_blocks,
                                          write_lines, R_to_zyx_deg)
-from fabric.sim.program import BED, MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
+from fabric.motion.program import BED, MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
 
 __all__ = ["write_krl"]
 

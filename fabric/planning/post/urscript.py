@@ -20,8 +20,8 @@ import numpy as np
 
 from fabric.errors import ValidationError
 from fabric.planning.post.common import check_program, extrusion_rate, quat_to_rotvec, row_blocks, write_lines
-from fabric.sim.frames import quat_from_R
-from fabric.sim.program import BED, MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
+from fabric.robot.frames import quat_from_R
+from fabric.motion.program import BED, MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
 
 __all__ = ["write_urscript"]
 

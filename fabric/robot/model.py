@@ -30,15 +30,15 @@ import numpy as np
 import pinocchio as pin
 
 from fabric.errors import ConfigError, NotFound, ValidationError
-from fabric.sim import frames
-from fabric.sim.branches import ClosedFormIK
-from fabric.sim.kinematics import IRB140_ARM
+from fabric.robot import frames
+from fabric.robot.closed_form import ClosedFormIK
+from fabric.robot.kinematics import IRB140_ARM
 
 __all__ = ["RobotModel", "ToolGeometry", "DEFAULT_TOOL_T", "ACC_PER_S", "JERK_PER_S2", "IRB140_URDF"]
 
 ACC_PER_S = 4.0
 JERK_PER_S2 = 40.0
-IRB140_URDF = Path(__file__).with_name("robots") / "irb140.urdf"
+IRB140_URDF = Path(__file__).with_name("urdf") / "irb140.urdf"
 DEFAULT_TOOL_T = frames.xyzrpy_to_T([0.0, 0.0, 150.0], [0.0, 0.0, 0.0])
 """Flange -> TCP of the default extruder: nozzle tip 150 mm out along the flange z axis."""
 
@@ -255,7 +255,7 @@ class RobotModel:
 
         Row i is solved continuous with row i-1 (row 0 with ``q_seed``): the
         valid solution nearest the previous one. Status codes: ``IK_*`` of
-        ``fabric.sim.kinematics``.
+        ``fabric.robot.kinematics``.
         """
         T = np.asarray(T, dtype=float).reshape(-1, 4, 4)
         q_seed = np.asarray(q_seed, dtype=float).reshape(-1)
@@ -263,7 +263,7 @@ class RobotModel:
             raise ValidationError(f"q_seed needs {self.nq} joints", field="q_seed")
         if self.closed_form is not None:
             return self.closed_form.ik(T, q_seed)
-        from fabric.sim.numik import numeric_ik
+        from fabric.robot.numeric import numeric_ik
         return numeric_ik(self, T, q_seed)
 
     def within_limits(self, q: np.ndarray, tol_rad: float = 1e-9) -> np.ndarray:

@@ -28,8 +28,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from fabric.sim.frames import inv_T, quat_from_R
-from fabric.sim.program import MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT_TEMP, Program
+from fabric.robot.frames import inv_T, quat_from_R
+from fabric.motion.program import MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT_TEMP, Program
 
 __all__ = ["Sample", "SampleBatch", "Timeline", "Leg"]
 

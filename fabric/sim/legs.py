@@ -1,6 +1,6 @@
 """The twin's motion legs: running them in simulated time, and planning pause, stop, resume and re-timing.
 
-Motion is a queue of *legs*, each a :class:`~fabric.sim.timeline.Timeline`
+Motion is a queue of *legs*, each a :class:`~fabric.motion.timeline.Timeline`
 with an absolute start: the program (re-timed from a row when an override
 changes it), a controlled stop, the pause/stop moves (retract, lift straight
 up along the plate normal), the resume moves (straight down at
@@ -30,13 +30,13 @@ import numpy as np
 
 from fabric.errors import UnreachableError
 from fabric.sim.deposition import Deposition
-from fabric.sim.frames import R_from_quat, inv_T, make_T, quat_from_R
-from fabric.sim.motion import StartState, mini_program, stop_timeline, time_program
-from fabric.sim.program import MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
-from fabric.sim.thermal import HEATER_NAMES, Thermal
-from fabric.sim.timeline import Leg, Timeline
-from fabric.sim.twin_types import IK_ACCEPT as _IK_ACCEPT
-from fabric.sim.twin_types import Event
+from fabric.robot.frames import R_from_quat, inv_T, make_T, quat_from_R
+from fabric.motion.timing import StartState, mini_program, stop_timeline, time_program
+from fabric.motion.program import MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
+from fabric.motion.thermal import HEATER_NAMES, Thermal
+from fabric.motion.timeline import Leg, Timeline
+from fabric.sim.types import IK_ACCEPT as _IK_ACCEPT
+from fabric.sim.types import Event
 
 __all__ = ["TwinLegs"]
 

@@ -55,9 +55,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from fabric.errors import ValidationError
-from fabric.sim import frames
-from fabric.sim.kinematics import IK_JUMP, IK_OK, pose_cols
-from fabric.sim.robot import RobotModel
+from fabric.robot import frames
+from fabric.robot.kinematics import IK_JUMP, IK_OK, pose_cols
+from fabric.robot.model import RobotModel
 
 __all__ = ["PathIK", "solve_path", "candidate_rotations_deg", "joint_jumps"]
 
@@ -142,7 +142,7 @@ def _unit_axes(z_axis: np.ndarray, n: int) -> np.ndarray:
 class _Frames:
     """The nozzle frames ``R0_i`` (theta = 0) as columns ``x0, y0`` (3, N) and ``z0`` ((3, 1) or (3, N)).
 
-    Built like :func:`fabric.sim.frames.frame_from_z_axis`: ``x_ref`` projected
+    Built like :func:`fabric.robot.frames.frame_from_z_axis`: ``x_ref`` projected
     onto the plane normal to z (base x, then base y where it is parallel to z),
     ``y = z x x``. Columns keep every operation on contiguous rows of N numbers.
     """

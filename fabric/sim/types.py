@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.sim.kinematics import IK_OK, IK_SINGULAR
+from fabric.robot.kinematics import IK_OK, IK_SINGULAR
 
 __all__ = ["EVENT_KINDS", "IK_ACCEPT", "STATES", "Event", "ExtrusionState", "Pose", "Temps", "TimeInfo"]
 

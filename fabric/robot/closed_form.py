@@ -1,4 +1,4 @@
-"""Branch selection and the closed-form IK solver built on :class:`~fabric.sim.kinematics.SphericalWristArm`.
+"""Branch selection and the closed-form IK solver built on :class:`~fabric.robot.kinematics.SphericalWristArm`.
 
 See ``fabric/sim/kinematics.py`` for the geometry, the branch-selection argument
 and the singularity tests; this module holds the solver that applies them to
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fabric.sim.kinematics import (IK_JOINT_LIMIT, IK_OK, IK_OUT_OF_REACH, IK_SINGULAR, SphericalWristArm,
+from fabric.robot.kinematics import (IK_JOINT_LIMIT, IK_OK, IK_OUT_OF_REACH, IK_SINGULAR, SphericalWristArm,
                                    _LIMIT_TOL_RAD, _PI, _TWO_PI, _wrap, _wrap_diff, multi_turn_mask, pose_cols,
                                    wrist_q6)
 
@@ -112,7 +112,7 @@ class ClosedFormIK:
 
     def branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`branches` of flange poses given as columns (9, N) (``fabric.sim.kinematics.pose_cols``)."""
+        """:meth:`branches` of flange poses given as columns (9, N) (``fabric.robot.kinematics.pose_cols``)."""
         qb, reach, sing = self.arm.ik_branches_cols(C, q1_hold)
         qb, inlim = self.canon(qb)
         return qb, reach & inlim, reach, sing

@@ -22,8 +22,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from fabric.sim.cell import Cell
-from fabric.sim.program import MOVEJ, MOVEL, Program
+from fabric.robot.cell import Cell
+from fabric.motion.program import MOVEJ, MOVEL, Program
 
 __all__ = ["Hit", "SweepResult", "CollisionChecker"]
 
@@ -59,7 +59,7 @@ class CollisionChecker:
         gm = robot.collision_model.copy()
         self.n_robot = len(gm.geometryObjects)
         env = []
-        # cell frames (fabric.sim.cell): the table's reference is the centre of its top face (the box hangs
+        # cell frames (fabric.robot.cell): the table's reference is the centre of its top face (the box hangs
         # below it), the plate's the centre of its bottom face; coal boxes are centred on their origin
         for name, size_mm, T, below in (("table", cell.table_size_mm, cell.table_T, True),
                                         ("plate", cell.plate_size_mm, cell.true_plate_T, False)):

@@ -38,8 +38,8 @@ from typing import Any
 import numpy as np
 
 from fabric.errors import ConfigError, NotFound, ValidationError
-from fabric.sim import frames
-from fabric.sim.robot import RobotModel, ToolGeometry
+from fabric.robot import frames
+from fabric.robot.model import RobotModel, ToolGeometry
 
 __all__ = ["Cell", "CELLS_DIR", "PACKAGE_DIR"]
 

@@ -20,10 +20,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
-from fabric.sim.kinematics import IK_JOINT_LIMIT, IK_OK, IK_OUT_OF_REACH, IK_SINGULAR
+from fabric.robot.kinematics import IK_JOINT_LIMIT, IK_OK, IK_OUT_OF_REACH, IK_SINGULAR
 
 if TYPE_CHECKING:
-    from fabric.sim.robot import RobotModel
+    from fabric.robot.model import RobotModel
 
 __all__ = ["numeric_ik", "solve_one", "SINGULAR_SIGMA"]
 

@@ -17,9 +17,9 @@ import numpy as np
 
 from fabric.errors import UnreachableError
 from fabric.sim.deposition import bead_area_mm2
-from fabric.sim.frames import inv_T, make_T, quat_from_R, rot_x
-from fabric.sim.kinematics import IK_OK, IK_SINGULAR
-from fabric.sim.program import (APPROACH, BED, MOVEJ, MOVEL, NOZZLE, PRINT, RETURN_HOME, SET_TEMP, WAIT_TEMP,
+from fabric.robot.frames import inv_T, make_T, quat_from_R, rot_x
+from fabric.robot.kinematics import IK_OK, IK_SINGULAR
+from fabric.motion.program import (APPROACH, BED, MOVEJ, MOVEL, NOZZLE, PRINT, RETURN_HOME, SET_TEMP, WAIT_TEMP,
                                 Program)
 
 __all__ = ["square_program"]

@@ -37,7 +37,7 @@ path in the plate frame with one acceleration limit ``accel_mm_s2``:
    override lowered mid-print) the first rows decelerate at ``a`` instead.
 
 **Other rows**: WAIT lasts ``value`` seconds; WAIT_TEMP lasts until the
-heater is within tolerance (closed form, :mod:`fabric.sim.thermal`);
+heater is within tolerance (closed form, :mod:`fabric.motion.thermal`);
 SET_TEMP is instantaneous; RETRACT moves only the filament, ``|value| /
 retract_speed_mm_s`` seconds with the robot at rest. A zero-length MOVEL that
 only turns the tool takes ``max_j |dq_j| / vlim_j`` at rest.
@@ -51,10 +51,10 @@ import numpy as np
 from ruckig import InputParameter, Result, Ruckig, Trajectory
 
 from fabric.errors import UnreachableError, ValidationError
-from fabric.sim.frames import inv_T, quat_from_R
-from fabric.sim.program import MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
-from fabric.sim.thermal import Thermal
-from fabric.sim.timeline import Timeline
+from fabric.robot.frames import inv_T, quat_from_R
+from fabric.motion.program import MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
+from fabric.motion.thermal import Thermal
+from fabric.motion.timeline import Timeline
 
 __all__ = ["StartState", "time_program", "stop_timeline", "validate_program", "mini_program",
            "DEFAULT_ACCEL_MM_S2", "DEFAULT_RETRACT_SPEED_MM_S"]

@@ -1,0 +1,1 @@
+"""Motion: the program model, exact timing (look-ahead linear moves, Ruckig joint moves), timelines and heaters."""
