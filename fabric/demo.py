@@ -17,11 +17,11 @@ from dataclasses import replace
 from pathlib import Path
 
 from fabric import schemas as s
-from fabric.cli.pipeline_cmds import follow_print
 from fabric.cli.up import Cell
 from fabric.client import Client
 from fabric.config import SessionSettings
 from fabric.errors import FabricError
+from fabric.follow import follow_print
 from fabric.programs import program_from_artifact
 from fabric.viz import toolpath_png
 

@@ -15,9 +15,9 @@ import zenoh
 
 from fabric import codec
 from fabric import schemas as s
-from fabric.cli.pipeline_cmds import follow_print
 from fabric.client import Client
 from fabric.demo import sample_model
+from fabric.follow import follow_print
 from fabric.keys import ENDPOINTS, SERVICES
 
 pytestmark = pytest.mark.timeout(300)

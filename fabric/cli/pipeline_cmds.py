@@ -10,11 +10,11 @@ from fabric import schemas as s
 from fabric.cli.output import emit
 from fabric.client import Client
 from fabric.errors import BadRequest
+from fabric.follow import follow_print
 
-__all__ = ["register", "parse_sets", "follow_print"]
+__all__ = ["register", "parse_sets"]
 
 EXPORT_FLAGS = {"csv": "csv", "rapid": "rapid", "krl": "krl", "urscript": "urscript"}
-END_EVENTS = ("finished", "stopped", "fault")
 
 
 def parse_sets(items: list[str] | None) -> dict[str, str]:
@@ -95,24 +95,6 @@ def cmd_plan(c: Client, a: argparse.Namespace) -> int:
         return "\n".join(lines)
     emit(result, a.json, text)
     return 0 if summary.runnable else 2
-
-
-def follow_print(c: Client, timeout_s: float | None = None) -> s.Event:
-    """Wait for the station's end-of-print event (finished, stopped or fault) and return it."""
-    sub = c.subscribe("station", "events")
-    try:
-        seen = c.events().next_seq
-        st = c.state()
-        if st.state not in ("printing", "paused"):
-            for ev in reversed(c.events(max(0, seen - 50)).events):
-                if ev.kind in END_EVENTS:
-                    return ev
-        while True:
-            ev = sub.get(timeout=timeout_s)
-            if ev.kind in END_EVENTS:
-                return ev
-    finally:
-        sub.close()
 
 
 def cmd_job_submit(c: Client, a: argparse.Namespace) -> int:
