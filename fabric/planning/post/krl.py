@@ -8,7 +8,8 @@ moves on the planned joints (``$VEL_AXIS`` from the row's velocity ratio).
 
 Extruder and heaters, as signals the integrator maps: ``$OUT[1]`` extruder
 on/off and ``$ANOUT[1]`` volumetric rate / ``AM_FLOW_MAX`` switched with
-``TRIGGER WHEN DISTANCE=0`` (at the start of the move, path-synchronous);
+``TRIGGER WHEN DISTANCE=0`` (at the start of the move, path-synchronous), and switched off
+plainly before a joint move, a dwell, a heater wait or a retraction (``walk.py``);
 ``$ANOUT[2]`` / ``$ANOUT[3]`` nozzle / bed set point divided by 300 / 150 deg C,
 ``WAIT FOR $IN[1]`` / ``$IN[2]`` heater at temperature; retraction writes the
 length / 10 mm to ``$ANOUT[4]`` and pulses ``$OUT[2]``.
@@ -20,9 +21,10 @@ from typing import TextIO
 import numpy as np
 
 from fabric.errors import ValidationError
-from fabric.planning.post.common import (check_program, extrusion_rate, quat_to_zyx_deg, row_blocks,
-                                         write_lines, R_to_zyx_deg)
-from fabric.motion.program import BED, MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
+from fabric.planning.post.common import check_program, extrusion_rate, quat_to_zyx_deg, write_lines, R_to_zyx_deg
+from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LinearMove,
+                                       Retract, RowWalker, SetTemp, Wait, WaitTemp, heater_index)
+from fabric.motion.program import MOVEL, Program
 
 __all__ = ["write_krl"]
 
@@ -58,51 +60,73 @@ def write_krl(program: Program, src: TextIO, dat: TextIO | None, *, name: str = 
                       f"  ; am-fabric KRL export: {int((program.op <= MOVEL).sum())} targets",
                       f"  $BASE={base}", f"  $TOOL={tcp}", "  $OUT[1]=FALSE", "  $ANOUT[1]=0.0",
                       "  $ACC.CP=2.0", "  $ORI_TYPE=#VAR"])
-    on, cur_rate, cur_vel, cur_zone = False, -1.0, -1.0, -1.0
-    for a, b in row_blocks(0, len(program)):
-        abc = quat_to_zyx_deg(program.quat_wxyz[a:b])
-        qd = np.degrees(program.q_rad[a:b])
-        lines: list[str] = []
-        for i in range(a, b):
-            k, op = i - a, int(program.op[i])
-            if op == MOVEJ:
-                if on:
-                    lines += ["  $OUT[1]=FALSE", "  $ANOUT[1]=0.0"]
-                    on = False
-                pct = max(1, min(100, int(round(100 * float(program.vel_r[i] or 1.0)))))
-                axes = ",".join(f"A{j + 1} {qd[k, j]:.4f}" for j in range(qd.shape[1]))
-                lines += [f"  $VEL_AXIS[1]={pct}", f"  PTP {{{axes}}}"]
-            elif op == MOVEL:
-                v = float(program.speed_mm_s[i]) / 1000.0
-                if v != cur_vel:
-                    lines.append(f"  $VEL.CP={v:.5f}")
-                    cur_vel = v
-                z = float(program.zone_mm[i])
-                if z > 0 and z != cur_zone:
-                    lines.append(f"  $APO.CDIS={z:.3f}")
-                    cur_zone = z
-                r = round(float(rate[i]), 3)
-                if r > 0 and (not on or r != cur_rate):
-                    lines.append(f"  TRIGGER WHEN DISTANCE=0 DELAY=0 DO $ANOUT[1]={r / flow_max:.5f}")
-                    if not on:
-                        lines.append("  TRIGGER WHEN DISTANCE=0 DELAY=0 DO $OUT[1]=TRUE")
-                    on, cur_rate = True, r
-                elif r <= 0 and on:
-                    lines += ["  TRIGGER WHEN DISTANCE=0 DELAY=0 DO $OUT[1]=FALSE",
-                              "  TRIGGER WHEN DISTANCE=0 DELAY=0 DO $ANOUT[1]=0.0"]
-                    on = False
-                x, y, zz = program.xyz_mm[i]
-                lines.append(f"  LIN {{X {x:.3f},Y {y:.3f},Z {zz:.3f},A {abc[k, 0]:.4f},B {abc[k, 1]:.4f},"
-                             f"C {abc[k, 2]:.4f}}}{' C_DIS' if z > 0 else ''} ; {program.gcode_line[i]}")
-            elif op == WAIT:
-                lines.append(f"  WAIT SEC {float(program.value[i]):.3f}")
-            elif op in (SET_TEMP, WAIT_TEMP):
-                heater = int(program.aux[i] == BED)
-                lines.append(f"  $ANOUT[{2 + heater}]={float(program.value[i]) / _TEMP_SCALE[heater]:.5f}")
-                if op == WAIT_TEMP:
-                    lines.append(f"  WAIT FOR $IN[{1 + heater}]")
-            elif op == RETRACT:
-                lines += [f"  $ANOUT[4]={float(program.value[i]) / 10.0:.5f}", "  PULSE($OUT[2],TRUE,0.1)"]
-        write_lines(src, lines)
+    fmt = _Formatter(program, flow_max)
+    lines: list[str] = []
+    for ev in RowWalker(program).walk():
+        if isinstance(ev, Block):
+            write_lines(src, lines)
+            lines = []
+        fmt.event(ev, lines)
+    write_lines(src, lines)
     write_lines(src, ["  $OUT[1]=FALSE", "  $ANOUT[1]=0.0", "END"])
     return int((program.op <= MOVEL).sum())
+
+
+_TRIGGER = "  TRIGGER WHEN DISTANCE=0 DELAY=0 DO "
+
+
+class _Formatter:
+    """Formats the walker's events as KRL; keeps the modal ``$VEL.CP`` and ``$APO.CDIS`` written last."""
+
+    def __init__(self, program: Program, flow_max: float) -> None:
+        self.p, self.flow_max = program, flow_max
+        self.vel_m_s = -1.0
+        self.zone_mm = -1.0
+
+    def event(self, ev: Event, lines: list[str]) -> None:
+        p = self.p
+        if isinstance(ev, Block):
+            # KUKA A, B, C and joints in degrees of the block's rows
+            self.base = ev.start
+            self.abc = quat_to_zyx_deg(p.quat_wxyz[ev.start:ev.stop])
+            self.q_deg = np.degrees(p.q_rad[ev.start:ev.stop])
+        elif isinstance(ev, LinearMove):
+            self._linear(ev, lines)
+        elif isinstance(ev, JointMove):
+            pct = max(1, min(100, int(round(100 * float(p.vel_r[ev.row] or 1.0)))))
+            q = self.q_deg[ev.row - self.base]
+            axes = ",".join(f"A{j + 1} {q[j]:.4f}" for j in range(len(q)))
+            lines += [f"  $VEL_AXIS[1]={pct}", f"  PTP {{{axes}}}"]
+        elif isinstance(ev, ExtruderOff):
+            lines += ["  $OUT[1]=FALSE", "  $ANOUT[1]=0.0"]
+        elif isinstance(ev, Wait):
+            lines.append(f"  WAIT SEC {ev.duration_s:.3f}")
+        elif isinstance(ev, SetTemp):
+            heater = heater_index(ev.heater)
+            lines.append(f"  $ANOUT[{2 + heater}]={ev.temp_c / _TEMP_SCALE[heater]:.5f}")
+        elif isinstance(ev, WaitTemp):
+            lines.append(f"  WAIT FOR $IN[{1 + heater_index(ev.heater)}]")
+        elif isinstance(ev, Retract):
+            lines += [f"  $ANOUT[4]={ev.length_mm / 10.0:.5f}", "  PULSE($OUT[2],TRUE,0.1)"]
+
+    def _linear(self, ev: LinearMove, lines: list[str]) -> None:
+        p, i, k = self.p, ev.row, ev.row - self.base
+        v = float(p.speed_mm_s[i]) / 1000.0
+        if v != self.vel_m_s:
+            lines.append(f"  $VEL.CP={v:.5f}")
+            self.vel_m_s = v
+        z = float(p.zone_mm[i])
+        if z > 0 and z != self.zone_mm:
+            lines.append(f"  $APO.CDIS={z:.3f}")
+            self.zone_mm = z
+        sw = ev.extruder
+        if isinstance(sw, (ExtruderOn, ExtruderRate)):
+            lines.append(f"{_TRIGGER}$ANOUT[1]={sw.rate_mm3_s / self.flow_max:.5f}")
+            if isinstance(sw, ExtruderOn):
+                lines.append(f"{_TRIGGER}$OUT[1]=TRUE")
+        elif isinstance(sw, ExtruderOff):
+            lines += [f"{_TRIGGER}$OUT[1]=FALSE", f"{_TRIGGER}$ANOUT[1]=0.0"]
+        x, y, zz = p.xyz_mm[i]
+        a, b, c = self.abc[k]
+        lines.append(f"  LIN {{X {x:.3f},Y {y:.3f},Z {zz:.3f},A {a:.4f},B {b:.4f},C {c:.4f}}}"
+                     f"{' C_DIS' if z > 0 else ''} ; {p.gcode_line[i]}")

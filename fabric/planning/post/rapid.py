@@ -35,9 +35,11 @@ from typing import Callable, TextIO
 import numpy as np
 
 from fabric.errors import ValidationError
-from fabric.planning.post.common import check_program, extrusion_rate, row_blocks, write_lines
+from fabric.planning.post.common import check_program, write_lines
+from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LayerStart,
+                                       LinearMove, Retract, RowWalker, SetTemp, Wait, WaitTemp)
 from fabric.robot.frames import quat_from_R
-from fabric.motion.program import BED, MOVEJ, MOVEL, PRINT, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
+from fabric.motion.program import MOVEJ, MOVEL, Program
 
 __all__ = ["RapidOptions", "RapidExport", "write_rapid"]
 
@@ -130,8 +132,7 @@ def write_rapid(program: Program, sink: TextIO | Callable[[str], TextIO], *,
     cuts = sorted(set(cuts)) if p1 > p0 else []
     n_mod = max(len(cuts) - 1, 0)
     export = RapidExport()
-    rate = extrusion_rate(program)
-    ctx = _Emitter(program, opt, names, speeds, rate)
+    ctx = _Emitter(program, opt, names, speeds)
     main_name = f"{opt.prefix}Main"
     out = _open(sink, main_name)
     _write_main(out, main_name, program, opt, names, tool, n_mod, bounds, ctx)
@@ -187,75 +188,70 @@ def _write_main(out: TextIO, name: str, program: Program, opt: RapidOptions, nam
     for proc in ("Approach", "ReturnHome"):
         # the extruder is off entering these, whatever the print left it as
         out.write(f"  PROC {proc}()\n    SetDO {opt.do_extruder}, 0;\n    SetAO {opt.ao_flow}, 0;\n")
-        ctx.on = False
+        ctx.walker.extruder_reset()
         if proc in bounds:
             ctx.rows(out, *bounds[proc])
         out.write("  ENDPROC\n")
     out.write("ENDMODULE\n")
-    ctx.on = False
+    ctx.walker.extruder_reset()
 
 
 class _Emitter:
-    """Formats rows as RAPID instructions, tracking the extruder state across modules."""
+    """Formats the walker's events as RAPID instructions; the walker keeps the extruder state across modules."""
 
-    def __init__(self, program: Program, opt: RapidOptions, names: _Names, speeds: np.ndarray,
-                 rate: np.ndarray) -> None:
-        self.p, self.opt, self.names, self.speeds, self.rate = program, opt, names, speeds, rate
-        self.on = False
-        self.cur_rate = -1.0
-        self.layer = -2
-
-    def _off(self, lines: list[str]) -> None:
-        if self.on:
-            lines += [f"    SetDO {self.opt.do_extruder}, 0;", f"    SetAO {self.opt.ao_flow}, 0;"]
-            self.on = False
+    def __init__(self, program: Program, opt: RapidOptions, names: _Names, speeds: np.ndarray) -> None:
+        self.p, self.opt, self.names, self.speeds = program, opt, names, speeds
+        self.walker = RowWalker(program)
+        self.tw = f"{opt.tool_name}\\WObj:={opt.wobj_name};"
 
     def rows(self, out: TextIO, start: int, stop: int) -> None:
-        p, opt = self.p, self.opt
-        tw = f"{opt.tool_name}\\WObj:={opt.wobj_name};"
-        for a, b in row_blocks(start, stop):
-            q_deg = np.degrees(p.q_rad[a:b])
-            cf = np.floor(q_deg[:, [0, 3, 5]] / 90.0).astype(int)
-            cfx = (q_deg[:, 4] < 0).astype(int)
-            lines: list[str] = []
-            for i in range(a, b):
-                k = i - a
-                op = int(p.op[i])
-                if p.layer[i] != self.layer and p.section[i] == PRINT:
-                    self.layer = int(p.layer[i])
-                    lines.append(f"    ! layer {self.layer}")
-                if op == MOVEJ:
-                    self._off(lines)
-                    joints = ",".join(_num(v, 4) for v in q_deg[k])
-                    lines.append(f"    MoveAbsJ [[{joints}],{_E9}]\\NoEOffs, {self.names.speed(self.speeds[i])}, "
-                                 f"{self.names.zone(p.zone_mm[i])}, {tw}")
-                elif op == MOVEL:
-                    target = (f"[{_pose(p.xyz_mm[i], p.quat_wxyz[i])[1:-1]},[{cf[k, 0]},{cf[k, 1]},{cf[k, 2]},"
-                              f"{cfx[k]}],{_E9}]")
-                    sp, zn = self.names.speed(self.speeds[i]), self.names.zone(p.zone_mm[i])
-                    r = round(float(self.rate[i]), 3)
-                    if r > 0 and (not self.on or r != self.cur_rate):
-                        lines.append(f"    TriggIO trFlow, 0\\Start\\AOp:={opt.ao_flow}, {_num(r)};")
-                        trig = "trFlow" if self.on else "trFlow\\T2:=trOn"
-                        lines.append(f"    TriggL {target}, {sp}, {trig}, {zn}, {tw}  ! {p.gcode_line[i]}")
-                        self.on, self.cur_rate = True, r
-                    elif r <= 0 and self.on:
-                        lines.append(f"    TriggL {target}, {sp}, trOff\\T2:=trFlowOff, {zn}, {tw}"
-                                     f"  ! {p.gcode_line[i]}")
-                        self.on = False
-                    else:
-                        lines.append(f"    MoveL {target}, {sp}, {zn}, {tw}  ! {p.gcode_line[i]}")
-                elif op == WAIT:
-                    self._off(lines)
-                    lines.append(f"    WaitTime {_num(p.value[i])};")
-                elif op in (SET_TEMP, WAIT_TEMP):
-                    heater = "Bed" if p.aux[i] == BED else "Nozzle"
-                    lines.append(f"    SetAO aoTemp{heater}, {_num(p.value[i], 1)};")
-                    if op == WAIT_TEMP:
-                        self._off(lines)
-                        lines.append(f"    WaitDI di{heater}AtTemp, 1;")
-                elif op == RETRACT:
-                    self._off(lines)
-                    lines.append(f"    Retract {_num(p.value[i])};")
-            write_lines(out, lines)
+        lines: list[str] = []
+        for ev in self.walker.walk(start, stop):
+            if isinstance(ev, Block):
+                write_lines(out, lines)
+                lines = []
+                self._block(ev)
+            else:
+                self._format(ev, lines)
+        write_lines(out, lines)
 
+    def _block(self, block: Block) -> None:
+        # joints in degrees and the confdata quadrants of the block's rows
+        self.base = block.start
+        self.q_deg = np.degrees(self.p.q_rad[block.start:block.stop])
+        self.cf = np.floor(self.q_deg[:, [0, 3, 5]] / 90.0).astype(int)
+        self.cfx = (self.q_deg[:, 4] < 0).astype(int)
+
+    def _format(self, ev: Event, lines: list[str]) -> None:
+        p, opt = self.p, self.opt
+        if isinstance(ev, LinearMove):
+            i, k = ev.row, ev.row - self.base
+            target = (f"[{_pose(p.xyz_mm[i], p.quat_wxyz[i])[1:-1]},[{self.cf[k, 0]},{self.cf[k, 1]},"
+                      f"{self.cf[k, 2]},{self.cfx[k]}],{_E9}]")
+            speed, zone = self.names.speed(self.speeds[i]), self.names.zone(p.zone_mm[i])
+            sw = ev.extruder
+            if isinstance(sw, (ExtruderOn, ExtruderRate)):
+                lines.append(f"    TriggIO trFlow, 0\\Start\\AOp:={opt.ao_flow}, {_num(sw.rate_mm3_s)};")
+                trigger = "trFlow\\T2:=trOn" if isinstance(sw, ExtruderOn) else "trFlow"
+                lines.append(f"    TriggL {target}, {speed}, {trigger}, {zone}, {self.tw}  ! {p.gcode_line[i]}")
+            elif isinstance(sw, ExtruderOff):
+                lines.append(f"    TriggL {target}, {speed}, trOff\\T2:=trFlowOff, {zone}, {self.tw}"
+                             f"  ! {p.gcode_line[i]}")
+            else:
+                lines.append(f"    MoveL {target}, {speed}, {zone}, {self.tw}  ! {p.gcode_line[i]}")
+        elif isinstance(ev, JointMove):
+            joints = ",".join(_num(v, 4) for v in self.q_deg[ev.row - self.base])
+            lines.append(f"    MoveAbsJ [[{joints}],{_E9}]\\NoEOffs, {self.names.speed(self.speeds[ev.row])}, "
+                         f"{self.names.zone(p.zone_mm[ev.row])}, {self.tw}")
+        elif isinstance(ev, LayerStart):
+            lines.append(f"    ! layer {ev.layer}")
+        elif isinstance(ev, ExtruderOff):
+            lines += [f"    SetDO {opt.do_extruder}, 0;", f"    SetAO {opt.ao_flow}, 0;"]
+        elif isinstance(ev, Wait):
+            lines.append(f"    WaitTime {_num(ev.duration_s)};")
+        elif isinstance(ev, SetTemp):
+            lines.append(f"    SetAO aoTemp{ev.heater.capitalize()}, {_num(ev.temp_c, 1)};")
+        elif isinstance(ev, WaitTemp):
+            lines.append(f"    WaitDI di{ev.heater.capitalize()}AtTemp, 1;")
+        elif isinstance(ev, Retract):
+            lines.append(f"    Retract {_num(ev.length_mm)};")

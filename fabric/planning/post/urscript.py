@@ -8,7 +8,8 @@ the plate-frame targets. Joint moves use the planned joints (rad) at
 metres (0 = stop). The extruder is ``set_digital_out(0, ...)`` and
 ``set_analog_out(0, rate / flow_max)``; URScript outputs switch when the
 interpreter reaches them (not path-synchronous), which with blends is at the
-start of the previous move's blend. Heaters: analog outputs 1 (nozzle / 300 C)
+start of the previous move's blend; the extruder goes off before a joint move, a dwell,
+a heater wait or a retraction (``walk.py``). Heaters: analog outputs 1 (nozzle / 300 C)
 and 2 (bed / 150 C), waits on digital inputs 0 / 1; retraction: analog output
 3 (length / 10 mm) and a pulse on digital output 1.
 """
@@ -19,9 +20,11 @@ from typing import TextIO
 import numpy as np
 
 from fabric.errors import ValidationError
-from fabric.planning.post.common import check_program, extrusion_rate, quat_to_rotvec, row_blocks, write_lines
+from fabric.planning.post.common import check_program, extrusion_rate, quat_to_rotvec, write_lines
+from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LinearMove,
+                                       Retract, RowWalker, SetTemp, Wait, WaitTemp, heater_index)
 from fabric.robot.frames import quat_from_R
-from fabric.motion.program import BED, MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
+from fabric.motion.program import MOVEL, Program
 
 __all__ = ["write_urscript"]
 
@@ -48,43 +51,61 @@ def write_urscript(program: Program, out: TextIO, *, name: str = "am_print", too
     write_lines(out, [f"def {name}():", f"  # am-fabric URScript export: {int((program.op <= MOVEL).sum())} targets",
                       f"  set_tcp({_pose_m(tool)})", f"  plate = {_pose_m(program.wobj)}",
                       "  set_digital_out(0, False)", "  set_analog_out(0, 0.0)"])
-    on, cur = False, -1.0
-    for a, b in row_blocks(0, len(program)):
-        rv = quat_to_rotvec(program.quat_wxyz[a:b])
-        lines: list[str] = []
-        for i in range(a, b):
-            k, op = i - a, int(program.op[i])
-            if op == MOVEJ:
-                if on:
-                    lines += ["  set_digital_out(0, False)", "  set_analog_out(0, 0.0)"]
-                    on = False
-                q = ",".join(f"{v:.6f}" for v in program.q_rad[i])
-                v = joint_speed_rad_s * float(program.vel_r[i] or 1.0)
-                lines.append(f"  movej([{q}], a=1.4, v={v:.4f})")
-            elif op == MOVEL:
-                r = round(float(rate[i]), 3)
-                if r > 0 and (not on or r != cur):
-                    lines.append(f"  set_analog_out(0, {r / flow_max:.5f})")
-                    if not on:
-                        lines.append("  set_digital_out(0, True)")
-                    on, cur = True, r
-                elif r <= 0 and on:
-                    lines += ["  set_digital_out(0, False)", "  set_analog_out(0, 0.0)"]
-                    on = False
-                x, y, z = program.xyz_mm[i] / 1000.0
-                lines.append(f"  movel(pose_trans(plate, p[{x:.6f},{y:.6f},{z:.6f},{rv[k, 0]:.6f},{rv[k, 1]:.6f},"
-                             f"{rv[k, 2]:.6f}]), a={accel_m_s2:.3f}, v={program.speed_mm_s[i] / 1000.0:.5f}, "
-                             f"r={program.zone_mm[i] / 1000.0:.5f})  # {program.gcode_line[i]}")
-            elif op == WAIT:
-                lines.append(f"  sleep({float(program.value[i]):.3f})")
-            elif op in (SET_TEMP, WAIT_TEMP):
-                heater = int(program.aux[i] == BED)
-                lines.append(f"  set_analog_out({1 + heater}, {float(program.value[i]) / _TEMP_SCALE[heater]:.5f})")
-                if op == WAIT_TEMP:
-                    lines += [f"  while not get_digital_in({heater}):", "    sync()", "  end"]
-            elif op == RETRACT:
-                lines += [f"  set_analog_out(3, {float(program.value[i]) / 10.0:.5f})",
-                          "  set_digital_out(1, True)", "  sleep(0.1)", "  set_digital_out(1, False)"]
-        write_lines(out, lines)
+    fmt = _Formatter(program, flow_max, joint_speed_rad_s, accel_m_s2)
+    lines: list[str] = []
+    for ev in RowWalker(program).walk():
+        if isinstance(ev, Block):
+            write_lines(out, lines)
+            lines = []
+        fmt.event(ev, lines)
+    write_lines(out, lines)
     write_lines(out, ["  set_digital_out(0, False)", "  set_analog_out(0, 0.0)", "end", f"{name}()"])
     return int((program.op <= MOVEL).sum())
+
+
+class _Formatter:
+    """Formats the walker's events as URScript (SI units: metres, radians, seconds)."""
+
+    def __init__(self, program: Program, flow_max: float, joint_speed_rad_s: float, accel_m_s2: float) -> None:
+        self.p, self.flow_max = program, flow_max
+        self.joint_speed_rad_s, self.accel_m_s2 = joint_speed_rad_s, accel_m_s2
+
+    def event(self, ev: Event, lines: list[str]) -> None:
+        p = self.p
+        if isinstance(ev, Block):
+            # rotation vectors of the block's rows
+            self.base = ev.start
+            self.rotvec = quat_to_rotvec(p.quat_wxyz[ev.start:ev.stop])
+        elif isinstance(ev, LinearMove):
+            self._linear(ev, lines)
+        elif isinstance(ev, JointMove):
+            q = ",".join(f"{v:.6f}" for v in p.q_rad[ev.row])
+            v = self.joint_speed_rad_s * float(p.vel_r[ev.row] or 1.0)
+            lines.append(f"  movej([{q}], a=1.4, v={v:.4f})")
+        elif isinstance(ev, ExtruderOff):
+            lines += ["  set_digital_out(0, False)", "  set_analog_out(0, 0.0)"]
+        elif isinstance(ev, Wait):
+            lines.append(f"  sleep({ev.duration_s:.3f})")
+        elif isinstance(ev, SetTemp):
+            heater = heater_index(ev.heater)
+            lines.append(f"  set_analog_out({1 + heater}, {ev.temp_c / _TEMP_SCALE[heater]:.5f})")
+        elif isinstance(ev, WaitTemp):
+            lines += [f"  while not get_digital_in({heater_index(ev.heater)}):", "    sync()", "  end"]
+        elif isinstance(ev, Retract):
+            lines += [f"  set_analog_out(3, {ev.length_mm / 10.0:.5f})",
+                      "  set_digital_out(1, True)", "  sleep(0.1)", "  set_digital_out(1, False)"]
+
+    def _linear(self, ev: LinearMove, lines: list[str]) -> None:
+        p, i = self.p, ev.row
+        sw = ev.extruder
+        if isinstance(sw, (ExtruderOn, ExtruderRate)):
+            lines.append(f"  set_analog_out(0, {sw.rate_mm3_s / self.flow_max:.5f})")
+            if isinstance(sw, ExtruderOn):
+                lines.append("  set_digital_out(0, True)")
+        elif isinstance(sw, ExtruderOff):
+            lines += ["  set_digital_out(0, False)", "  set_analog_out(0, 0.0)"]
+        x, y, z = p.xyz_mm[i] / 1000.0
+        rx, ry, rz = self.rotvec[i - self.base]
+        lines.append(f"  movel(pose_trans(plate, p[{x:.6f},{y:.6f},{z:.6f},{rx:.6f},{ry:.6f},{rz:.6f}]), "
+                     f"a={self.accel_m_s2:.3f}, v={p.speed_mm_s[i] / 1000.0:.5f}, "
+                     f"r={p.zone_mm[i] / 1000.0:.5f})  # {p.gcode_line[i]}")

@@ -1,0 +1,211 @@
+"""One walk over a program's rows for every post-processor: typed events, the extruder state machine once.
+
+The dialects (RAPID, KRL, URScript) differ only in how they spell things;
+what happens when is decided here. A :class:`RowWalker` goes through a row
+range and yields, in order:
+
+- :class:`Block` before every ``BLOCK_ROWS`` rows, so that a dialect can
+  compute its per-row numbers (angles, rotation vectors) for the block at once
+  and write its lines out block by block (memory stays flat);
+- :class:`LayerStart` when a print row starts a new layer;
+- :class:`JointMove` and :class:`LinearMove` for the motion rows;
+- :class:`Wait`, :class:`SetTemp`, :class:`WaitTemp` and :class:`Retract` for the others.
+
+The extruder. A linear move whose programmed volumetric rate (flow per mm
+x speed, rounded to 1e-3 mm^3/s) is positive switches the extruder on, or
+changes its rate, *at the start of that move* (path-synchronous where the
+controller can): the switch rides on the move as ``LinearMove.extruder``.
+The first linear move with rate 0 after extruding switches it off the same
+way. Anything that stops the robot or moves it on joints (a joint move, a
+dwell, a heater wait, a retraction) is preceded by a plain
+:class:`ExtruderOff` if the extruder is on, so nothing is pushed out while
+the nozzle stands still.
+"""
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+from fabric.errors import ValidationError
+from fabric.planning.post.common import BLOCK_ROWS, extrusion_rate, row_blocks
+from fabric.motion.program import BED, MOVEJ, MOVEL, PRINT, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
+
+__all__ = ["RowWalker", "Event", "Block", "LayerStart", "JointMove", "LinearMove", "ExtruderOn", "ExtruderRate",
+           "ExtruderOff", "Wait", "SetTemp", "WaitTemp", "Retract", "NOZZLE_HEATER", "BED_HEATER",
+           "heater_index"]
+
+NOZZLE_HEATER, BED_HEATER = "nozzle", "bed"
+
+
+@dataclass(frozen=True, slots=True)
+class Block:
+    """The rows ``[start, stop)`` follow: compute per-row numbers for them now."""
+
+    start: int
+    stop: int
+
+
+@dataclass(frozen=True, slots=True)
+class LayerStart:
+    """A print row of a new layer follows."""
+
+    layer: int
+
+
+@dataclass(frozen=True, slots=True)
+class ExtruderOn:
+    """Switch the extruder on at ``rate_mm3_s`` (at the start of the move that carries it)."""
+
+    rate_mm3_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class ExtruderRate:
+    """The extruder is on: change its rate to ``rate_mm3_s`` (at the start of the move that carries it)."""
+
+    rate_mm3_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class ExtruderOff:
+    """Switch the extruder off: at the start of the move that carries it, or at once when on its own."""
+
+
+@dataclass(frozen=True, slots=True)
+class JointMove:
+    """Move on joints to the planned joints of ``row``."""
+
+    row: int
+
+
+@dataclass(frozen=True, slots=True)
+class LinearMove:
+    """Move linearly to the plate-frame target of ``row``; ``extruder`` switches at the start of the move."""
+
+    row: int
+    extruder: ExtruderOn | ExtruderRate | ExtruderOff | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Wait:
+    """Dwell for ``duration_s``."""
+
+    row: int
+    duration_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class SetTemp:
+    """Set a heater (``NOZZLE_HEATER`` or ``BED_HEATER``) to ``temp_c``."""
+
+    row: int
+    heater: str
+    temp_c: float
+
+
+@dataclass(frozen=True, slots=True)
+class WaitTemp:
+    """Wait until the heater has reached its set point (always after its :class:`SetTemp`)."""
+
+    row: int
+    heater: str
+    temp_c: float
+
+
+@dataclass(frozen=True, slots=True)
+class Retract:
+    """Move the filament by ``length_mm`` (< 0 retracts, > 0 primes)."""
+
+    row: int
+    length_mm: float
+
+
+Event = (Block | LayerStart | JointMove | LinearMove | ExtruderOff | Wait | SetTemp | WaitTemp | Retract)
+
+_OFF = ExtruderOff()
+
+
+class RowWalker:
+    """Walks row ranges of one program, keeping the extruder and layer state from one range to the next.
+
+    RAPID writes the approach and the return home before the print modules,
+    each from an extruder known to be off: :meth:`extruder_reset` says so.
+    """
+
+    def __init__(self, program: Program, block_rows: int = BLOCK_ROWS) -> None:
+        self.program = program
+        self.block_rows = block_rows
+        self.rate_mm3_s = extrusion_rate(program)
+        self.extruding = False
+        self.current_rate_mm3_s = -1.0
+        self.layer = -2
+
+    def extruder_reset(self) -> None:
+        """The extruder is off here whatever the rows before left it as (the caller switched it off)."""
+        self.extruding = False
+
+    def walk(self, start: int = 0, stop: int | None = None) -> Iterator[Event]:
+        """The events of rows ``[start, stop)`` (the whole program by default)."""
+        p = self.program
+        stop = len(p) if stop is None else stop
+        for a, b in row_blocks(start, stop, self.block_rows):
+            yield Block(a, b)
+            ops = p.op[a:b].tolist()
+            layers = p.layer[a:b].tolist()
+            in_print = (p.section[a:b] == PRINT).tolist()
+            for k, op in enumerate(ops):
+                i = a + k
+                if in_print[k] and layers[k] != self.layer:
+                    self.layer = layers[k]
+                    yield LayerStart(self.layer)
+                if op == MOVEL:
+                    yield LinearMove(i, self._switch(i))
+                elif op == MOVEJ:
+                    yield from self._off()
+                    yield JointMove(i)
+                else:
+                    yield from self._other(op, i)
+
+    def _switch(self, i: int) -> ExtruderOn | ExtruderRate | ExtruderOff | None:
+        # the rate a linear move programs, against what the extruder does now
+        rate = round(float(self.rate_mm3_s[i]), 3)
+        if rate > 0:
+            if not self.extruding:
+                self.extruding, self.current_rate_mm3_s = True, rate
+                return ExtruderOn(rate)
+            if rate != self.current_rate_mm3_s:
+                self.current_rate_mm3_s = rate
+                return ExtruderRate(rate)
+            return None
+        if self.extruding:
+            self.extruding = False
+            return _OFF
+        return None
+
+    def _off(self) -> Iterator[ExtruderOff]:
+        if self.extruding:
+            self.extruding = False
+            yield _OFF
+
+    def _other(self, op: int, i: int) -> Iterator[Event]:
+        p = self.program
+        value = float(p.value[i])
+        if op == WAIT:
+            yield from self._off()
+            yield Wait(i, value)
+        elif op in (SET_TEMP, WAIT_TEMP):
+            heater = BED_HEATER if p.aux[i] == BED else NOZZLE_HEATER
+            yield SetTemp(i, heater, value)
+            if op == WAIT_TEMP:
+                yield from self._off()
+                yield WaitTemp(i, heater, value)
+        elif op == RETRACT:
+            yield from self._off()
+            yield Retract(i, value)
+        else:
+            raise ValidationError(f"row {i}: unknown instruction code {op}", field="op", row=i, value=op)
+
+
+def heater_index(heater: str) -> int:
+    """0 for the nozzle, 1 for the bed (the signal numbering the dialects share)."""
+    return 1 if heater == BED_HEATER else 0
