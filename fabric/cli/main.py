@@ -14,9 +14,12 @@ from fabric.client import Client
 from fabric.config import add_session_args, settings_from_args
 from fabric.errors import FabricError
 from fabric.keys import SERVICES
-from fabric.services import SERVICE_MODULES
 
-__all__ = ["main", "build_parser"]
+# Building the parser and running a query import only the client and the schemas (numpy, zenoh, msgpack).
+# The heavy modules (services, twin, robot model: scipy, trimesh, pinocchio) are imported inside the
+# commands that need them: ``serve`` (the service's module), ``up`` (the launcher), ``cell`` (the cell model).
+
+__all__ = ["main", "build_parser", "service_parser"]
 
 
 def _common() -> argparse.ArgumentParser:
@@ -31,13 +34,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="fabric-cli", description="Control fabric for robotic additive manufacturing")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("serve", help="run one service in this process")
-    ssub = p.add_subparsers(dest="service", required=True)
-    for name, mod in SERVICE_MODULES.items():
-        sp = ssub.add_parser(name, parents=[common], help=f"the {name} service")
-        sp.add_argument("--log-level", default="INFO")
-        importlib.import_module(mod).add_arguments(sp)
-        sp.set_defaults(local=_cmd_serve)
+    p = sub.add_parser("serve", help="run one service in this process",
+                       description="Run one service in this process. Its options follow its name: "
+                                   "fabric-cli serve station --help lists them.")
+    p.add_argument("service", choices=SERVICES)
+    p.add_argument("service_args", nargs=argparse.REMAINDER, metavar="...", help="the service's options")
+    p.set_defaults(local=_cmd_serve)
 
     p = sub.add_parser("up", parents=[common], help="start the whole cell on this host (Ctrl-C stops it)")
     p.add_argument("--services", nargs="+", choices=SERVICES, default=list(SERVICES))
@@ -69,10 +71,23 @@ def _load_cell(path: str | None):
     return Cell.load(path) if path else Cell.builtin("irb140")
 
 
+def service_parser(name: str) -> argparse.ArgumentParser:
+    """The options of service ``name``; imports that service's module, so only ``serve`` builds it."""
+    from fabric.services import SERVICE_MODULES
+    module = importlib.import_module(SERVICE_MODULES[name])
+    p = argparse.ArgumentParser(prog="fabric-cli serve " + name, parents=[_common()],
+                                description=f"Run the {name} service in this process.")
+    p.add_argument("--log-level", default="INFO")
+    module.add_arguments(p)
+    return p
+
+
 def _cmd_serve(a: argparse.Namespace) -> int:
     from fabric.services.host import serve, setup_logging
-    setup_logging(a.service, a.log_level)
-    return serve(a.service, settings_from_args(a), a)
+    opts = service_parser(a.service).parse_args(a.service_args)
+    opts.service = a.service
+    setup_logging(a.service, opts.log_level)
+    return serve(a.service, settings_from_args(opts), opts)
 
 
 def _cmd_up(a: argparse.Namespace) -> int:
