@@ -76,10 +76,10 @@ def test_pause_resume_mid_layer_gives_identical_beads(cell: Cell, prog: Program)
     assert kinds(events) == ["extruder_off", "paused"]
     stopped_at = events[1].data["xyz_mm"]
     lifted = twin.pose()
-    assert lifted.xyz_mm[2] == pytest.approx(stopped_at[2] + twin.lift_mm, abs=1e-6)
+    assert lifted.xyz_mm[2] == pytest.approx(stopped_at[2] + twin.config.lift_mm, abs=1e-6)
     assert not twin.extrusion().on
     assert twin.extrusion().filament_mm == pytest.approx(twin.extrusion().extruded_mm3 / (np.pi * 1.75 ** 2 / 4)
-                                                         - twin.retract_mm)
+                                                         - twin.config.retract_mm)
     vol_paused = twin.extrusion().extruded_mm3
     assert vol_paused > before                                 # the controlled stop still extrudes
     twin.advance(30.0)                                         # a long pause: nothing moves, nothing extrudes
@@ -137,7 +137,7 @@ def test_stop_keeps_partial_bead_and_goes_safe(cell: Cell) -> None:
     part = twin.beads
     assert np.linalg.norm(part.end_mm[-1] - part.start_mm[-1]) < 20.0
     assert part.total_volume_mm3 == pytest.approx(twin.extrusion().extruded_mm3, rel=1e-12)
-    assert twin.pose().base_xyz_mm[2] > cell.wobj_T()[2, 3] + twin.lift_mm
+    assert twin.pose().base_xyz_mm[2] > cell.wobj_T()[2, 3] + twin.config.lift_mm
     twin.go_home()
     events = run(twin, 0.5)
     assert kinds(events) == ["home"]
@@ -255,7 +255,7 @@ def test_pause_in_joint_move_and_during_resume(cell: Cell, prog: Program) -> Non
     events = twin.advance(5.0)
     assert kinds(events) == ["paused"]                        # the joint move is finished first
     assert events[0].data["resume_row"] == 1
-    np.testing.assert_allclose(twin.pose().xyz_mm, prog.xyz_mm[0] + [0, 0, twin.lift_mm], atol=1e-6)
+    np.testing.assert_allclose(twin.pose().xyz_mm, prog.xyz_mm[0] + [0, 0, twin.config.lift_mm], atol=1e-6)
     twin.resume()
     twin.advance(0.01)                                         # going back down
     twin.pause()                                               # ... and pause again: that resume never completes

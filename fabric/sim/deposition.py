@@ -135,6 +135,26 @@ class Deposition:
     def __len__(self) -> int:
         return self._n
 
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """Every bead field as an array (copies), for a snapshot."""
+        return {k: self._buf[k][: self._n].copy() for k in _FIELDS}
+
+    @classmethod
+    def from_arrays(cls, program: Program | None, arrays: dict[str, np.ndarray]) -> "Deposition":
+        """The beads saved by :meth:`to_arrays`, for ``program`` (which sets the bead shape of new beads)."""
+        if set(arrays) != set(_FIELDS):
+            raise ValidationError(f"bead arrays {sorted(arrays)}, expected {sorted(_FIELDS)}", field="beads")
+        dep = cls(program)
+        n = len(arrays["row"])
+        dep._alloc(max(256, n))
+        for k, shape in _FIELDS.items():
+            arr = np.asarray(arrays[k])
+            if arr.shape != (n, *shape):
+                raise ValidationError(f"bead field {k}: shape {arr.shape}, expected {(n, *shape)}", field="beads")
+            dep._buf[k][:n] = arr
+        dep._n = n
+        return dep
+
     def __getattr__(self, name: str) -> np.ndarray:
         if name in _FIELDS:
             return self.__dict__["_buf"][name][: self.__dict__["_n"]]

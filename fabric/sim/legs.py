@@ -1,394 +1,258 @@
-"""The twin's motion legs: running them in simulated time, and planning pause, stop, resume and re-timing.
+"""Motion legs: a timeline placed at an absolute time, and the recipe (spec) that rebuilds it exactly.
 
-Motion is a queue of *legs*, each a :class:`~fabric.motion.timeline.Timeline`
-with an absolute start: the program (re-timed from a row when an override
-changes it), a controlled stop, the pause/stop moves (retract, lift straight
-up along the plate normal), the resume moves (straight down at
-``resume_speed_mm_s`` to the exact stop point, unretract) and homing. A leg
-may be *cut* (a pause, an override, a fault): it then ends at a given time and
-owns only the rows up to there. Legs that continue the program are timed when
-they start, so the heaters and overrides they see are the ones of that moment.
+The twin's motion is a queue of legs. Each leg knows *how its timeline is
+made* (its spec), not only the timeline itself, so the queue can be saved as
+plain data and rebuilt bit for bit: the motion model is deterministic, and a
+timeline is a function of its spec alone.
 
-Pause is a controlled stop: the TCP keeps following the path and slows at the
-acceleration limit (extruding with flow tied to the speed, as a synchronised
-extruder does), so the stop point lies a little beyond where the command came;
-during a joint move or a retraction the row is finished first; a dwell or a
-heat-up is interrupted and redone on resume. Then extruder off, retract, lift.
-Resume goes back down to the recorded point, unretracts and continues the row
-from rest. Because a bead is recorded when its row completes, from the row's
-own start and end points, and volumes are the flow per mm times the distance
-actually covered, a paused print gives the same beads as an uninterrupted one.
-Stop is the same controlled stop, then retract and lift, heaters off, and the
-row in progress is recorded as a partial bead.
+- :class:`ProgramLegSpec`: the loaded program from ``row`` on, starting from
+  a given pose (``s_mm`` along that row, at ``v_mm_s``) or from wherever the
+  robot rests when the leg begins. It is timed when it begins, with the
+  heaters and overrides of that moment; those inputs are then frozen into the
+  spec (:class:`ProgramStart`), so a saved leg is rebuilt with the same ones.
+- :class:`StopLegSpec`: the controlled stop of another leg's timeline at a
+  local time (pause and stop slow down along the path).
+- :class:`AuxLegSpec`: the twin's own short moves (retract and lift, the way
+  back down, homing) as explicit rows from an explicit start pose.
 """
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, Union
 
 import numpy as np
 
-from fabric.errors import UnreachableError
-from fabric.sim.deposition import Deposition
-from fabric.robot.frames import R_from_quat, inv_T, make_T, quat_from_R
-from fabric.motion.timing import StartState, mini_program, stop_timeline, time_program
-from fabric.motion.program import MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
-from fabric.motion.thermal import HEATER_NAMES, Thermal
-from fabric.motion.timeline import Leg, Timeline
-from fabric.sim.types import IK_ACCEPT as _IK_ACCEPT
-from fabric.sim.types import Event
+from fabric.errors import ValidationError
+from fabric.motion.program import MOVEL, RETRACT, SET_TEMP, WAIT_TEMP
+from fabric.motion.thermal import HeaterParams, HeaterState, Thermal
+from fabric.motion.timeline import Timeline
 
-__all__ = ["TwinLegs"]
+__all__ = ["AuxLegSpec", "Leg", "LegSpec", "PoseSpec", "ProgramLegSpec", "ProgramStart", "StopLegSpec",
+           "spec_from_dict", "thermal_from_dict", "thermal_to_dict"]
 
 
-class TwinLegs:
-    """The leg machinery of :class:`~fabric.sim.twin.Twin` (a mixin: the twin owns the state below)."""
+@dataclass
+class PoseSpec:
+    """Joints and TCP (plate frame) of a start or resume point."""
 
-    # configuration and state set up by Twin.__init__ / Twin._reset_job
-    robot: Any
-    accel_mm_s2: float
-    retract_mm: float
-    lift_mm: float
-    resume_speed_mm_s: float
-    retract_speed_mm_s: float
-    state: str
-    reason: str
-    t_sim_s: float
-    _work_T: np.ndarray
-    _thermal: Thermal
-    _program: Program | None
-    _beads: Deposition
-    _legs: list[Leg]
-    _seq: int
-    _sample_key: tuple[float, int, float] | None
-    _speed_r: float
-    _flow_r: float
-    _t_started: float | None
-    _t_ended: float | None
-    _rest_q: np.ndarray
-    _rest_T: np.ndarray
-    _extruded_done: float
-    _retract_total_mm: float
-    _retracted: bool
-    _carry: dict[int, float]
-    _ext_on: bool
-    _layer: int
-    _row: int
-    _resume_at: tuple[int, float, np.ndarray, np.ndarray, np.ndarray] | None
-    _pause_retract_mm: float
-    _pause_preview_s: float | None
+    q_rad: np.ndarray
+    xyz_mm: np.ndarray
+    quat_wxyz: np.ndarray
 
-    # ------------------------------------------------------------------ running legs
+    def to_dict(self) -> dict[str, Any]:
+        return {"q_rad": np.asarray(self.q_rad, float), "xyz_mm": np.asarray(self.xyz_mm, float),
+                "quat_wxyz": np.asarray(self.quat_wxyz, float)}
 
-    def _run_leg(self, leg: Leg, tau: float, final: bool, events: list[Event]) -> None:
-        """Process the rows of ``leg`` that start or complete by local time ``tau``."""
-        ns, nd = leg.cursor(tau, final)
-        if ns == leg.started and nd == leg.done:
-            return
-        it = leg.interesting
-        for j in it[np.searchsorted(it, leg.done):np.searchsorted(it, ns)].tolist():
-            if j >= leg.started:
-                self._row_start(leg, j, events)
-            if j < nd:
-                self._row_done(leg, j, events)
-        if leg.main:
-            if nd > leg.done:
-                self._deposit(leg, leg.done, nd)
-                self._extruded_done += float(leg.cumvol_mm3[nd] - leg.cumvol_mm3[leg.done])
-            if ns > 0:
-                self._row = leg.tl.start_row + ns - 1
-        leg.started, leg.done = ns, nd
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "PoseSpec":
+        return cls(np.asarray(d["q_rad"], float), np.asarray(d["xyz_mm"], float), np.asarray(d["quat_wxyz"], float))
 
-    def _row_start(self, leg: Leg, j: int, events: list[Event]) -> None:
-        tl = leg.tl
-        p, r, t = tl.program, tl.start_row + j, leg.t0 + float(tl.t_start_s[j])
-        if leg.main:
-            self._row = r
-        if leg.main and p.layer[r] >= 0 and p.layer[r] != self._layer:
-            self._layer = int(p.layer[r])
-            self._emit(events, t, "layer", {"z_mm": float(p.xyz_mm[r, 2])})
-        if leg.ext[j] >= 0 and bool(leg.ext[j]) != self._ext_on:
-            self._ext_on = bool(leg.ext[j])
-            self._emit(events, t, "extruder_on" if self._ext_on else "extruder_off",
-                       {"flow_mm3_mm": float(p.flow_mm3_mm[r]) * tl.flow_r} if self._ext_on else {})
-        if p.op[r] == SET_TEMP:
-            self._thermal.set_target(int(p.aux[r]), float(p.value[r]), t)
 
-    def _row_done(self, leg: Leg, j: int, events: list[Event]) -> None:
-        tl = leg.tl
-        p, r, t = tl.program, tl.start_row + j, leg.t0 + float(tl.t_end_s[j])
-        if p.op[r] == WAIT_TEMP:
-            h = int(p.aux[r])
-            self._emit(events, t, "temp_reached", {"heater": HEATER_NAMES[h], "temp_c": self._thermal.temp_at(h, t),
-                                                   "target_c": self._thermal.target(h)})
-        elif p.op[r] == RETRACT:
-            self._retract_total_mm += float(p.value[r])
-            self._retracted = bool(p.value[r] < 0)
+@dataclass
+class ProgramStart:
+    """The inputs a program leg was timed with: start time, start pose, heaters, overrides."""
 
-    def _deposit(self, leg: Leg, a: int, b: int) -> None:
-        """Record the beads of main-program rows ``a .. b-1`` of ``leg`` (just completed), vectorised."""
-        tl = leg.tl
+    t0_s: float
+    pose: PoseSpec
+    thermal: Thermal
+    speed_r: float
+    flow_r: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"t0_s": self.t0_s, "pose": self.pose.to_dict(), "thermal": thermal_to_dict(self.thermal),
+                "speed_r": self.speed_r, "flow_r": self.flow_r}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "ProgramStart":
+        return cls(float(d["t0_s"]), PoseSpec.from_dict(d["pose"]), thermal_from_dict(d["thermal"]),
+                   float(d["speed_r"]), float(d["flow_r"]))
+
+
+@dataclass
+class ProgramLegSpec:
+    """The loaded program from ``row`` (see module docstring); ``pose`` None: from the rest joints."""
+
+    row: int
+    pose: PoseSpec | None = None
+    s_mm: float = 0.0
+    v_mm_s: float = 0.0
+    frozen: ProgramStart | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": "program", "row": self.row, "pose": self.pose.to_dict() if self.pose else None,
+                "s_mm": self.s_mm, "v_mm_s": self.v_mm_s,
+                "frozen": self.frozen.to_dict() if self.frozen else None}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "ProgramLegSpec":
+        return cls(int(d["row"]), PoseSpec.from_dict(d["pose"]) if d["pose"] is not None else None,
+                   float(d["s_mm"]), float(d["v_mm_s"]),
+                   ProgramStart.from_dict(d["frozen"]) if d["frozen"] is not None else None)
+
+
+@dataclass
+class StopLegSpec:
+    """A controlled stop of the timeline of ``parent`` from its local time ``tau_s``."""
+
+    parent: "LegSpec"
+    tau_s: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": "stop", "parent": self.parent.to_dict(), "tau_s": self.tau_s}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "StopLegSpec":
+        return cls(spec_from_dict(d["parent"]), float(d["tau_s"]))
+
+
+@dataclass
+class AuxLegSpec:
+    """The twin's own moves: program rows (column name -> value) from ``start`` in plate frame ``wobj``."""
+
+    rows: list[dict[str, Any]]
+    start: PoseSpec
+    wobj: np.ndarray
+
+    def to_dict(self) -> dict[str, Any]:
+        rows = [{k: (np.asarray(v) if isinstance(v, (np.ndarray, list, tuple)) else v) for k, v in r.items()}
+                for r in self.rows]
+        return {"kind": "aux", "rows": rows, "start": self.start.to_dict(), "wobj": np.asarray(self.wobj, float)}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "AuxLegSpec":
+        return cls([dict(r) for r in d["rows"]], PoseSpec.from_dict(d["start"]), np.asarray(d["wobj"], float))
+
+
+LegSpec = Union[ProgramLegSpec, StopLegSpec, AuxLegSpec]
+_SPECS = {"program": ProgramLegSpec, "stop": StopLegSpec, "aux": AuxLegSpec}
+
+
+def spec_from_dict(d: dict[str, Any]) -> LegSpec:
+    """A leg spec from its :meth:`to_dict` form."""
+    kind = d.get("kind")
+    if kind not in _SPECS:
+        raise ValidationError(f"unknown leg kind {kind!r}", field="kind")
+    return _SPECS[kind].from_dict(d)
+
+
+def thermal_to_dict(th: Thermal) -> dict[str, Any]:
+    """Heater parameters and anchored states as plain values."""
+    return {"params": [[p.tau_s, p.tol_c, p.ambient_c, p.max_c] for p in th.params],
+            "states": [[st.t_s, st.temp_c, st.target_c] for st in th.states]}
+
+
+def thermal_from_dict(d: dict[str, Any]) -> Thermal:
+    """The inverse of :func:`thermal_to_dict` (exact: the closed forms re-anchor nowhere)."""
+    params = tuple(HeaterParams(*(float(v) for v in p)) for p in d["params"])
+    states = [HeaterState(*(float(v) for v in st)) for st in d["states"]]
+    return Thermal(params, states)     # type: ignore[arg-type]
+
+
+@dataclass
+class Leg:
+    """A timeline placed at an absolute start ``t0``, possibly cut short, with row cursors.
+
+    A leg whose timeline is not built yet (``tl`` None) is timed when it is
+    placed. A cut leg owns only its first ``n_rows`` rows and ends at
+    ``t_cut`` (local seconds); ``partial_end`` says the last owned row is left
+    unfinished. ``started`` / ``done`` count rows whose start / end has been
+    processed. ``main`` legs run the loaded program (they extrude and deposit);
+    ``end_kinds`` are the events fired when the leg ends.
+    """
+
+    spec: LegSpec
+    main: bool
+    end_kinds: list[str]
+    tl: Timeline | None = None
+    t0: float = float("nan")
+    t_cut: float = 0.0
+    n_rows: int = 0
+    partial_end: bool = False
+    started: int = 0
+    done: int = 0
+    placed: bool = False
+    preview_s: float | None = None       # cache: duration of a lazy leg if it started now
+    ext: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int8))
+    interesting: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    vol_mm3: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cumvol_mm3: np.ndarray = field(default_factory=lambda: np.zeros(1))
+
+    def place(self, t0: float, tl: Timeline) -> None:
+        """Start the leg at absolute time ``t0`` with its timeline ``tl``."""
+        self.tl = tl
+        self.t0, self.placed = float(t0), True
+        if not self.t_cut and not self.n_rows:
+            self.t_cut, self.n_rows = tl.total_s, tl.n
+        self.derive()
+
+    def derive(self) -> None:
+        """The per-row arrays the runner needs: extruder changes, rows of interest, volumes."""
+        tl = self.tl
         p = tl.program
-        j = np.arange(a, b)
-        r = tl.start_row + j
-        keep = (p.op[r] == MOVEL) & (p.flow_mm3_mm[r] > 0)
-        j, r = j[keep], r[keep]
-        if len(j) == 0:
-            return
-        keep = tl.row_length_mm(j) > 0
-        j, r = j[keep], r[keep]
-        if len(j) == 0:
-            return
-        vol = leg.vol_mm3[j].copy()
-        if j[0] == 0:
-            vol[0] += self._carry.pop(int(r[0]), 0.0)
-        _, start, _ = tl.from_pose(j)
-        self._beads.add(r, p.layer[r], start, p.xyz_mm[r], vol, p.flow_mm3_mm[r])
+        rows = tl.rows
+        op, flow, layer = p.op[rows], p.flow_mm3_mm[rows], p.layer[rows]
+        on = ((op == MOVEL) & (flow > 0)) if self.main else np.zeros(len(rows), dtype=bool)
+        ext = np.where(op == SET_TEMP, -1, on).astype(np.int8)
+        # extruder state carried through set-point rows: compare with the last real state
+        idx = np.where(ext >= 0, np.arange(len(ext)), 0)
+        np.maximum.accumulate(idx, out=idx)
+        filled = ext[idx]
+        change = np.zeros(len(ext), dtype=bool)
+        change[1:] = (ext[1:] >= 0) & (filled[1:] != filled[:-1])
+        lay = np.zeros(len(ext), dtype=bool)
+        if self.main:
+            lay[1:] = (layer[1:] >= 0) & (layer[1:] != layer[:-1])
+        special = (op == SET_TEMP) | (op == WAIT_TEMP) | (op == RETRACT)
+        first = np.zeros(len(ext), dtype=bool)
+        first[:1] = True
+        self.ext = ext
+        self.interesting = np.flatnonzero(first | change | lay | special)
+        self.vol_mm3 = np.where(self.main & (op == MOVEL), flow * tl.flow_r * tl.len_mm, 0.0)
+        self.cumvol_mm3 = np.concatenate([[0.0], np.cumsum(self.vol_mm3)])
 
-    def _finish_leg(self, leg: Leg, events: list[Event]) -> None:
-        """The leg ended: keep the unfinished row's volume, record the pose, fire its end events."""
-        tl = leg.tl
-        p = tl.program
-        if leg.partial_end and leg.main:
-            j = leg.n_rows - 1
-            r = tl.start_row + j
-            if p.op[r] == MOVEL:
-                s, _ = tl.profile(np.array([j]), np.array([leg.t_cut - tl.t_start_s[j]]))
-                piece = float(p.flow_mm3_mm[r]) * tl.flow_r * float(s[0])
-                self._carry[r] = self._carry.get(r, 0.0) + piece
-                self._extruded_done += piece
-        smp = tl.sample(leg.t_cut)
-        self._rest_q = np.array(smp.q_rad, dtype=float)
-        self._rest_T = p.wobj @ make_T(R_from_quat(smp.quat_wxyz), smp.xyz_mm)
-        self._legs.pop(0)
-        t_end = leg.t0 + leg.t_cut
-        for kind in leg.end_kinds:
-            self._on_end(kind, t_end, events)
-        if self._legs:
-            self._legs[0].place(t_end)
+    def row_at(self, tau_s: float) -> int:
+        """Local row running at local time ``tau_s`` (within the owned rows)."""
+        return int(min(self.tl.locate(np.array([tau_s]))[0], self.n_rows - 1))
 
-    def _on_end(self, kind: str, t: float, events: list[Event]) -> None:
-        if kind == "finished":
-            self.state, self.reason = "idle", "finished"
-            self._t_ended = t
-            self._emit(events, t, kind, {"elapsed_s": t - (self._t_started or 0.0),
-                                         "extruded_mm3": self._extruded_done, "beads": len(self._beads)})
-        elif kind == "stopped":
-            self._record_partial()
-            self._t_ended = t
-            self._emit(events, t, kind, {"extruded_mm3": self._extruded_done, "beads": len(self._beads)})
-        elif kind == "resumed":
-            self._resume_at = None
-            self._emit(events, t, kind)
-        elif kind == "paused" and self._resume_at is not None:
-            row, s, _q, xyz, _quat = self._resume_at
-            self._emit(events, t, kind, {"resume_row": row, "resume_s_mm": s, "xyz_mm": xyz.tolist()})
-        else:
-            self._emit(events, t, kind)
+    def cut_at(self, tau_s: float) -> None:
+        """End the leg at local time ``tau_s``: the row running then is left unfinished."""
+        j = self.row_at(tau_s)
+        self.n_rows, self.t_cut = j + 1, float(tau_s)
+        self.partial_end = tau_s < self.tl.t_end_s[j]
 
-    def _emit(self, events: list[Event], t: float, kind: str, data: dict[str, Any] | None = None) -> None:
-        p = self._program
-        g = int(p.gcode_line[min(self._row, len(p) - 1)]) if p is not None else -1
-        self._seq += 1
-        events.append(Event(self._seq, float(t), kind, self._row, g, self._layer, data or {}))
+    def cut_after(self, j: int) -> None:
+        """End the leg when local row ``j`` completes."""
+        self.n_rows, self.t_cut, self.partial_end = j + 1, float(self.tl.t_end_s[j]), False
 
-    def _record_partial(self) -> None:
-        """The row in progress when a job ends early: a partial bead from its start to the stop point."""
-        p = self._program
-        if p is None or not self._carry:
-            self._carry.clear()
-            return
-        for r, vol in sorted(self._carry.items()):
-            if self._resume_at is not None and self._resume_at[0] == r:
-                end = self._resume_at[3]
-            else:
-                end = (inv_T(p.wobj) @ self._rest_T)[:3, 3]
-            start = p.xyz_mm[r - 1] if r > 0 else end
-            if vol > 0:
-                self._beads.add(np.array([r]), p.layer[r:r + 1], start[None], np.asarray(end)[None], np.array([vol]),
-                                p.flow_mm3_mm[r:r + 1])
-        self._carry.clear()
-        self._resume_at = None
+    def cursor(self, tau_s: float, final: bool) -> tuple[int, int]:
+        """Rows started and rows completed by local time ``tau_s`` (all owned ones when ``final``)."""
+        if final:
+            return self.n_rows, self.n_rows - int(self.partial_end)
+        tl = self.tl
+        ns = int(np.searchsorted(tl.t_start_s, tau_s, side="right"))
+        nd = int(np.searchsorted(tl.t_end_s, tau_s, side="right"))
+        return min(ns, self.n_rows), min(nd, self.n_rows - int(self.partial_end))
 
-    # ------------------------------------------------------------------ legs
+    def end_pose(self) -> PoseSpec:
+        """Joints and TCP (plate frame of the leg's program) where the leg ends."""
+        tl = self.tl
+        smp = tl.sample(self.t_cut if self.n_rows else tl.total_s)
+        return PoseSpec(np.asarray(smp.q_rad, float), np.asarray(smp.xyz_mm, float),
+                        np.asarray(smp.quat_wxyz, float))
 
-    def _enqueue(self, leg: Leg) -> None:
-        self._sample_key = None
-        self._legs.append(leg)
-        if len(self._legs) == 1:
-            leg.place(self.t_sim_s)
+    # Saving ---------------------------------------------------------------------------
 
-    def _main_builder(self, program: Program, row: int, pose: tuple[np.ndarray, ...] | None, s_mm: float,
-                      v_mm_s: float) -> Callable[[float], Timeline]:
-        """Times the program from ``row`` when called with the leg's start time (overrides, heaters then)."""
-        def build(t0: float) -> Timeline:
-            if pose is None:
-                ss = StartState.at_joints(self.robot, program.wobj, self._rest_q, self._thermal.copy(), t0)
-            else:
-                ss = StartState(pose[0], pose[1], pose[2], s_mm, v_mm_s, self._thermal.copy(), t0)
-            return time_program(program, self.robot, self._speed_r, row, ss, accel_mm_s2=self.accel_mm_s2,
-                                flow_r=self._flow_r, retract_speed_mm_s=self.retract_speed_mm_s)
-        return build
+    def to_dict(self) -> dict[str, Any]:
+        """The leg as plain data (the timeline is rebuilt from the spec on restore)."""
+        return {"spec": self.spec.to_dict(), "main": self.main, "end_kinds": list(self.end_kinds),
+                "built": self.tl is not None, "t0": self.t0, "t_cut": self.t_cut, "n_rows": self.n_rows,
+                "partial_end": self.partial_end, "started": self.started, "done": self.done,
+                "placed": self.placed}
 
-    def _leg_end_pose(self, leg: Leg) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        tl = leg.tl
-        smp = tl.sample(leg.t_cut if leg.n_rows else tl.total_s)
-        return smp.q_rad, smp.xyz_mm, smp.quat_wxyz, tl.program.wobj
-
-    def _queue_end_pose(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Joints, TCP (plate frame) and that plate frame where the queued motion ends."""
-        if self._legs and self._legs[-1].tl is not None:
-            return self._leg_end_pose(self._legs[-1])
-        wobj = self._program.wobj if self._program is not None else self._work_T
-        if self._legs:                              # a lazy program leg: it ends on the last row
-            p = self._program
-            return p.q_rad[-1], p.xyz_mm[-1], p.quat_wxyz[-1], wobj
-        Tp = inv_T(wobj) @ self._rest_T
-        return self._rest_q.copy(), Tp[:3, 3].copy(), quat_from_R(Tp[:3, :3]), wobj
-
-    def _retracted_after_queue(self) -> bool:
-        r = self._retracted
-        for leg in self._legs:
-            if leg.tl is None:
-                continue
-            p, rows = leg.tl.program, leg.tl.rows[leg.done:(leg.n_rows or leg.tl.n)]
-            rr = rows[p.op[rows] == RETRACT]
-            if len(rr):
-                r = bool(p.value[rr[-1]] < 0)
-        return r
-
-    def _ik_one(self, wobj: np.ndarray, xyz: np.ndarray, quat: np.ndarray, seed: np.ndarray) -> np.ndarray:
-        T = wobj @ make_T(R_from_quat(quat), xyz)
-        q, status = self.robot.ik(T[None], np.asarray(seed, dtype=float))
-        if int(np.asarray(status).reshape(-1)[0]) not in _IK_ACCEPT:
-            raise UnreachableError(f"pose {np.round(xyz, 3).tolist()} mm (plate frame) is unreachable",
-                                   reason=int(np.asarray(status).reshape(-1)[0]), gcode_line=-1)
-        return np.asarray(q, dtype=float).reshape(-1, len(seed))[0]
-
-    def _time_aux(self, rows: list[dict[str, Any]], pose: tuple[np.ndarray, ...], end_kinds: list[str]) -> Leg:
-        q, xyz, quat, wobj = pose
-        tl = time_program(mini_program(rows, wobj), self.robot, start_state=StartState(q, xyz, quat),
-                          accel_mm_s2=self.accel_mm_s2, retract_speed_mm_s=self.retract_speed_mm_s)
-        return Leg(tl, False, end_kinds)
-
-    def _lift_leg(self, pose: tuple[np.ndarray, ...], end_kind: str) -> Leg:
-        """Retract (unless already retracted) and move straight up ``lift_mm`` along the plate normal."""
-        q, xyz, quat, wobj = pose
-        here = {"q_rad": q, "xyz_mm": xyz, "quat_wxyz": quat}
-        rows: list[dict[str, Any]] = []
-        self._pause_retract_mm = 0.0
-        if self.retract_mm > 0 and not self._retracted_after_queue():
-            rows.append({"op": RETRACT, "value": -self.retract_mm, **here})
-            self._pause_retract_mm = self.retract_mm
-        if self.lift_mm > 0:
-            up = np.asarray(xyz, dtype=float) + [0.0, 0.0, self.lift_mm]
-            rows.append({"op": MOVEL, "q_rad": self._ik_one(wobj, up, quat, q), "xyz_mm": up, "quat_wxyz": quat,
-                         "speed_mm_s": self.resume_speed_mm_s})
-        if not rows:
-            rows.append({"op": WAIT, "value": 0.0, **here})
-        return self._time_aux(rows, pose, [end_kind])
-
-    def _halt(self, end_kind: str) -> None:
-        """Controlled stop of the running motion, then retract and lift (pause and stop)."""
-        head = self._legs[0]
-        tau = min(max(self.t_sim_s - head.t0, 0.0), head.t_cut)
-        queue: list[Leg] = []
-        if head.main:
-            tl = head.tl
-            j = head.row_at(tau)
-            r = tl.start_row + j
-            op = tl.program.op[r]
-            if op == MOVEL and tl.len_mm[j] > 0:
-                head.cut_at(tau)
-                st, row, s = stop_timeline(tl, tau)
-                if st is not None:
-                    dl = Leg(st, True, [])
-                    dl.partial_end = row == st.start_row + st.n - 1
-                    queue.append(dl)
-            elif op in (WAIT, WAIT_TEMP):
-                head.cut_at(tau)
-                row, s = r, 0.0
-            else:
-                head.cut_after(j)
-                row, s = r + 1, 0.0
-            head.end_kinds = []
-            pose = self._leg_end_pose(queue[-1] if queue else head)
-            self._resume_at = (row, s, pose[0], pose[1], pose[2])
-        elif {"paused", "stopped"} & set(head.end_kinds):
-            # still lifting from the previous pause: cancel the queued resume, keep lifting
-            self._legs = [head]
-            head.end_kinds = [end_kind]
-            self._pause_preview_s = None
-            return
-        else:
-            # going back down to resume: that resume never completes; lift again from where it ends
-            head.end_kinds = []
-            pose = self._leg_end_pose(head)
-        self._legs = [head] + queue
-        self._legs.append(self._lift_leg(pose, end_kind))
-        self._pause_preview_s = None
-
-    def _make_resume_legs(self) -> list[Leg]:
-        assert self._resume_at is not None and self._program is not None
-        row, s, q, xyz, quat = self._resume_at
-        start = self._queue_end_pose()
-        back = {"q_rad": q, "xyz_mm": xyz, "quat_wxyz": quat}
-        rows: list[dict[str, Any]] = [{"op": MOVEL, **back, "speed_mm_s": self.resume_speed_mm_s}]
-        if self._pause_retract_mm > 0:
-            rows.append({"op": RETRACT, "value": self._pause_retract_mm, **back})
-        aux = self._time_aux(rows, start, ["resumed"])
-        if row >= len(self._program):
-            aux.end_kinds.append("finished")
-            return [aux]
-        main = Leg(None, True, ["finished"], build=self._main_builder(self._program, row, (q, xyz, quat), s, 0.0))
-        return [aux, main]
-
-    def _resume_legs(self) -> None:
-        for leg in self._make_resume_legs():
-            self._enqueue(leg)
-        self._pause_retract_mm = 0.0
-        self._pause_preview_s = None
-
-    def _retime(self, temp_changed: bool) -> None:
-        """Re-time the program after the running row (or redo a heat-up whose set point changed)."""
-        head = self._legs[0]
-        tl = head.tl
-        p = tl.program
-        tau = min(max(self.t_sim_s - head.t0, 0.0), head.t_cut)
-        j = head.row_at(tau)
-        r = tl.start_row + j
-        if p.op[r] == WAIT_TEMP and temp_changed:
-            head.cut_at(tau)
-            nxt, pose, v = r, (p.q_rad[r], p.xyz_mm[r], p.quat_wxyz[r]), 0.0
-        elif j >= tl.n - 1:
-            return
-        else:
-            head.cut_after(j)
-            nxt, pose = r + 1, (p.q_rad[r], p.xyz_mm[r], p.quat_wxyz[r])
-            v = float(tl.v1_mm_s[j]) if p.op[r] == MOVEL else 0.0
-        head.end_kinds = []
-        self._legs = [head, Leg(None, True, ["finished"], build=self._main_builder(p, nxt, pose, 0.0, v))]
-
-    def _legs_remaining_s(self) -> float:
-        total, t = 0.0, self.t_sim_s
-        for k, leg in enumerate(self._legs):
-            if k == 0 and leg.placed:
-                rem = leg.t0 + leg.t_cut - t
-            elif leg.tl is not None:
-                rem = leg.t_cut if leg.n_rows else leg.tl.total_s
-            else:
-                if leg.preview_s is None:
-                    leg.preview_s = leg.build(t + total).total_s
-                rem = leg.preview_s
-            total += max(rem, 0.0)
-        return total
-
-    def _resume_preview_s(self) -> float:
-        """Time a resume would take from now (the resume moves plus the rest of the program)."""
-        if self._pause_preview_s is None:
-            if self._resume_at is None or self._program is None:
-                return 0.0
-            legs = self._make_resume_legs()
-            t = self.t_sim_s + self._legs_remaining_s() + legs[0].tl.total_s
-            self._pause_preview_s = legs[0].tl.total_s + (legs[1].build(t).total_s if len(legs) > 1 else 0.0)
-        return self._pause_preview_s
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "Leg":
+        """A leg with its cursors; the caller rebuilds ``tl`` from ``spec`` and calls :meth:`derive`."""
+        return cls(spec_from_dict(d["spec"]), bool(d["main"]), [str(k) for k in d["end_kinds"]],
+                   t0=float(d["t0"]), t_cut=float(d["t_cut"]), n_rows=int(d["n_rows"]),
+                   partial_end=bool(d["partial_end"]), started=int(d["started"]), done=int(d["done"]),
+                   placed=bool(d["placed"]))

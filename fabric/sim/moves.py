@@ -1,0 +1,241 @@
+"""Plans the twin's own motion: pause and stop, resume, re-timing after an override, homing.
+
+Pause is a controlled stop: the TCP keeps following the path and slows at the
+acceleration limit (extruding with flow tied to the speed, as a synchronised
+extruder does), so the stop point lies a little beyond where the command came;
+during a joint move or a retraction the row is finished first; a dwell or a
+heat-up is interrupted and redone on resume. Then extruder off, retract, and a
+straight lift of ``lift_mm`` along the plate normal. Resume goes back down at
+``resume_speed_mm_s`` to the recorded point, unretracts and continues the row
+from rest. Stop is the same controlled stop, then retract and lift, heaters
+off. An override re-times the program after the running row (a heat-up whose
+set point changed is redone from now).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from fabric.errors import UnreachableError
+from fabric.motion.program import MOVEJ, MOVEL, RETRACT, WAIT, WAIT_TEMP
+from fabric.motion.timing import stop_timeline
+from fabric.robot.frames import R_from_quat, inv_T, make_T, quat_from_R
+from fabric.sim.builder import LegBuilder
+from fabric.sim.config import TwinConfig
+from fabric.sim.legs import AuxLegSpec, Leg, PoseSpec, ProgramLegSpec, StopLegSpec
+from fabric.sim.runner import LegRunner
+from fabric.sim.state import ResumePoint, TwinState
+from fabric.sim.types import IK_ACCEPT
+
+__all__ = ["MotionPlanner"]
+
+
+class MotionPlanner:
+    """Builds and queues the legs of pause, stop, resume, re-timing and homing on ``state``."""
+
+    def __init__(self, robot: Any, home_q_rad: np.ndarray, config: TwinConfig, state: TwinState,
+                 builder: LegBuilder, runner: LegRunner) -> None:
+        self.robot = robot
+        self.home_q_rad = np.asarray(home_q_rad, dtype=float).copy()
+        self.config = config
+        self.state = state
+        self.builder = builder
+        self.runner = runner
+        self.pause_preview_s: float | None = None      # cache: a resume's duration, if it came now
+
+    def forget_previews(self) -> None:
+        """Drop cached durations (the queue, the overrides or the heaters changed)."""
+        self.pause_preview_s = None
+        for leg in self.state.legs:
+            leg.preview_s = None
+
+    # Legs of the twin's own moves -------------------------------------------------------
+
+    def aux_leg(self, rows: list[dict[str, Any]], start: PoseSpec, wobj: np.ndarray, end_kinds: list[str]) -> Leg:
+        """A timed leg of the twin's own rows from ``start`` (plate frame ``wobj``)."""
+        spec = AuxLegSpec(rows, start, np.asarray(wobj, dtype=float))
+        return Leg(spec, False, end_kinds, tl=self.builder.aux(spec))
+
+    def home_leg(self) -> Leg:
+        """A joint move from where the queue ends to the cell's home joints."""
+        start, wobj = self.queue_end()
+        home = self.home_q_rad
+        Th = inv_T(wobj) @ np.asarray(self.robot.fk(home[None]))[0]
+        row = {"op": MOVEJ, "q_rad": home, "xyz_mm": Th[:3, 3], "quat_wxyz": quat_from_R(Th[:3, :3]),
+               "vel_r": self.config.home_vel_r}
+        return self.aux_leg([row], start, wobj, ["home"])
+
+    def _lift_leg(self, start: PoseSpec, wobj: np.ndarray, end_kind: str) -> Leg:
+        """Retract (unless already retracted) and move straight up ``lift_mm`` along the plate normal."""
+        cfg, job = self.config, self.state.job
+        here = {"q_rad": start.q_rad, "xyz_mm": start.xyz_mm, "quat_wxyz": start.quat_wxyz}
+        rows: list[dict[str, Any]] = []
+        job.pause_retract_mm = 0.0
+        if cfg.retract_mm > 0 and not self._retracted_after_queue():
+            rows.append({"op": RETRACT, "value": -cfg.retract_mm, **here})
+            job.pause_retract_mm = cfg.retract_mm
+        if cfg.lift_mm > 0:
+            up = np.asarray(start.xyz_mm, dtype=float) + [0.0, 0.0, cfg.lift_mm]
+            rows.append({"op": MOVEL, "q_rad": self._ik_one(wobj, up, start.quat_wxyz, start.q_rad),
+                         "xyz_mm": up, "quat_wxyz": start.quat_wxyz, "speed_mm_s": cfg.resume_speed_mm_s})
+        if not rows:
+            rows.append({"op": WAIT, "value": 0.0, **here})
+        return self.aux_leg(rows, start, wobj, [end_kind])
+
+    def _ik_one(self, wobj: np.ndarray, xyz: np.ndarray, quat: np.ndarray, seed: np.ndarray) -> np.ndarray:
+        T = wobj @ make_T(R_from_quat(quat), xyz)
+        q, status = self.robot.ik(T[None], np.asarray(seed, dtype=float))
+        code = int(np.asarray(status).reshape(-1)[0])
+        if code not in IK_ACCEPT:
+            raise UnreachableError(f"pose {np.round(xyz, 3).tolist()} mm (plate frame) is unreachable",
+                                   reason=code, gcode_line=-1)
+        return np.asarray(q, dtype=float).reshape(-1, len(seed))[0]
+
+    # Where the queue ends -------------------------------------------------------------
+
+    def queue_end(self) -> tuple[PoseSpec, np.ndarray]:
+        """Joints and TCP (plate frame) where the queued motion ends, and that plate frame."""
+        st = self.state
+        legs = st.legs
+        if legs and legs[-1].tl is not None:
+            return legs[-1].end_pose(), legs[-1].tl.program.wobj
+        wobj = st.program.wobj if st.program is not None else st.work_T
+        if legs:                                    # a lazy program leg: it ends on the last row
+            p = st.program
+            return PoseSpec(p.q_rad[-1], p.xyz_mm[-1], p.quat_wxyz[-1]), wobj
+        Tp = inv_T(wobj) @ st.rest_T
+        return PoseSpec(st.rest_q_rad.copy(), Tp[:3, 3].copy(), quat_from_R(Tp[:3, :3])), wobj
+
+    def _retracted_after_queue(self) -> bool:
+        r = self.state.job.retracted
+        for leg in self.state.legs:
+            if leg.tl is None:
+                continue
+            p, rows = leg.tl.program, leg.tl.rows[leg.done:(leg.n_rows or leg.tl.n)]
+            rr = rows[p.op[rows] == RETRACT]
+            if len(rr):
+                r = bool(p.value[rr[-1]] < 0)
+        return r
+
+    # Pause and stop -----------------------------------------------------------------------
+
+    def halt(self, end_kind: str) -> None:
+        """Controlled stop of the running motion, then retract and lift (pause and stop)."""
+        st = self.state
+        head = st.legs[0]
+        tau = min(max(st.t_sim_s - head.t0, 0.0), head.t_cut)
+        queue: list[Leg] = []
+        if head.main:
+            tl = head.tl
+            j = head.row_at(tau)
+            r = tl.start_row + j
+            op = tl.program.op[r]
+            if op == MOVEL and tl.len_mm[j] > 0:
+                head.cut_at(tau)
+                stop_tl, row, s = stop_timeline(tl, tau)
+                if stop_tl is not None:
+                    stop_leg = Leg(StopLegSpec(head.spec, tau), True, [], tl=stop_tl)
+                    stop_leg.partial_end = row == stop_tl.start_row + stop_tl.n - 1
+                    queue.append(stop_leg)
+            elif op in (WAIT, WAIT_TEMP):
+                head.cut_at(tau)
+                row, s = r, 0.0
+            else:
+                head.cut_after(j)
+                row, s = r + 1, 0.0
+            head.end_kinds = []
+            pose = (queue[-1] if queue else head).end_pose()
+            st.job.resume_at = ResumePoint(row, s, pose)
+        elif {"paused", "stopped"} & set(head.end_kinds):
+            # still lifting from the previous pause: cancel the queued resume, keep lifting
+            st.legs = [head]
+            head.end_kinds = [end_kind]
+            self.pause_preview_s = None
+            return
+        else:
+            # going back down to resume: that resume never completes; lift again from where it ends
+            head.end_kinds = []
+            pose = head.end_pose()
+        wobj = (queue[-1] if queue else head).tl.program.wobj
+        st.legs = [head] + queue
+        st.legs.append(self._lift_leg(pose, wobj, end_kind))
+        self.pause_preview_s = None
+
+    # Resume -------------------------------------------------------------------------------
+
+    def _resume_legs(self) -> list[Leg]:
+        st = self.state
+        at = st.job.resume_at
+        assert at is not None and st.program is not None
+        start, wobj = self.queue_end()
+        back = {"q_rad": at.pose.q_rad, "xyz_mm": at.pose.xyz_mm, "quat_wxyz": at.pose.quat_wxyz}
+        rows: list[dict[str, Any]] = [{"op": MOVEL, **back, "speed_mm_s": self.config.resume_speed_mm_s}]
+        if st.job.pause_retract_mm > 0:
+            rows.append({"op": RETRACT, "value": st.job.pause_retract_mm, **back})
+        down = self.aux_leg(rows, start, wobj, ["resumed"])
+        if at.row >= len(st.program):
+            down.end_kinds.append("finished")
+            return [down]
+        spec = ProgramLegSpec(at.row, PoseSpec(at.pose.q_rad, at.pose.xyz_mm, at.pose.quat_wxyz), at.s_mm, 0.0)
+        return [down, Leg(spec, True, ["finished"])]
+
+    def resume(self) -> None:
+        """Queue the way back down, the unretraction and the rest of the program."""
+        for leg in self._resume_legs():
+            self.runner.enqueue(leg)
+        self.state.job.pause_retract_mm = 0.0
+        self.pause_preview_s = None
+
+    # Overrides --------------------------------------------------------------------------
+
+    def retime(self, temp_changed: bool) -> None:
+        """Re-time the program after the running row (or redo a heat-up whose set point changed)."""
+        st = self.state
+        head = st.legs[0]
+        tl = head.tl
+        p = tl.program
+        tau = min(max(st.t_sim_s - head.t0, 0.0), head.t_cut)
+        j = head.row_at(tau)
+        r = tl.start_row + j
+        pose = PoseSpec(p.q_rad[r], p.xyz_mm[r], p.quat_wxyz[r])
+        if p.op[r] == WAIT_TEMP and temp_changed:
+            head.cut_at(tau)
+            nxt, v = r, 0.0
+        elif j >= tl.n - 1:
+            return
+        else:
+            head.cut_after(j)
+            nxt = r + 1
+            v = float(tl.v1_mm_s[j]) if p.op[r] == MOVEL else 0.0
+        head.end_kinds = []
+        st.legs = [head, Leg(ProgramLegSpec(nxt, pose, 0.0, v), True, ["finished"])]
+
+    # Time left ----------------------------------------------------------------------------
+
+    def remaining_s(self) -> float:
+        """Simulated time until the queued motion ends (lazy legs timed as if they started next)."""
+        total, t = 0.0, self.state.t_sim_s
+        for k, leg in enumerate(self.state.legs):
+            if k == 0 and leg.placed:
+                rem = leg.t0 + leg.t_cut - t
+            elif leg.tl is not None:
+                rem = leg.t_cut if leg.n_rows else leg.tl.total_s
+            else:
+                if leg.preview_s is None:
+                    leg.preview_s = self.builder.build(leg.spec, t + total, freeze=False).total_s
+                rem = leg.preview_s
+            total += max(rem, 0.0)
+        return total
+
+    def resume_preview_s(self) -> float:
+        """Time a resume would take from now (the resume moves plus the rest of the program)."""
+        st = self.state
+        if self.pause_preview_s is None:
+            if st.job.resume_at is None or st.program is None:
+                return 0.0
+            legs = self._resume_legs()
+            t = st.t_sim_s + self.remaining_s() + legs[0].tl.total_s
+            rest = self.builder.build(legs[1].spec, t, freeze=False).total_s if len(legs) > 1 else 0.0
+            self.pause_preview_s = legs[0].tl.total_s + rest
+        return self.pause_preview_s

@@ -1,0 +1,191 @@
+"""Runs the twin's motion legs in simulated time: row events, heaters, retractions and beads.
+
+Walking a leg to a local time processes, in order, the rows that start or
+complete by then: a row's start may change the layer, turn the extruder on or
+off and change a heater set point; its end reports a temperature reached or a
+retraction. Rows of the program that complete are deposited as beads, from the
+row's own start and end points with the flow per mm times the distance the row
+covered; a row cut short (pause, stop, override, fault) keeps its volume so far
+in ``carry_mm3`` and adds it to the bead when the row completes on resume, so a
+paused print deposits the same beads as an uninterrupted one. When a job ends
+with a row cut short, that row is recorded as a partial bead.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from fabric.motion.program import MOVEL, RETRACT, SET_TEMP, WAIT_TEMP
+from fabric.motion.thermal import HEATER_NAMES
+from fabric.robot.frames import R_from_quat, inv_T, make_T
+from fabric.sim.builder import LegBuilder
+from fabric.sim.legs import Leg
+from fabric.sim.state import TwinState
+from fabric.sim.types import Event
+
+__all__ = ["LegRunner"]
+
+
+class LegRunner:
+    """Owns no state: walks the legs of ``state`` and records what happens in it."""
+
+    def __init__(self, state: TwinState, builder: LegBuilder) -> None:
+        self.state = state
+        self.builder = builder
+
+    # Queue ---------------------------------------------------------------------------
+
+    def enqueue(self, leg: Leg) -> None:
+        """Append ``leg``; it starts now if the robot is idle."""
+        self.state.legs.append(leg)
+        if len(self.state.legs) == 1:
+            self.place(leg, self.state.t_sim_s)
+
+    def place(self, leg: Leg, t0: float) -> None:
+        """Start ``leg`` at ``t0``, timing it now if it was not timed yet."""
+        leg.place(t0, leg.tl if leg.tl is not None else self.builder.build(leg.spec, t0))
+
+    # Walking a leg ---------------------------------------------------------------------
+
+    def run_leg(self, leg: Leg, tau: float, final: bool, events: list[Event]) -> None:
+        """Process the rows of ``leg`` that start or complete by local time ``tau``."""
+        ns, nd = leg.cursor(tau, final)
+        if ns == leg.started and nd == leg.done:
+            return
+        job = self.state.job
+        it = leg.interesting
+        for j in it[np.searchsorted(it, leg.done):np.searchsorted(it, ns)].tolist():
+            if j >= leg.started:
+                self._row_start(leg, j, events)
+            if j < nd:
+                self._row_done(leg, j, events)
+        if leg.main:
+            if nd > leg.done:
+                self._deposit(leg, leg.done, nd)
+                job.extruded_mm3 += float(leg.cumvol_mm3[nd] - leg.cumvol_mm3[leg.done])
+            if ns > 0:
+                job.row = leg.tl.start_row + ns - 1
+        leg.started, leg.done = ns, nd
+
+    def _row_start(self, leg: Leg, j: int, events: list[Event]) -> None:
+        tl, job = leg.tl, self.state.job
+        p, r, t = tl.program, tl.start_row + j, leg.t0 + float(tl.t_start_s[j])
+        if leg.main:
+            job.row = r
+        if leg.main and p.layer[r] >= 0 and p.layer[r] != job.layer:
+            job.layer = int(p.layer[r])
+            self.emit(events, t, "layer", {"z_mm": float(p.xyz_mm[r, 2])})
+        if leg.ext[j] >= 0 and bool(leg.ext[j]) != job.extruder_on:
+            job.extruder_on = bool(leg.ext[j])
+            data = {"flow_mm3_mm": float(p.flow_mm3_mm[r]) * tl.flow_r} if job.extruder_on else {}
+            self.emit(events, t, "extruder_on" if job.extruder_on else "extruder_off", data)
+        if p.op[r] == SET_TEMP:
+            self.state.thermal.set_target(int(p.aux[r]), float(p.value[r]), t)
+
+    def _row_done(self, leg: Leg, j: int, events: list[Event]) -> None:
+        tl, job, thermal = leg.tl, self.state.job, self.state.thermal
+        p, r, t = tl.program, tl.start_row + j, leg.t0 + float(tl.t_end_s[j])
+        if p.op[r] == WAIT_TEMP:
+            h = int(p.aux[r])
+            self.emit(events, t, "temp_reached", {"heater": HEATER_NAMES[h], "temp_c": thermal.temp_at(h, t),
+                                                  "target_c": thermal.target(h)})
+        elif p.op[r] == RETRACT:
+            job.retract_total_mm += float(p.value[r])
+            job.retracted = bool(p.value[r] < 0)
+
+    def _deposit(self, leg: Leg, a: int, b: int) -> None:
+        """Record the beads of main-program rows ``a .. b-1`` of ``leg`` (just completed), vectorised."""
+        tl = leg.tl
+        p = tl.program
+        j = np.arange(a, b)
+        r = tl.start_row + j
+        keep = (p.op[r] == MOVEL) & (p.flow_mm3_mm[r] > 0)
+        j, r = j[keep], r[keep]
+        if len(j) == 0:
+            return
+        keep = tl.row_length_mm(j) > 0
+        j, r = j[keep], r[keep]
+        if len(j) == 0:
+            return
+        vol = leg.vol_mm3[j].copy()
+        if j[0] == 0:
+            vol[0] += self.state.job.carry_mm3.pop(int(r[0]), 0.0)
+        _, start, _ = tl.from_pose(j)
+        self.state.beads.add(r, p.layer[r], start, p.xyz_mm[r], vol, p.flow_mm3_mm[r])
+
+    # Ending a leg ----------------------------------------------------------------------
+
+    def finish_leg(self, leg: Leg, events: list[Event]) -> None:
+        """The head leg ended: keep the unfinished row's volume, record the pose, fire its end events."""
+        st = self.state
+        tl = leg.tl
+        p = tl.program
+        if leg.partial_end and leg.main:
+            j = leg.n_rows - 1
+            r = tl.start_row + j
+            if p.op[r] == MOVEL:
+                s, _ = tl.profile(np.array([j]), np.array([leg.t_cut - tl.t_start_s[j]]))
+                piece = float(p.flow_mm3_mm[r]) * tl.flow_r * float(s[0])
+                st.job.carry_mm3[r] = st.job.carry_mm3.get(r, 0.0) + piece
+                st.job.extruded_mm3 += piece
+        smp = tl.sample(leg.t_cut)
+        st.rest_q_rad = np.array(smp.q_rad, dtype=float)
+        st.rest_T = p.wobj @ make_T(R_from_quat(smp.quat_wxyz), smp.xyz_mm)
+        st.legs.pop(0)
+        t_end = leg.t0 + leg.t_cut
+        for kind in leg.end_kinds:
+            self.on_end(kind, t_end, events)
+        if st.legs:
+            self.place(st.legs[0], t_end)
+
+    def on_end(self, kind: str, t: float, events: list[Event]) -> None:
+        """Fire the end event ``kind`` of a leg (finished, stopped, paused, resumed, home) at ``t``."""
+        st = self.state
+        job = st.job
+        if kind == "finished":
+            st.state, st.reason = "idle", "finished"
+            st.t_ended_s = t
+            self.emit(events, t, kind, {"elapsed_s": t - (st.t_started_s or 0.0),
+                                        "extruded_mm3": job.extruded_mm3, "beads": len(st.beads)})
+        elif kind == "stopped":
+            self.record_partial()
+            st.t_ended_s = t
+            self.emit(events, t, kind, {"extruded_mm3": job.extruded_mm3, "beads": len(st.beads)})
+        elif kind == "resumed":
+            job.resume_at = None
+            self.emit(events, t, kind)
+        elif kind == "paused" and job.resume_at is not None:
+            at = job.resume_at
+            self.emit(events, t, kind, {"resume_row": at.row, "resume_s_mm": at.s_mm,
+                                        "xyz_mm": at.pose.xyz_mm.tolist()})
+        else:
+            self.emit(events, t, kind)
+
+    def emit(self, events: list[Event], t: float, kind: str, data: dict[str, Any] | None = None) -> None:
+        """Append the next event (``seq`` counts on across the twin's life)."""
+        st = self.state
+        p = st.program
+        row = st.job.row
+        g = int(p.gcode_line[min(row, len(p) - 1)]) if p is not None else -1
+        st.seq += 1
+        events.append(Event(st.seq, float(t), kind, row, g, st.job.layer, data or {}))
+
+    def record_partial(self) -> None:
+        """The row in progress when a job ends early: a partial bead from its start to the stop point."""
+        st = self.state
+        job, p = st.job, st.program
+        if p is None or not job.carry_mm3:
+            job.carry_mm3.clear()
+            return
+        for r, vol in sorted(job.carry_mm3.items()):
+            if job.resume_at is not None and job.resume_at.row == r:
+                end = job.resume_at.pose.xyz_mm
+            else:
+                end = (inv_T(p.wobj) @ st.rest_T)[:3, 3]
+            start = p.xyz_mm[r - 1] if r > 0 else end
+            if vol > 0:
+                st.beads.add(np.array([r]), p.layer[r:r + 1], start[None], np.asarray(end)[None], np.array([vol]),
+                             p.flow_mm3_mm[r:r + 1])
+        job.carry_mm3.clear()
+        job.resume_at = None
