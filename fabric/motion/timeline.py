@@ -24,14 +24,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from fabric.robot.frames import inv_T, quat_from_R
-from fabric.motion.program import MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT_TEMP, Program
+from fabric.motion.program import MOVEJ, MOVEL, Program
 
-__all__ = ["Sample", "SampleBatch", "Timeline", "Leg"]
+__all__ = ["Sample", "SampleBatch", "Timeline"]
 
 
 @dataclass
@@ -294,86 +294,3 @@ def _nlerp(qa: np.ndarray, qb: np.ndarray, f: np.ndarray) -> np.ndarray:
     q = (1.0 - f)[:, None] * qa + (f * sgn)[:, None] * qb
     q /= np.linalg.norm(q, axis=-1, keepdims=True)
     return np.where(q[:, :1] < 0, -q, q)
-
-
-@dataclass
-class Leg:
-    """A timeline placed at an absolute start ``t0``, possibly cut short, with row cursors.
-
-    ``build`` makes the timeline when the leg is placed (legs that continue the
-    program are timed when they begin, with the heaters and overrides of that
-    moment). A cut leg owns only its first ``n_rows`` rows and ends at ``t_cut``
-    (local seconds); ``partial_end`` says the last owned row is left unfinished.
-    ``started`` / ``done`` count rows whose start / end has been processed.
-    """
-
-    tl: Timeline | None
-    main: bool
-    end_kinds: list[str]
-    build: Callable[[float], Timeline] | None = None
-    t0: float = float("nan")
-    t_cut: float = 0.0
-    n_rows: int = 0
-    partial_end: bool = False
-    started: int = 0
-    done: int = 0
-    placed: bool = False
-    preview_s: float | None = None
-    ext: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int8))
-    interesting: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    vol_mm3: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    cumvol_mm3: np.ndarray = field(default_factory=lambda: np.zeros(1))
-
-    def place(self, t0: float) -> None:
-        """Start the leg at absolute time ``t0`` (building its timeline if needed)."""
-        if self.tl is None:
-            assert self.build is not None
-            self.tl = self.build(t0)
-        tl = self.tl
-        self.t0, self.placed = float(t0), True
-        if not self.t_cut and not self.n_rows:
-            self.t_cut, self.n_rows = tl.total_s, tl.n
-        p = tl.program
-        rows = tl.rows
-        op, flow, layer = p.op[rows], p.flow_mm3_mm[rows], p.layer[rows]
-        on = ((op == MOVEL) & (flow > 0)) if self.main else np.zeros(len(rows), dtype=bool)
-        ext = np.where(op == SET_TEMP, -1, on).astype(np.int8)
-        # extruder state carried through set-point rows: compare with the last real state
-        idx = np.where(ext >= 0, np.arange(len(ext)), 0)
-        np.maximum.accumulate(idx, out=idx)
-        filled = ext[idx]
-        change = np.zeros(len(ext), dtype=bool)
-        change[1:] = (ext[1:] >= 0) & (filled[1:] != filled[:-1])
-        lay = np.zeros(len(ext), dtype=bool)
-        if self.main:
-            lay[1:] = (layer[1:] >= 0) & (layer[1:] != layer[:-1])
-        special = (op == SET_TEMP) | (op == WAIT_TEMP) | (op == RETRACT)
-        first = np.zeros(len(ext), dtype=bool)
-        first[:1] = True
-        self.ext = ext
-        self.interesting = np.flatnonzero(first | change | lay | special)
-        self.vol_mm3 = np.where(self.main & (op == MOVEL), flow * tl.flow_r * tl.len_mm, 0.0)
-        self.cumvol_mm3 = np.concatenate([[0.0], np.cumsum(self.vol_mm3)])
-
-    def row_at(self, tau_s: float) -> int:
-        """Local row running at local time ``tau_s`` (within the owned rows)."""
-        return int(min(self.tl.locate(np.array([tau_s]))[0], self.n_rows - 1))
-
-    def cut_at(self, tau_s: float) -> None:
-        """End the leg at local time ``tau_s``: the row running then is left unfinished."""
-        j = self.row_at(tau_s)
-        self.n_rows, self.t_cut = j + 1, float(tau_s)
-        self.partial_end = tau_s < self.tl.t_end_s[j]
-
-    def cut_after(self, j: int) -> None:
-        """End the leg when local row ``j`` completes."""
-        self.n_rows, self.t_cut, self.partial_end = j + 1, float(self.tl.t_end_s[j]), False
-
-    def cursor(self, tau_s: float, final: bool) -> tuple[int, int]:
-        """Rows started and rows completed by local time ``tau_s`` (all owned ones when ``final``)."""
-        if final:
-            return self.n_rows, self.n_rows - int(self.partial_end)
-        tl = self.tl
-        ns = int(np.searchsorted(tl.t_start_s, tau_s, side="right"))
-        nd = int(np.searchsorted(tl.t_end_s, tau_s, side="right"))
-        return min(ns, self.n_rows), min(nd, self.n_rows - int(self.partial_end))
