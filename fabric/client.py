@@ -182,9 +182,8 @@ class Client:
                     continue
                 if msg.job_id == job_id:
                     st = msg
-            if st.state == "failed" and st.error:
-                raise error_from_code(st.error.get("code", "internal"), st.error.get("message", ""),
-                                      st.error.get("details"))
+            if st.state == "failed" and st.error is not None:
+                raise error_from_code(st.error.code, st.error.message, st.error.details)
             return st
         finally:
             sub.close()

@@ -58,7 +58,7 @@ def run_demo(client: Client, model: Path, out: Path, profile: str, backend: str,
                 stages.append(st.stage)
                 say(f"  {st.stage} ...")
         client.wait_job("supervisor", acc.job_id, on_progress=progress)
-        rec = next(j for j in client.jobs().jobs if j["job_id"] == acc.job_id)
+        rec = next(j for j in client.jobs().jobs if j.job_id == acc.job_id)
         end = follow_print(client, timeout_s=3600)
         t_wall = time.monotonic() - t0
         info = client.time()
@@ -73,22 +73,22 @@ def run_demo(client: Client, model: Path, out: Path, profile: str, backend: str,
     finally:
         ext_sub.close()
 
-    plan, coll = rec["plan"], rec["collisions"]
-    slice_res = client.slice_result(rec["gcode_id"])
-    (out / f"{model.stem}.gcode").write_bytes(client.artifact("slicer", rec["gcode_id"]).data)
-    program = program_from_artifact(client.artifact("planner", rec["program_id"]))
-    (out / f"{model.stem}.mod").write_bytes(client.export(rec["program_id"], "rapid").data)
-    (out / f"{model.stem}.csv").write_bytes(client.export(rec["program_id"], "csv").data)
+    plan, coll = rec.plan, rec.collisions          # both set: the job went through planning and the check
+    slice_res = client.slice_result(rec.gcode_id)
+    (out / f"{model.stem}.gcode").write_bytes(client.artifact("slicer", rec.gcode_id).data)
+    program = program_from_artifact(client.artifact("planner", rec.program_id))
+    (out / f"{model.stem}.mod").write_bytes(client.export(rec.program_id, "rapid").data)
+    (out / f"{model.stem}.csv").write_bytes(client.export(rec.program_id, "csv").data)
     (out / "toolpath.png").write_bytes(toolpath_png(program, title=model.stem))
     (out / "as-printed.stl").write_bytes(client.mesh("stl").data)
     summary = {
         "model": model.name, "profile": profile, "backend": backend, "end": end.kind,
-        "layers": plan["layers"], "moves": plan["moves"], "targets": plan["targets"],
-        "print_time_s": info.total_s, "estimate_s": plan["estimate_s"], "wall_s": t_wall,
-        "collision_free": coll["collision_free"], "collision_configs": coll["checked_configs"],
-        "min_clearance_mm": coll["min_distance_mm"],
+        "layers": plan.layers, "moves": plan.moves, "targets": plan.targets,
+        "print_time_s": info.total_s, "estimate_s": plan.estimate_s, "wall_s": t_wall,
+        "collision_free": coll.collision_free, "collision_configs": coll.checked_configs,
+        "min_clearance_mm": coll.min_distance_mm,
         "extruded_mm3": last_ext.extruded_mm3 if last_ext else float("nan"),
-        "planned_mm3": plan["extruded_mm3"], "sliced_mm3": slice_res.extruded_mm3,
+        "planned_mm3": plan.extruded_mm3, "sliced_mm3": slice_res.extruded_mm3,
         "model_volume_mm3": slice_res.model_volume_mm3, "out": str(out),
     }
     return summary

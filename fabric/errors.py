@@ -20,8 +20,21 @@ class that matches it)::
     ├── ServiceUnavailable           "unavailable"     no service answered in time
     └── InternalError                "internal"        unexpected failure (bug)
 
-Every error carries ``details``: a dict of plain values (file, line, joint,
-limit, field, ...) that a caller can act on.
+Every error carries ``details``: a dict of plain values that a caller can act
+on. Each detail has one type wherever the error is raised; the ones a caller
+may rely on, by class (others may be present)::
+
+    ValidationError    field: str (dotted path), schema: str
+    GcodeError         line: int (1-based), text: str
+    MeshError          file: str, reason: str ("empty", "format", "truncated", "open", ...)
+    ConfigError        field: str (``section.key``), value
+    UnreachableError   reason: str (one of UNREACHABLE_REASONS), gcode_line: int (-1: not from G-code),
+                       and where known row: int, joint: int (0-based), xyz_mm: list[float], probe: int
+    CollisionError     the fields of ``collision.Hit``: body_a, body_b: str, t_s: float,
+                       row, gcode_line, layer: int, move_r: float
+    StateError         state: str, command: str
+    NotFound           what was looked for (job_id, artifact_id, backend, ...): str
+    ServiceUnavailable key: str, timeout_s: float, or missing: list[str]
 """
 from __future__ import annotations
 
@@ -31,8 +44,13 @@ __all__ = [
     "FabricError", "BadRequest", "DecodeError", "ValidationError", "GcodeError",
     "MeshError", "ProfileError", "ConfigError", "PlacementError", "UnreachableError",
     "CollisionError", "StateError", "NotFound", "SlicerError", "ServiceUnavailable",
-    "InternalError", "error_from_code",
+    "InternalError", "error_from_code", "UNREACHABLE_REASONS",
 ]
+
+UNREACHABLE_REASONS = ("out of reach", "joint limit", "singular", "joint jump")
+"""Why a target is unreachable (``UnreachableError.details['reason']``): no solution at all, a
+solution only beyond a joint's limits, at a singularity, or a configuration change between two
+consecutive targets. ``fabric.robot.kinematics.ik_reason`` maps the IK status codes to these."""
 
 
 class FabricError(Exception):
@@ -94,9 +112,15 @@ class PlacementError(BadRequest):
 
 
 class UnreachableError(FabricError):
-    """A target the robot cannot reach; ``details`` has ``gcode_line`` and ``reason``."""
+    """A target the robot cannot reach; ``details`` has ``reason`` (one of ``UNREACHABLE_REASONS``)
+    and ``gcode_line`` (-1 when the target does not come from G-code)."""
 
     code = "unreachable"
+
+    def __init__(self, message: str, *, reason: str, gcode_line: int = -1, **details: Any) -> None:
+        if reason not in UNREACHABLE_REASONS:
+            raise TypeError(f"UnreachableError reason must be one of {UNREACHABLE_REASONS}, got {reason!r}")
+        super().__init__(message, reason=reason, gcode_line=int(gcode_line), **details)
 
 
 class CollisionError(FabricError):

@@ -18,7 +18,7 @@ from typing import Callable
 
 from fabric.errors import FabricError, InternalError, NotFound
 from fabric.runtime import Publisher
-from fabric.schemas import JobStatus
+from fabric.schemas import ErrorReply, JobStatus
 
 __all__ = ["Job", "JobRunner"]
 
@@ -102,9 +102,14 @@ class JobRunner:
                 st.result_id = fn(Job(self, st))
                 st.state, st.progress_r = "done", 1.0
             except FabricError as err:
-                st.state, st.error, st.message = "failed", err.to_wire(), err.message
+                _fail(st, err)
             except Exception as exc:  # a bug: keep the trace, fail the job, keep running
                 log.error("%s job %s failed:\n%s", self.name, st.job_id, traceback.format_exc())
-                err = InternalError(f"{type(exc).__name__}: {exc}")
-                st.state, st.error, st.message = "failed", err.to_wire(), err.message
+                _fail(st, InternalError(f"{type(exc).__name__}: {exc}"))
             self.publish(st)
+
+
+def _fail(st: JobStatus, err: FabricError) -> None:
+    """Mark the job failed with the error a caller gets back (``Client.wait_job`` raises it)."""
+    st.state, st.message = "failed", err.message
+    st.error = ErrorReply(code=err.code, message=err.message, details=err.to_wire()["details"])

@@ -7,6 +7,7 @@ from typing import Any, Union
 
 import numpy as np
 
+from fabric.errors import UNREACHABLE_REASONS
 from fabric.keys import ENDPOINTS, SERVICES, TOPICS
 from fabric.schemas import REGISTRY
 
@@ -32,7 +33,7 @@ Every payload is one **msgpack** map holding the message's fields plus two tags:
 | key | meaning |
 |---|---|
 | `_t` | message type, e.g. `station.Pose` |
-| `_v` | schema version (integer, currently 1 for all) |
+| `_v` | schema version (integer; each message's heading below gives its current version) |
 
 Field names carry their unit (`_mm`, `_s`, `_mm_s`, `_deg`, `_rad`, `_c` Celsius,
 `_r` ratio, `_mm3`). Small fixed vectors (a pose, six joints) are plain msgpack arrays of
@@ -50,8 +51,8 @@ message as the query payload; a success is one reply carrying the reply message.
 is an error reply (`reply_err`) whose payload is `common.Error`:
 `{"code": str, "message": str, "details": map}`. Codes: `bad_request`, `decode`,
 `validation` (details.field names the field), `gcode` (details.line), `mesh`, `profile`,
-`config`, `placement`, `unreachable` (details.gcode_line, details.reason), `collision`,
-`state` (details.state, details.command), `not_found`, `slicer`, `unavailable`, `internal`.
+`config`, `placement`, `unreachable` (details.gcode_line, details.reason: one of {reasons}),
+`collision` (details: the fields of `collision.Hit`), `state` (details.state, details.command), `not_found`, `slicer`, `unavailable`, `internal`.
 A service answers malformed payloads with `decode`/`validation` errors and keeps serving.
 
 Long work (slicing, planning, print jobs) is a **job**: the command replies at once with
@@ -121,7 +122,8 @@ def _constraints(spec) -> str:
 
 
 def render() -> str:
-    out = [INTRO.replace("{services}", ", ".join(f"`{s}`" for s in SERVICES))]
+    intro = INTRO.replace("{services}", ", ".join(f"`{s}`" for s in SERVICES))
+    out = [intro.replace("{reasons}", ", ".join(f"`{r}`" for r in UNREACHABLE_REASONS))]
     out.append("## Commands (queryables)\n")
     out.append("| key | request | reply | timeout | what it does |\n|---|---|---|---|---|")
     for (svc, cmd), ep in ENDPOINTS.items():

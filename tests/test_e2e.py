@@ -106,10 +106,10 @@ def test_demo_path_through_the_processes(running_cell, client, tmp_path):
     assert not errors, errors[:3]
     assert len(received) > 5
     assert any(m["xyz_mm"][2] < 50 for m in received), "the monitor never saw the nozzle near the plate"
-    rec = next(j for j in client.jobs().jobs if j["job_id"] == acc.job_id)
-    assert rec["collisions"]["collision_free"]
+    rec = next(j for j in client.jobs().jobs if j.job_id == acc.job_id)
+    assert rec.state == "done" and rec.collisions.collision_free
     info = client.time()
-    assert info.total_s == pytest.approx(rec["plan"]["estimate_s"], rel=1e-6)
+    assert info.total_s == pytest.approx(rec.plan.estimate_s, rel=1e-6)
     assert info.remaining_s == pytest.approx(0.0, abs=1e-6)
     mesh = client.mesh("stl")
     assert len(mesh.data) > 1000

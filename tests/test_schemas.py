@@ -155,3 +155,56 @@ def test_decode_any_reads_the_type_tag():
         codec.decode_any(codec.pack({"_t": "no.Such", "_v": 1}))
     with pytest.raises(ValidationError):
         codec.decode_any(codec.pack({"_t": Pose.TYPE, "_v": 1, "seq": 1}))
+
+
+@pytest.mark.parametrize("cls_name,field,nested", [
+    ("PlanSummary", "first_unreachable", "UnreachableTarget"),
+    ("PlanSummary", "first_slowed", "SlowedMove"),
+    ("CollisionReport", "first_hit", "CollisionHit"),
+    ("FabricStatus", "job", "JobRecord"),
+    ("JobStatus", "error", "ErrorReply"),
+])
+def test_fields_callers_read_are_schemas(cls_name, field, nested):
+    from fabric import schemas
+    hints = typing.get_type_hints(getattr(schemas, cls_name))
+    assert hints[field] == getattr(schemas, nested) | None
+
+
+def test_job_list_holds_job_records():
+    from fabric.schemas import JobList, JobRecord
+    assert typing.get_type_hints(JobList)["jobs"] == list[JobRecord]
+
+
+def test_nested_schema_is_validated_with_its_dotted_path():
+    from fabric.schemas import CollisionReport, PlanSummary
+    base = {"_t": "planner.PlanSummary", "_v": 2, "program_id": "p", "targets": 1, "moves": 1, "layers": 1,
+            "feasible_r": 0.5, "runnable": False, "estimate_s": -1.0, "extruded_mm3": 0.0, "path_mm": 0.0}
+    ok = codec.decode(codec.pack({**base, "first_unreachable": {"gcode_line": 6, "reason": "out of reach"}}),
+                      PlanSummary)
+    assert ok.first_unreachable.gcode_line == 6 and ok.first_unreachable.row == -1
+    with pytest.raises(ValidationError) as e:
+        codec.decode(codec.pack({**base, "first_unreachable": {"gcode_line": 6, "reason": 1}}), PlanSummary)
+    assert e.value.details["field"] == "first_unreachable.reason"
+    with pytest.raises(ValidationError) as e:
+        codec.decode(codec.pack({**base, "first_unreachable": {"gcode_line": 6, "reason": "far away"}}),
+                     PlanSummary)
+    assert e.value.details["field"] == "first_unreachable.reason"
+    with pytest.raises(ValidationError) as e:
+        codec.decode(codec.pack({"_t": "collision.Report", "_v": 2, "collision_free": False, "checked_configs": 3,
+                                 "min_distance_mm": 0.0, "first_hit": {"body_a": "link_2"}}), CollisionReport)
+    assert e.value.details["field"] == "first_hit.body_b"
+
+
+def test_unreachable_reason_is_one_word_of_the_vocabulary():
+    from fabric.errors import UNREACHABLE_REASONS, UnreachableError, error_from_code
+    from fabric.robot.kinematics import IK_OK, IK_REASONS, ik_reason
+    err = UnreachableError("far", reason="out of reach", gcode_line=6)
+    assert err.details == {"reason": "out of reach", "gcode_line": 6}
+    with pytest.raises(TypeError, match="reason"):
+        UnreachableError("far", reason=1)                 # an IK status code is not a reason: use ik_reason
+    assert {ik_reason(code) for code in IK_REASONS if code != IK_OK} == set(UNREACHABLE_REASONS)
+    assert ik_reason(np.uint8(1)) == "out of reach"
+    with pytest.raises(ValueError):
+        ik_reason(IK_OK)
+    back = error_from_code("unreachable", "far", err.to_wire()["details"])
+    assert isinstance(back, UnreachableError) and back.details["reason"] == "out of reach"

@@ -84,13 +84,13 @@ def cmd_plan(c: Client, a: argparse.Namespace) -> int:
         r = summary
         lines = [f"program {r.program_id[:12]}: {r.targets} targets, {r.moves} moves, {r.layers} layers, "
                  f"cycle time {r.estimate_s:.1f} s, {r.extruded_mm3:.0f} mm3, feasible {100 * r.feasible_r:.2f} %"]
-        if r.slowed_targets:
-            fs = r.first_slowed or {}
+        fs = r.first_slowed
+        if fs is not None:
             lines.append(f"{r.slowed_targets} moves slowed to respect joint speed limits, first at G-code line "
-                         f"{fs.get('gcode_line')} (A{fs.get('joint')})")
-        if not r.runnable and r.first_unreachable:
-            fu = r.first_unreachable
-            lines.append(f"NOT RUNNABLE: first unreachable target at G-code line {fu.get('gcode_line')}: {fu.get('reason')}")
+                         f"{fs.gcode_line} (A{fs.joint})")
+        fu = r.first_unreachable
+        if fu is not None:
+            lines.append(f"NOT RUNNABLE: first unreachable target at G-code line {fu.gcode_line}: {fu.reason}")
         lines += [f"wrote {fmt}: {path}" for fmt, path in written.items()]
         return "\n".join(lines)
     emit(result, a.json, text)

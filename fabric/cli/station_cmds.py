@@ -35,8 +35,11 @@ def _ready_text(r) -> str:
 
 def _status_text(st) -> str:
     lines = [f"cell {st.cell}"] + [f"  {i.name:<11} {'alive' if i.alive else 'DEAD'}" for i in st.services]
-    if st.job:
-        lines.append(f"job {st.job.get('job_id')} {st.job.get('filename', '')}")
+    job = st.job
+    if job is not None:
+        lines.append(f"job {job.job_id} {job.filename}: {job.state} {job.stage}".rstrip())
+    if st.job_error:
+        lines.append(f"job unknown: {st.job_error}")
     return "\n".join(lines)
 
 
@@ -44,9 +47,9 @@ def _collision_text(r) -> str:
     if r.collision_free:
         return (f"collision-free: {r.checked_configs} configurations checked, min clearance "
                 f"{r.min_distance_mm:.1f} mm ({r.elapsed_s:.2f} s)")
-    h = r.first_hit or {}
-    return (f"COLLISION at t={h.get('t_s', 0):.2f} s, row {h.get('row')}, G-code line {h.get('gcode_line')}: "
-            f"{h.get('body_a')} <-> {h.get('body_b')}")
+    h = r.first_hit
+    return (f"COLLISION at t={h.t_s:.2f} s, row {h.row}, G-code line {h.gcode_line}: "
+            f"{h.body_a} <-> {h.body_b}")
 
 
 def _ack_text(a) -> str:
@@ -63,7 +66,7 @@ def cmd_status(c: Client, a: argparse.Namespace) -> int:
         try:
             st.job = c.status().job
         except FabricError as exc:  # the supervisor may be mid-shutdown: liveliness already answered
-            st.job = {"error": str(exc)}
+            st.job_error = str(exc)
     emit(st, a.json, _status_text)
     return 0 if all(alive.values()) else 3
 

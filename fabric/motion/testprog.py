@@ -18,7 +18,7 @@ import numpy as np
 from fabric.errors import UnreachableError
 from fabric.sim.deposition import bead_area_mm2
 from fabric.robot.frames import inv_T, make_T, quat_from_R, rot_x
-from fabric.robot.kinematics import IK_OK, IK_SINGULAR
+from fabric.robot.kinematics import IK_OK, IK_SINGULAR, ik_reason
 from fabric.motion.program import (APPROACH, BED, MOVEJ, MOVEL, NOZZLE, PRINT, RETURN_HOME, SET_TEMP, WAIT_TEMP,
                                 Program)
 
@@ -74,8 +74,9 @@ def square_program(cell: Any, size_mm: float = 20.0, layers: int = 3, layer_heig
     q, status = cell.robot.ik(p.wobj @ T, home)
     bad = np.flatnonzero(~np.isin(status, (IK_OK, IK_SINGULAR)))
     if len(bad):
-        raise UnreachableError(f"square program row {motion[bad[0]]} is unreachable (IK status {status[bad[0]]})",
-                               row=motion[bad[0]], gcode_line=-1, reason=int(status[bad[0]]))
+        reason = ik_reason(status[bad[0]])
+        raise UnreachableError(f"square program row {motion[bad[0]]} is unreachable ({reason})",
+                               row=motion[bad[0]], gcode_line=-1, reason=reason)
     Th = inv_T(p.wobj) @ np.asarray(cell.robot.fk(home[None]))[0]
     last_q, last_xyz, last_quat = home, Th[:3, 3], quat_from_R(Th[:3, :3])
     k = 0

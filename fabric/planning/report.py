@@ -8,7 +8,8 @@ import numpy as np
 
 from fabric.errors import UnreachableError
 from fabric.gcode.toolpath import Toolpath
-from fabric.robot.kinematics import IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR
+from fabric.robot.kinematics import (IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR,
+                                     ik_reason)
 from fabric.motion.program import Program
 
 __all__ = ["Reachability", "PlanStats", "PlanResult", "UNREACHABLE_CODES"]
@@ -39,7 +40,7 @@ class Reachability:
         row = -1
         if bad.any():
             row = int(np.argmax(bad))
-            first = (int(gcode_line[row]), IK_REASONS.get(int(status[row]), f"status {int(status[row])}"))
+            first = (int(gcode_line[row]), ik_reason(status[row]))
         ok = ~np.isin(st, UNREACHABLE_CODES)
         return cls(status=status, rot_deg=rot_deg, feasible_r=float(ok.mean()) if len(st) else 1.0,
                    counts=counts, first_unreachable=first, first_unreachable_row=row)

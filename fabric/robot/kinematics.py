@@ -47,19 +47,29 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = [
-    "IK_OK", "IK_OUT_OF_REACH", "IK_JOINT_LIMIT", "IK_SINGULAR", "IK_JUMP", "IK_REASONS",
+    "IK_OK", "IK_OUT_OF_REACH", "IK_JOINT_LIMIT", "IK_SINGULAR", "IK_JUMP", "IK_REASONS", "ik_reason",
     "WRIST_SING_SIN", "ELBOW_SING_COS", "SHOULDER_SING_MM", "SphericalWristArm", "IRB140_ARM",
     "multi_turn_mask", "wrist_q6", "pose_cols",
 ]
 
 IK_OK, IK_OUT_OF_REACH, IK_JOINT_LIMIT, IK_SINGULAR, IK_JUMP = 0, 1, 2, 3, 4
+# The one map from IK status codes to words; every failing status names an UnreachableError reason.
 IK_REASONS: dict[int, str] = {
     IK_OK: "ok",
     IK_OUT_OF_REACH: "out of reach",
     IK_JOINT_LIMIT: "joint limit",
     IK_SINGULAR: "singular",
-    IK_JUMP: "joint jump (configuration change between consecutive targets)",
+    IK_JUMP: "joint jump",
 }
+
+
+def ik_reason(status: int | np.integer) -> str:
+    """The ``UnreachableError`` reason (``fabric.errors.UNREACHABLE_REASONS``) of a failing IK status."""
+    code = int(status)
+    if code == IK_OK or code not in IK_REASONS:
+        raise ValueError(f"IK status {code} is not a failure (statuses: {IK_REASONS})")
+    return IK_REASONS[code]
+
 
 WRIST_SING_SIN = 0.01
 ELBOW_SING_COS = 0.01

@@ -2,9 +2,10 @@
 from fabric.schemas.base import REGISTRY, f, schema, to_plain, validate_into
 from fabric.schemas.common import (Ack, Artifact, ArtifactQuery, Empty, ErrorReply, JobAccepted,
                                    JobQuery, JobStatus)
-from fabric.schemas.pipeline import (Backends, CollisionReport, CollisionRequest, ExportRequest,
-                                     FabricStatus, JobList, JobSubmit, PlanRequest, PlanSummary,
-                                     ProgramMsg, ServiceInfo, SliceRequest, SliceResult)
+from fabric.schemas.pipeline import (Backends, CollisionHit, CollisionReport, CollisionRequest, ExportRequest,
+                                     FabricStatus, JobList, JobRecord, JobSubmit, PlanRequest, PlanSummary,
+                                     ProgramMsg, ServiceInfo, SliceRequest, SliceResult, SlowedMove,
+                                     UnreachableTarget)
 from fabric.schemas.station import (CalibrationReport, Check, Event, EventList, EventsQuery,
                                     Extrusion, LoadRequest, MeshRequest, Overrides, Pose,
                                     ReadyReport, StartRequest, StationState, Temps, TimeInfo)
@@ -12,8 +13,9 @@ from fabric.schemas.station import (CalibrationReport, Check, Event, EventList, 
 __all__ = [
     "REGISTRY", "f", "schema", "to_plain", "validate_into",
     "Ack", "Artifact", "ArtifactQuery", "Empty", "ErrorReply", "JobAccepted", "JobQuery", "JobStatus",
-    "Backends", "CollisionReport", "CollisionRequest", "ExportRequest", "FabricStatus", "JobList",
-    "JobSubmit", "PlanRequest", "PlanSummary", "ProgramMsg", "ServiceInfo", "SliceRequest", "SliceResult",
+    "Backends", "CollisionHit", "CollisionReport", "CollisionRequest", "ExportRequest", "FabricStatus", "JobList",
+    "JobRecord", "JobSubmit", "PlanRequest", "PlanSummary", "ProgramMsg", "ServiceInfo", "SliceRequest",
+    "SliceResult", "SlowedMove", "UnreachableTarget",
     "CalibrationReport", "Check", "Event", "EventList", "EventsQuery", "Extrusion", "LoadRequest",
     "MeshRequest", "Overrides", "Pose", "ReadyReport", "StartRequest", "StationState", "Temps", "TimeInfo",
 ]

@@ -41,7 +41,7 @@ class JobQuery:
     job_id: str = f(max_len=128)
 
 
-@schema("common.JobStatus")
+@schema("common.JobStatus", version=2)
 class JobStatus:
     """State of a job; ``result_id`` names the content-addressed result once done."""
     job_id: str
@@ -51,7 +51,7 @@ class JobStatus:
     stage: str = ""
     message: str = ""
     result_id: str = ""
-    error: dict[str, Any] | None = None
+    error: ErrorReply | None = None            # set when ``state`` is failed
     created_s: float = 0.0
     updated_s: float = 0.0
 

@@ -5,7 +5,9 @@ from typing import Any
 
 import numpy as np
 
+from fabric.errors import UNREACHABLE_REASONS
 from fabric.schemas.base import f, schema
+from fabric.schemas.common import JOB_STATES
 
 BACKENDS = ("builtin", "prusaslicer", "slic3r")
 EXPORT_FORMATS = ("rapid", "krl", "urscript", "csv")
@@ -60,7 +62,23 @@ class PlanRequest:
     wobj_rpy_deg: list[float] | None = f(None, shape=(3,))
 
 
-@schema("planner.PlanSummary")
+@schema("planner.UnreachableTarget")
+class UnreachableTarget:
+    """The first target the robot cannot reach: where (G-code line, program row) and why."""
+    gcode_line: int
+    reason: str = f(choices=UNREACHABLE_REASONS)
+    row: int = -1
+
+
+@schema("planner.SlowedMove")
+class SlowedMove:
+    """The first linear move slowed down to keep a joint within its velocity limit."""
+    gcode_line: int
+    row: int
+    joint: int = f(ge=1)        # the limiting axis, 1-based (A1 = 1)
+
+
+@schema("planner.PlanSummary", version=2)
 class PlanSummary:
     program_id: str
     targets: int
@@ -71,11 +89,11 @@ class PlanSummary:
     estimate_s: float
     extruded_mm3: float
     path_mm: float
-    first_unreachable: dict[str, Any] | None = None
+    first_unreachable: UnreachableTarget | None = None
     unreachable_by_reason: dict[str, int] = f(factory=dict)
     elapsed_s: float = 0.0
     slowed_targets: int = 0                    # linear moves slowed to respect a joint velocity limit
-    first_slowed: dict[str, Any] | None = None  # gcode_line, joint (1-based), row
+    first_slowed: SlowedMove | None = None
 
 
 @schema("planner.ProgramMsg")
@@ -107,12 +125,24 @@ class CollisionRequest:
     include_part: bool = True
 
 
-@schema("collision.Report")
+@schema("collision.Hit")
+class CollisionHit:
+    """The first colliding configuration of a sweep: when, where, and which two bodies touch."""
+    body_a: str
+    body_b: str
+    t_s: float = -1.0                          # from the program start (-1: not timed, e.g. a single move)
+    row: int = -1                              # program row (-1 for a single joint move)
+    gcode_line: int = -1
+    layer: int = -1
+    move_r: float = f(0.0, ge=0.0, le=1.0)     # where along a single joint move (0 = start, 1 = end)
+
+
+@schema("collision.Report", version=2)
 class CollisionReport:
     collision_free: bool
     checked_configs: int
     min_distance_mm: float
-    first_hit: dict[str, Any] | None = None     # t_s, row, gcode_line, body_a, body_b
+    first_hit: CollisionHit | None = None
     elapsed_s: float = 0.0
 
 
@@ -125,11 +155,30 @@ class ServiceInfo:
     since_s: float = 0.0
 
 
-@schema("supervisor.Status")
+@schema("supervisor.JobRecord")
+class JobRecord:
+    """One print job: what was submitted, where the pipeline is, and what each stage produced."""
+    job_id: str
+    filename: str
+    profile: str = ""
+    backend: str = ""
+    created_s: float = 0.0
+    state: str = f("queued", choices=JOB_STATES)
+    stage: str = ""
+    message: str = ""
+    result_id: str = ""
+    gcode_id: str = ""                          # the slicer's G-code artifact, once sliced
+    program_id: str = ""                        # the planner's program artifact, once planned
+    plan: PlanSummary | None = None
+    collisions: CollisionReport | None = None
+
+
+@schema("supervisor.Status", version=2)
 class FabricStatus:
     cell: str
     services: list[ServiceInfo]
-    job: dict[str, Any] | None = None
+    job: JobRecord | None = None                # the latest job
+    job_error: str = ""                         # why the latest job could not be read (then ``job`` is nil)
 
 
 @schema("supervisor.JobSubmit")
@@ -144,6 +193,6 @@ class JobSubmit:
     rtf: float = f(0.0, ge=0.0, le=1e6)
 
 
-@schema("supervisor.JobList")
+@schema("supervisor.JobList", version=2)
 class JobList:
-    jobs: list[dict[str, Any]]
+    jobs: list[JobRecord]

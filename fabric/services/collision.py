@@ -36,8 +36,8 @@ def sweep_program(checker: CollisionChecker, program: Program, step_deg: float, 
         if t_end_s is not None:
             t_start = t_end_s[row - 1] if row > 0 else 0.0
             t_s = float(t_start + (t_end_s[row] - t_start) * frac[hit.config])
-        first = {"t_s": t_s, "row": row, "gcode_line": int(program.gcode_line[row]),
-                 "body_a": hit.body_a, "body_b": hit.body_b, "layer": int(program.layer[row])}
+        first = s.CollisionHit(body_a=hit.body_a, body_b=hit.body_b, t_s=t_s, row=row,
+                               gcode_line=int(program.gcode_line[row]), layer=int(program.layer[row]))
     return s.CollisionReport(collision_free=hit is None, checked_configs=n,
                              min_distance_mm=float(min_d) if np.isfinite(min_d) else -1.0,
                              first_hit=first, elapsed_s=time.perf_counter() - t0)
@@ -77,8 +77,9 @@ class CollisionService(Service):
             n = int(max(1, np.ceil(np.abs(q1 - q0).max() / np.radians(req.step_deg))))
             qs = q0 + (q1 - q0) * np.linspace(0.0, 1.0, n + 1)[:, None]
             hit, min_d, checked = self.checker.check_configs(qs)
-            first = None if hit is None else {"t_s": -1.0, "row": -1, "gcode_line": -1, "body_a": hit.body_a,
-                                              "body_b": hit.body_b, "fraction": float(hit.config / n)}
+            first = None
+            if hit is not None:
+                first = s.CollisionHit(body_a=hit.body_a, body_b=hit.body_b, move_r=float(hit.config / n))
             return s.CollisionReport(collision_free=hit is None, checked_configs=checked,
                                      min_distance_mm=float(min_d) if np.isfinite(min_d) else -1.0,
                                      first_hit=first, elapsed_s=time.perf_counter() - t0)

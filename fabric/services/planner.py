@@ -75,7 +75,8 @@ class PlannerService(Service):
         rep = result.report
         first = None
         if rep.first_unreachable is not None:
-            first = {"gcode_line": int(rep.first_unreachable[0]), "reason": str(rep.first_unreachable[1])}
+            line, reason = rep.first_unreachable
+            first = s.UnreachableTarget(gcode_line=int(line), reason=reason, row=int(rep.first_unreachable_row))
         st = result.stats
         estimate = float(result.estimate_s) if np.isfinite(result.estimate_s) else -1.0
         self.summaries[pid] = s.PlanSummary(
@@ -94,10 +95,11 @@ class PlannerService(Service):
 
     def on_export(self, req: s.ExportRequest) -> s.Artifact:
         summary = self.on_summary(s.ArtifactQuery(artifact_id=req.program_id))
-        if not summary.runnable and req.fmt != "csv":
-            fu = summary.first_unreachable or {}
+        fu = summary.first_unreachable
+        if fu is not None and req.fmt != "csv":
             raise UnreachableError(f"program is not runnable: first unreachable target at G-code line "
-                                   f"{fu.get('gcode_line')} ({fu.get('reason')})", **fu)
+                                   f"{fu.gcode_line} ({fu.reason})", gcode_line=fu.gcode_line, reason=fu.reason,
+                                   row=fu.row)
         program = program_from_artifact(self.get_artifact(req.program_id))
         t_end = None
         if req.fmt == "csv" and summary.runnable:      # time at each target, from home, as the station runs it
@@ -111,11 +113,11 @@ class PlannerService(Service):
         return s.Artifact(artifact_id=content_id(data), name=name, media_type=MEDIA[req.fmt], data=data)
 
 
-def _first_slowed(result, program) -> dict | None:
+def _first_slowed(result, program) -> s.SlowedMove | None:
     if result.slowed_rows is None or len(result.slowed_rows) == 0:
         return None
     row = int(result.slowed_rows[0])
-    return {"gcode_line": int(program.gcode_line[row]), "joint": int(result.slowed_joint[0]) + 1, "row": row}
+    return s.SlowedMove(gcode_line=int(program.gcode_line[row]), row=row, joint=int(result.slowed_joint[0]) + 1)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

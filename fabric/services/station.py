@@ -172,9 +172,9 @@ class StationService(Service):
             q_now = self.twin.pose().q_rad
         report = self.client.check(s.CollisionRequest(q_from_deg=np.degrees(q_now).tolist(),
                                                       q_to_deg=np.degrees(self.cell.home_q_rad).tolist()))
-        if not report.collision_free:
-            hit = report.first_hit or {}
-            raise CollisionError(f"the move home would collide: {hit.get('body_a')} <-> {hit.get('body_b')}", **hit)
+        hit = report.first_hit
+        if hit is not None:
+            raise CollisionError(f"the move home would collide: {hit.body_a} <-> {hit.body_b}", **s.to_plain(hit))
         with self.lock:
             self.twin.go_home()
             return self._ack("moving home (collision-checked)")

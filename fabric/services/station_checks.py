@@ -35,10 +35,10 @@ def ready_report(svc: "StationService") -> s.ReadyReport:
             checks.append(s.Check(name="program collision-free", ok=False, detail=f"check failed: {err.message}"))
     rep = svc.collision_report
     if rep is not None:
-        hit = rep.first_hit or {}
-        checks.append(s.Check(name="program collision-free", ok=rep.collision_free,
-                              detail=f"min clearance {rep.min_distance_mm:.1f} mm" if rep.collision_free else
-                              f"{hit.get('body_a')} <-> {hit.get('body_b')} at line {hit.get('gcode_line')}"))
+        hit = rep.first_hit
+        checks.append(s.Check(name="program collision-free", ok=hit is None,
+                              detail=f"min clearance {rep.min_distance_mm:.1f} mm" if hit is None else
+                              f"{hit.body_a} <-> {hit.body_b} at line {hit.gcode_line}"))
     elif not any(c.name == "program collision-free" for c in checks):
         checks.append(s.Check(name="program collision-free", ok=False, detail="not checked (no program)"))
 

@@ -9,10 +9,10 @@ another host. Stages and failures are published on ``supervisor/progress``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import queue
 import threading
 import time
-from typing import Any
 
 import zenoh
 
@@ -35,7 +35,7 @@ class SupervisorService(Service):
         self._alive: dict[str, float] = {}           # service -> since (wall time)
         self._alive_lock = threading.Lock()
         self._events: queue.Queue[tuple[str, str]] = queue.Queue()
-        self._records: dict[str, dict[str, Any]] = {}
+        self._records: dict[str, s.JobRecord] = {}       # what each job was given and produced
         self.jobs = JobRunner("supervisor", self.publisher("progress", lossless=True))
         self.handle("status", self.on_status)
         self.handle("submit", self.on_submit)
@@ -80,22 +80,22 @@ class SupervisorService(Service):
         since.setdefault("supervisor", self.started_s)
         infos = [s.ServiceInfo(name=n, alive=now[n], since_s=since.get(n, 0.0) if now[n] else 0.0) for n in SERVICES]
         jobs = self.jobs.all()
-        current = self._records.get(jobs[-1].job_id) if jobs else None
+        current = self._record(jobs[-1]) if jobs else None
         return s.FabricStatus(cell=self.keys.cell, services=infos, job=current)
 
     def on_submit(self, req: s.JobSubmit) -> s.JobAccepted:
         st = self.jobs.submit("print", lambda job: self._pipeline(job, req))
-        self._records[st.job_id] = {"job_id": st.job_id, "filename": req.filename, "profile": req.profile,
-                                    "backend": req.backend, "created_s": st.created_s}
+        self._records[st.job_id] = s.JobRecord(job_id=st.job_id, filename=req.filename, profile=req.profile,
+                                               backend=req.backend, created_s=st.created_s)
         return s.JobAccepted(job_id=st.job_id, kind="print")
 
     def on_jobs(self, _: s.Empty) -> s.JobList:
-        out = []
-        for st in self.jobs.all():
-            rec = dict(self._records.get(st.job_id, {}))
-            rec.update(state=st.state, stage=st.stage, message=st.message, result_id=st.result_id)
-            out.append(rec)
-        return s.JobList(jobs=out)
+        return s.JobList(jobs=[self._record(st) for st in self.jobs.all()])
+
+    def _record(self, st: s.JobStatus) -> s.JobRecord:
+        """A job's record with its status now (a copy: the pipeline keeps filling the original)."""
+        rec = self._records.get(st.job_id) or s.JobRecord(job_id=st.job_id, filename="")
+        return dataclasses.replace(rec, state=st.state, stage=st.stage, message=st.message, result_id=st.result_id)
 
     # --- the pipeline ---------------------------------------------------------
 
@@ -106,25 +106,25 @@ class SupervisorService(Service):
         acc = c.slice(s.SliceRequest(model=req.model, filename=req.filename, profile=req.profile,
                                      backend=req.backend, overrides=req.overrides))
         sl = c.wait_job("slicer", acc.job_id, on_progress=lambda st: job.progress(0.3 * st.progress_r))
-        rec["gcode_id"] = sl.result_id
+        rec.gcode_id = sl.result_id
         job.progress(0.3, "planning")
         station = c.state()          # plan against the station's current (possibly calibrated) work object
         acc = c.plan(s.PlanRequest(gcode_id=sl.result_id, filename=req.filename.rsplit(".", 1)[0] + ".gcode",
                                    wobj_xyz_mm=station.wobj_xyz_mm, wobj_rpy_deg=station.wobj_rpy_deg))
         pl = c.wait_job("planner", acc.job_id, on_progress=lambda st: job.progress(0.3 + 0.4 * st.progress_r))
         summary = c.plan_summary(pl.result_id)
-        rec["program_id"], rec["plan"] = pl.result_id, s.to_plain(summary)
-        if not summary.runnable:
-            fu = summary.first_unreachable or {}
-            raise UnreachableError(f"program has unreachable targets, first at G-code line {fu.get('gcode_line')}: "
-                                   f"{fu.get('reason')}", **fu)
+        rec.program_id, rec.plan = pl.result_id, summary
+        fu = summary.first_unreachable
+        if fu is not None:
+            raise UnreachableError(f"program has unreachable targets, first at G-code line {fu.gcode_line}: "
+                                   f"{fu.reason}", gcode_line=fu.gcode_line, reason=fu.reason, row=fu.row)
         job.progress(0.7, "checking collisions")
         report = c.check(s.CollisionRequest(program_id=pl.result_id))
-        rec["collisions"] = s.to_plain(report)
-        if not report.collision_free:
-            hit = report.first_hit or {}
-            raise CollisionError(f"collision at t={hit.get('t_s', 0):.2f} s, G-code line {hit.get('gcode_line')}: "
-                                 f"{hit.get('body_a')} hits {hit.get('body_b')}", **hit)
+        rec.collisions = report
+        hit = report.first_hit
+        if hit is not None:
+            raise CollisionError(f"collision at t={hit.t_s:.2f} s, G-code line {hit.gcode_line}: "
+                                 f"{hit.body_a} hits {hit.body_b}", **s.to_plain(hit))
         job.progress(0.9, "loading")
         c.load(pl.result_id, job_id=job.job_id)
         if req.start:

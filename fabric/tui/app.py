@@ -43,8 +43,8 @@ def describe(command: str, result: Any) -> str:
     if command == "collisions":
         if result.collision_free:
             return f"collision-free ({result.checked_configs} configs, clearance {result.min_distance_mm:.1f} mm)"
-        h = result.first_hit or {}
-        return f"COLLISION line {h.get('gcode_line')}: {h.get('body_a')} <-> {h.get('body_b')}"
+        h = result.first_hit
+        return f"COLLISION line {h.gcode_line}: {h.body_a} <-> {h.body_b}"
     if command == "calibrate":
         return (f"plate corrected by {[round(v, 3) for v in result.correction_xyz_mm]} mm, "
                 f"residual {result.residual_rms_mm:.4f} mm")
