@@ -6,7 +6,8 @@ import pytest
 
 from fabric.errors import UnreachableError, ValidationError
 from fabric.robot.frames import make_T
-from fabric.motion.timing import StartState, stop_timeline, time_program, validate_program
+from fabric.motion.timing import StartState, stop_timeline, time_program
+from fabric.motion.validate import validate_program
 from fabric.motion.program import MOVEJ, MOVEL, WAIT, Program
 from fabric.robot.model import IRB140_URDF, RobotModel
 

@@ -139,3 +139,14 @@ class Program:
     def deposited_volume_mm3(self) -> float:
         """Volume the program deposits (flow x path length over linear moves)."""
         return float(np.sum(self.flow_mm3_mm * self.path_length_mm() * (self.op == MOVEL)))
+
+
+def mini_program(rows: list[dict[str, Any]], wobj: np.ndarray) -> Program:
+    """A small program from explicit rows (column name -> value; others as ``Program.empty``):
+    the twin's own moves (lift, lower, retract, home) are timed by the same model."""
+    p = Program.empty(len(rows))
+    p.wobj = np.asarray(wobj, dtype=float).reshape(4, 4)
+    for i, row in enumerate(rows):
+        for name, val in row.items():
+            getattr(p, name)[i] = val
+    return p

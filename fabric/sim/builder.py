@@ -8,7 +8,8 @@ import numpy as np
 from fabric.codec import pack
 from fabric.motion.program import Program
 from fabric.motion.timeline import Timeline
-from fabric.motion.timing import StartState, mini_program, stop_timeline, time_program
+from fabric.motion.program import mini_program
+from fabric.motion.timing import StartState, stop_timeline, time_program
 from fabric.sim.config import TwinConfig
 from fabric.sim.legs import AuxLegSpec, LegSpec, PoseSpec, ProgramLegSpec, ProgramStart, StopLegSpec
 from fabric.sim.state import TwinState

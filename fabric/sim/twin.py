@@ -28,7 +28,7 @@ from fabric.errors import CollisionError, FabricError, StateError, UnreachableEr
 from fabric.motion.program import Program
 from fabric.motion.thermal import Thermal
 from fabric.motion.timeline import Sample
-from fabric.motion.timing import validate_program
+from fabric.motion.validate import validate_program
 from fabric.robot.frames import R_from_quat, inv_T, make_T, quat_from_R, rot_x
 from fabric.sim.builder import LegBuilder
 from fabric.sim.calibration import CalibrationResult, calibrate_plate
