@@ -22,10 +22,10 @@ import zenoh
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.errors import CollisionError, NotFound, StateError
+from fabric.errors import CollisionError, FabricError, NotFound, StateError
 from fabric.programs import content_id, program_from_artifact
+from fabric.readiness import ReadyFacts, print_temp_c, ready_report
 from fabric.runtime import Service
-from fabric.services.station_checks import ready_report
 from fabric.robot.cell import Cell
 from fabric.robot.frames import T_to_xyzrpy
 from fabric.sim.twin import Twin
@@ -232,7 +232,27 @@ class StationService(Service):
                                    wobj_xyz_mm=np.asarray(wobj_xyz).tolist(), wobj_rpy_deg=np.asarray(wobj_rpy).tolist())
 
     def on_ready(self, _: s.Empty) -> s.ReadyReport:
-        return ready_report(self)
+        return ready_report(self._ready_facts())
+
+    def _ready_facts(self) -> ReadyFacts:
+        """What the ready checklist judges: the fabric is asked first (no lock held), then the twin is read."""
+        alive = self.client.alive(timeout=2.0)
+        collision_error = ""
+        if self.program_id and self.collision_report is None:
+            try:
+                self.collision_report = self.client.check(s.CollisionRequest(program_id=self.program_id))
+            except FabricError as err:
+                collision_error = err.message
+        with self.lock:
+            q = self.twin.pose().q_rad
+            program = self.twin.program
+            return ReadyFacts(alive=alive, program_id=self.program_id, collisions=self.collision_report,
+                              collision_error=collision_error,
+                              pose_known=bool(np.all(np.isfinite(q)) and self.cell.robot.within_limits(q[None, :])[0]),
+                              at_home=bool(np.allclose(q, self.cell.home_q_rad, atol=1e-3)),
+                              nozzle_c=float(self.twin.temps().nozzle_c),
+                              print_temp_c=print_temp_c(program) if program is not None else None,
+                              state=self.twin.state, reason=self.twin.reason)
 
     def _time_msg(self) -> s.TimeInfo:
         ti = self.twin.time_info()
