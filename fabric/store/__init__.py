@@ -1,0 +1,1 @@
+"""Durable state of a cell: SQLite stores (jobs, queue, events, checkpoints) and content-addressed artifacts."""
