@@ -6,13 +6,14 @@ from typing import TextIO
 import numpy as np
 
 from fabric.planning.post.common import check_program, row_blocks
+from fabric.planning.post.numtext import FixedColumn, format_rows
 from fabric.motion.program import MOVEL, Program
 
-__all__ = ["write_csv", "CSV_COLUMNS"]
+__all__ = ["write_csv", "csv_rows", "CSV_COLUMNS"]
 
 CSV_COLUMNS = ["gcode_line", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz",
                "q1_deg", "q2_deg", "q3_deg", "q4_deg", "q5_deg", "q6_deg", "speed_mm_s", "extrude", "t_s"]
-_FMT = "%d,%.4f,%.4f,%.4f,%.7f,%.7f,%.7f,%.7f,%.5f,%.5f,%.5f,%.5f,%.5f,%.5f,%.3f,%d,%s"
+CSV_BLOCK_ROWS = 50_000      # rows formatted at once (measured fastest of 4k-50k; a block's bytes stay ~7 MB)
 
 
 def write_csv(program: Program, out: TextIO, t_end_s: np.ndarray | None = None) -> int:
@@ -26,16 +27,24 @@ def write_csv(program: Program, out: TextIO, t_end_s: np.ndarray | None = None) 
         raise ValueError(f"t_end_s has {len(t_end_s)} rows, the program {len(program)}")
     out.write(",".join(CSV_COLUMNS) + "\n")
     n = 0
-    for a, b in row_blocks(0, len(program)):
+    for a, b in row_blocks(0, len(program), CSV_BLOCK_ROWS):
         idx = np.flatnonzero(program.op[a:b] <= MOVEL) + a
         if len(idx) == 0:
             continue
-        q = np.degrees(program.q_rad[idx])
-        ext = (program.flow_mm3_mm[idx] > 0).astype(int)
-        t = [f"{v:.4f}" for v in t_end_s[idx]] if t_end_s is not None else [""] * len(idx)
-        rows = zip(program.gcode_line[idx].tolist(), *program.xyz_mm[idx].T.tolist(),
-                   *program.quat_wxyz[idx].T.tolist(), *q[:, :6].T.tolist(),
-                   program.speed_mm_s[idx].tolist(), ext.tolist(), t)
-        out.write("\n".join(_FMT % r for r in rows) + "\n")
+        out.write(csv_rows(program, idx, t_end_s).decode("ascii"))
         n += len(idx)
     return n
+
+
+def csv_rows(program: Program, idx: np.ndarray, t_end_s: np.ndarray | None = None) -> bytes:
+    """The CSV text of rows ``idx`` (vectorised: the characters ``%.<d>f`` would write)."""
+    q_deg = np.degrees(program.q_rad[idx])
+    xyz, quat = program.xyz_mm[idx], program.quat_wxyz[idx]
+    columns: list[FixedColumn | bytes] = [FixedColumn(program.gcode_line[idx], 0)]
+    columns += [FixedColumn(xyz[:, j], 4) for j in range(3)]
+    columns += [FixedColumn(quat[:, j], 7) for j in range(4)]
+    columns += [FixedColumn(q_deg[:, j], 5) for j in range(6)]
+    columns += [FixedColumn(program.speed_mm_s[idx], 3),
+                FixedColumn((program.flow_mm3_mm[idx] > 0).astype(np.int64), 0),
+                FixedColumn(t_end_s[idx], 4) if t_end_s is not None else b""]
+    return format_rows(columns)

@@ -1,0 +1,129 @@
+"""Fast text of numeric columns: vectorised fixed-point formatting, the same characters as ``"%.<d>f"``.
+
+Formatting a million rows with ``%`` costs some 2.5 us a row in Python. Here
+every column becomes a byte matrix at once: the value is scaled to an integer
+of ``decimals`` places (``rint(|v| * 10**d)``), its digits are peeled off with
+integer division, right-aligned in a fixed-width cell padded with zero bytes;
+the cells of all columns are joined with separators, and the zero bytes are
+dropped from the flattened matrix, which leaves the text of the block.
+
+Exactness. ``printf`` rounds the exact binary value; ``rint`` of the scaled
+double can only disagree when the scaled value lies within its own rounding
+error of a half (a tie, or nearly). Those few values (and non-finite or huge
+ones) are formatted by Python itself and written into their cells, so the
+output is always the same characters as ``"%.<d>f" % v``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["format_rows", "FixedColumn"]
+
+_ZERO, _DOT, _MINUS = ord("0"), ord("."), ord("-")
+_MAX_SCALED = 1e15          # beyond this the int64 digits path is not trusted: Python formats the value
+_TIE_TOL_R = 1e-15          # relative width of the band around a half that goes to Python
+_POW10 = 10 ** np.arange(1, 19, dtype=np.int64)
+
+
+class FixedColumn:
+    """One column: values and their decimals (``0``: an integer column, written like ``%d``)."""
+
+    def __init__(self, values: np.ndarray, decimals: int) -> None:
+        if not 0 <= decimals <= 12:
+            raise ValueError(f"decimals must be in 0..12, got {decimals}")
+        self.values = np.asarray(values)
+        self.decimals = decimals
+
+
+def _digits_count(iv: np.ndarray) -> np.ndarray:
+    """Number of decimal digits of non-negative integers (1 for 0)."""
+    n = np.ones(iv.shape, dtype=np.uint8)
+    top = int(iv.max(initial=0))
+    p = 10
+    while p <= top:
+        n += iv >= p
+        p *= 10
+    return n
+
+
+def _divmod(x: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    # floor division by a scalar is numpy's fast path (libdivide); np.divmod is not
+    q = x // k
+    return q, x - q * k
+
+
+def _python_text(v: float, decimals: int) -> bytes:
+    return (f"%.{decimals}f" % v).encode("ascii")
+
+
+def _cells(col: FixedColumn) -> np.ndarray:
+    """(width, n) uint8: the text of every value right-aligned in its column, zero bytes above it."""
+    v, d = col.values, col.decimals
+    n = len(v)
+    if v.dtype.kind in "iu":
+        neg = v < 0
+        iv = np.abs(v.astype(np.int64))
+        slow = np.zeros(n, dtype=bool)
+    else:
+        v = v.astype(np.float64, copy=False)
+        neg = np.signbit(v)
+        scaled = np.abs(v) * 10.0 ** d
+        rounded = np.rint(scaled)
+        with np.errstate(invalid="ignore"):
+            # near a half (or not finite, or huge): Python decides
+            off = np.abs(scaled - rounded)
+            slow = ~(off < 0.5 - scaled * _TIE_TOL_R) | ~(scaled < _MAX_SCALED)
+        if slow.any():
+            rounded[slow] = 0.0
+        iv = rounded.astype(np.int64)
+    if iv.max(initial=0) < 2**32:
+        iv = iv.astype(np.uint32)                   # the fast integer division path
+    ip, fp = _divmod(iv, 10 ** d) if d else (iv, None)
+    n_int = _digits_count(ip)
+    slow_rows = np.flatnonzero(slow)
+    slow_text = [_python_text(float(v[i]), d) for i in slow_rows]
+    width = max(int(n_int.max(initial=1)) + 1 + (d + 1 if d else 0), max(map(len, slow_text), default=0))
+    # built transposed: one contiguous row of bytes per character position
+    cells = np.zeros((width, n), dtype=np.uint8)
+    pos = width - 1
+    for _ in range(d):                              # fractional digits, then the point
+        fp, digit = _divmod(fp, 10)
+        cells[pos] = digit
+        cells[pos] += _ZERO
+        pos -= 1
+    if d:
+        cells[pos] = _DOT
+        pos -= 1
+    rest = ip                                       # integer digits (as many as each value has)
+    for j in range(int(n_int.max(initial=1))):
+        rest, digit = _divmod(rest, 10)
+        cells[pos - j] = digit
+        cells[pos - j] += _ZERO
+        if j:
+            cells[pos - j] *= n_int > j
+    rows = np.flatnonzero(neg)
+    cells[pos - n_int[rows], rows] = _MINUS         # the sign
+    for i, text in zip(slow_rows, slow_text):       # the values Python formats
+        cells[:, i] = 0
+        cells[width - len(text):, i] = np.frombuffer(text, dtype=np.uint8)
+    return cells
+
+
+def format_rows(columns: list[FixedColumn | bytes], sep: bytes = b",") -> bytes:
+    """Text of rows: the columns in order, ``sep`` between them, ``\\n`` after each row.
+
+    A ``bytes`` column is a constant written on every row (e.g. ``b""`` for an empty field).
+    """
+    n = next(len(c.values) for c in columns if isinstance(c, FixedColumn))
+    parts: list[np.ndarray] = []
+    for k, col in enumerate(columns):
+        if k:
+            parts.append(_constant(sep, n))
+        parts.append(_cells(col) if isinstance(col, FixedColumn) else _constant(col, n))
+    parts.append(_constant(b"\n", n))
+    flat = np.concatenate(parts, axis=0).T.ravel()       # row after row
+    return flat[flat != 0].tobytes()
+
+
+def _constant(text: bytes, n: int) -> np.ndarray:
+    return np.broadcast_to(np.frombuffer(text, dtype=np.uint8)[:, None], (len(text), n))
