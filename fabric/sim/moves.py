@@ -20,6 +20,7 @@ import numpy as np
 from fabric.errors import UnreachableError
 from fabric.motion.program import MOVEJ, MOVEL, RETRACT, WAIT, WAIT_TEMP
 from fabric.motion.timing import stop_timeline
+from fabric.robot.kinematics import ik_reason
 from fabric.robot.frames import R_from_quat, inv_T, make_T, quat_from_R
 from fabric.sim.builder import LegBuilder
 from fabric.sim.config import TwinConfig
@@ -88,8 +89,9 @@ class MotionPlanner:
         q, status = self.robot.ik(T[None], np.asarray(seed, dtype=float))
         code = int(np.asarray(status).reshape(-1)[0])
         if code not in IK_ACCEPT:
-            raise UnreachableError(f"pose {np.round(xyz, 3).tolist()} mm (plate frame) is unreachable",
-                                   reason=code, gcode_line=-1)
+            raise UnreachableError(f"pose {np.round(xyz, 3).tolist()} mm (plate frame) is unreachable "
+                                   f"({ik_reason(code)})", reason=ik_reason(code), gcode_line=-1,
+                                   xyz_mm=np.asarray(xyz, dtype=float).tolist())
         return np.asarray(q, dtype=float).reshape(-1, len(seed))[0]
 
     # Where the queue ends -------------------------------------------------------------

@@ -29,6 +29,7 @@ from fabric.motion.program import Program
 from fabric.motion.thermal import Thermal
 from fabric.motion.timeline import Sample
 from fabric.motion.validate import validate_program
+from fabric.robot.kinematics import ik_reason
 from fabric.robot.frames import R_from_quat, inv_T, make_T, quat_from_R, rot_x
 from fabric.sim.builder import LegBuilder
 from fabric.sim.calibration import CalibrationResult, calibrate_plate
@@ -328,8 +329,9 @@ class Twin:
         bad = ~np.isin(np.asarray(status), IK_ACCEPT)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise UnreachableError(f"probe {i} at {np.round(res.points_base_mm[i], 2).tolist()} mm is unreachable",
-                                   probe=i, reason=int(np.asarray(status)[i]), gcode_line=-1)
+            reason = ik_reason(np.asarray(status)[i])
+            raise UnreachableError(f"probe {i} at {np.round(res.points_base_mm[i], 2).tolist()} mm is unreachable "
+                                   f"({reason})", probe=i, reason=reason, gcode_line=-1)
         st.work_T = res.work_object_T.copy()
         if st.state == "ready":
             st.program = None
