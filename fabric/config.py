@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 
 import zenoh
 
-__all__ = ["SessionSettings", "DEFAULT_HUB", "add_session_args", "settings_from_args", "zenoh_config"]
+__all__ = ["SessionSettings", "DEFAULT_HUB", "add_session_args", "add_cell_argument", "settings_from_args",
+           "zenoh_config"]
 
 DEFAULT_HUB = os.environ.get("FABRIC_HUB", "tcp/127.0.0.1:7447")
 MODES = ("peer", "client", "router")
@@ -56,6 +57,12 @@ def add_session_args(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--listen", action="append", metavar="ENDPOINT", help="endpoint to listen on")
     g.add_argument("--multicast", action="store_true", help="enable multicast scouting (off by default)")
     g.add_argument("--cell", default=os.environ.get("FABRIC_CELL", "cell1"), help="cell name: the key prefix am/<cell>/")
+
+
+def add_cell_argument(parser: argparse.ArgumentParser, what: str = "") -> None:
+    """The ``--cell-config`` option (read with ``Cell.load_or_builtin``); ``what`` says what the cell is used for."""
+    parser.add_argument("--cell-config", default=None, metavar="TOML",
+                        help="cell file" + (f" ({what})" if what else "") + "; default: the built-in IRB 140 cell")
 
 
 def settings_from_args(ns: argparse.Namespace, default_mode: str = "peer") -> SessionSettings:

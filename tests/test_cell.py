@@ -156,3 +156,19 @@ def test_ur5_plate_is_reachable_with_a_vertical_nozzle(ur5: Cell) -> None:
     res = solve_path(ur5.robot, xyz, [0.0, 0.0, -1.0], ur5.home_q_rad)
     assert res.feasible_r == 1.0, res.status
     np.testing.assert_allclose(ur5.robot.fk(res.q_rad)[:, :3, 3], xyz, atol=1e-3)
+
+
+def test_load_or_builtin_reads_the_cell_config_option(irb: Cell, tmp_path: Path) -> None:
+    assert Cell.load_or_builtin(None).source_path == irb.source_path          # no option: the built-in IRB 140
+    assert Cell.load_or_builtin("").robot.name == "irb140"
+    assert Cell.load_or_builtin(CELLS_DIR / "ur5.toml").robot.name == "ur5"
+    with pytest.raises(NotFound):
+        Cell.load_or_builtin(tmp_path / "missing.toml")
+
+
+@pytest.mark.parametrize("service", ["station", "slicer", "planner", "collision"])
+def test_every_service_that_needs_the_cell_takes_cell_config(service: str) -> None:
+    from fabric.cli.main import service_parser
+    opts = service_parser(service).parse_args(["--cell-config", "mycell.toml"])
+    assert opts.cell_config == "mycell.toml"
+    assert service_parser(service).parse_args([]).cell_config is None

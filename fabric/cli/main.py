@@ -11,7 +11,7 @@ from pathlib import Path
 from fabric.cli import pipeline_cmds, station_cmds
 from fabric.cli.output import emit, fail
 from fabric.client import Client
-from fabric.config import add_session_args, settings_from_args
+from fabric.config import add_cell_argument, add_session_args, settings_from_args
 from fabric.errors import FabricError
 from fabric.keys import SERVICES
 
@@ -45,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--services", nargs="+", choices=SERVICES, default=list(SERVICES))
     p.add_argument("--no-hub", action="store_true", help="do not host the hub (a router runs elsewhere)")
     p.add_argument("--log-dir", type=Path, default=None, help="write each service's log there")
-    p.add_argument("--cell-config", default=None, help="cell TOML for the station, planner and collision services")
+    add_cell_argument(p, "for every service of the cell")
     p.set_defaults(local=_cmd_up)
 
     p = sub.add_parser("router", parents=[common], help="host the fabric hub (a Zenoh router) in this process")
@@ -57,18 +57,18 @@ def build_parser() -> argparse.ArgumentParser:
     cell = sub.add_parser("cell", help="the cell configuration")
     csub = cell.add_subparsers(dest="cell_cmd", required=True)
     p = csub.add_parser("show", parents=[common], help="print the cell (robot, frames, plate, home)")
-    p.add_argument("--cell-config", default=None)
+    add_cell_argument(p)
     p.set_defaults(local=_cmd_cell_show)
     p = csub.add_parser("export-urdf", parents=[common], help="write robot + tool as one URDF (TCP frame 'tcp')")
     p.add_argument("output")
-    p.add_argument("--cell-config", default=None)
+    add_cell_argument(p)
     p.set_defaults(local=_cmd_cell_urdf)
     return parser
 
 
 def _load_cell(path: str | None):
     from fabric.robot.cell import Cell
-    return Cell.load(path) if path else Cell.builtin("irb140")
+    return Cell.load_or_builtin(path)
 
 
 def service_parser(name: str) -> argparse.ArgumentParser:
@@ -94,7 +94,7 @@ def _cmd_up(a: argparse.Namespace) -> int:
     from fabric.cli.up import run_up
     extra = {}
     if a.cell_config:
-        extra = {n: ["--cell-config", a.cell_config] for n in ("station", "planner", "collision")}
+        extra = {n: ["--cell-config", a.cell_config] for n in ("station", "slicer", "planner", "collision")}
     return run_up(settings_from_args(a), tuple(a.services), not a.no_hub, a.log_dir, extra)
 
 

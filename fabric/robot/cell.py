@@ -41,10 +41,11 @@ from fabric.errors import ConfigError, NotFound, ValidationError
 from fabric.robot import frames
 from fabric.robot.model import RobotModel, ToolGeometry
 
-__all__ = ["Cell", "CELLS_DIR", "PACKAGE_DIR"]
+__all__ = ["Cell", "CELLS_DIR", "PACKAGE_DIR", "DEFAULT_CELL"]
 
 PACKAGE_DIR = Path(__file__).resolve().parent.parent
 CELLS_DIR = PACKAGE_DIR / "cells"
+DEFAULT_CELL = "irb140"          # the built-in cell a service uses when given no cell file
 
 # section -> allowed keys (a trailing "." marks a sub-table)
 _SCHEMA: dict[str, set[str]] = {
@@ -170,7 +171,12 @@ class Cell:
         return cls.from_toml_text(p.read_text(), p.resolve().parent, source=str(p))
 
     @classmethod
-    def builtin(cls, name: str = "irb140") -> "Cell":
+    def load_or_builtin(cls, path: str | Path | None) -> "Cell":
+        """The cell file ``path`` (a ``--cell-config`` option), or the built-in ``DEFAULT_CELL`` when None or empty."""
+        return cls.load(path) if path else cls.builtin(DEFAULT_CELL)
+
+    @classmethod
+    def builtin(cls, name: str = DEFAULT_CELL) -> "Cell":
         """One of the cells shipped in ``fabric/cells/`` (``irb140``, ``ur5``)."""
         path = CELLS_DIR / f"{name}.toml"
         if not path.is_file():

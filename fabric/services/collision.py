@@ -12,6 +12,7 @@ from fabric import schemas as s
 from fabric.client import Client
 from fabric.errors import BadRequest
 from fabric.programs import program_from_artifact
+from fabric.config import add_cell_argument
 from fabric.runtime import Service
 from fabric.robot.cell import Cell
 from fabric.collision.sweep import CollisionChecker, layer_boxes
@@ -90,9 +91,9 @@ def _timeline_ends(program: Program, cell: Cell) -> np.ndarray:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--cell-config", default=None, help="cell TOML (default: the built-in IRB 140 cell)")
+    add_cell_argument(parser)
 
 
 def build(session: zenoh.Session, cell_id: str, options: argparse.Namespace) -> CollisionService:
-    cell = Cell.load(options.cell_config) if options.cell_config else Cell.builtin("irb140")
+    cell = Cell.load_or_builtin(options.cell_config)
     return CollisionService(session, cell_id, cell)

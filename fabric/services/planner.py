@@ -18,6 +18,7 @@ from fabric.client import Client
 from fabric.errors import BadRequest, NotFound, UnreachableError
 from fabric.jobs import Job, JobRunner
 from fabric.programs import content_id, program_artifact, program_from_artifact
+from fabric.config import add_cell_argument
 from fabric.runtime import Service
 from fabric.robot.cell import Cell
 from fabric.robot.frames import xyzrpy_to_T
@@ -121,9 +122,9 @@ def _first_slowed(result, program) -> s.SlowedMove | None:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--cell-config", default=None, help="cell TOML (default: the built-in IRB 140 cell)")
+    add_cell_argument(parser)
 
 
 def build(session: zenoh.Session, cell_id: str, options: argparse.Namespace) -> PlannerService:
-    cell = Cell.load(options.cell_config) if options.cell_config else Cell.builtin("irb140")
+    cell = Cell.load_or_builtin(options.cell_config)
     return PlannerService(session, cell_id, cell)

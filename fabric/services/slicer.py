@@ -9,6 +9,7 @@ from fabric import schemas as s
 from fabric.errors import NotFound
 from fabric.jobs import Job, JobRunner
 from fabric.programs import content_id
+from fabric.config import add_cell_argument
 from fabric.runtime import Service
 from fabric.robot.cell import Cell
 from fabric.slicing import Placement, available_backends, list_profiles, load_profile, slice_model
@@ -69,11 +70,11 @@ class SlicerService(Service):
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--cell-config", default=None, help="cell TOML: the plate size and build volume")
+    add_cell_argument(parser, "its plate size")
     parser.add_argument("--build-height", type=float, default=250.0, help="reachable build height (mm)")
 
 
 def build(session: zenoh.Session, cell_id: str, options: argparse.Namespace) -> SlicerService:
-    cell = Cell.load(options.cell_config) if options.cell_config else Cell.builtin("irb140")
+    cell = Cell.load_or_builtin(options.cell_config)
     size = tuple(float(v) for v in cell.plate_size_mm[:2])
     return SlicerService(session, cell_id, size, options.build_height)

@@ -25,6 +25,7 @@ from fabric.client import Client
 from fabric.errors import CollisionError, FabricError, NotFound, StateError
 from fabric.programs import content_id, program_from_artifact
 from fabric.readiness import ReadyFacts, print_temp_c, ready_report
+from fabric.config import add_cell_argument
 from fabric.runtime import Service
 from fabric.robot.cell import Cell
 from fabric.robot.frames import T_to_xyzrpy
@@ -294,10 +295,10 @@ class StationService(Service):
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--cell-config", default=None, help="cell TOML (default: the built-in IRB 140 cell)")
+    add_cell_argument(parser)
     parser.add_argument("--pose-hz", type=float, default=50.0, help="wall-clock rate of pose telemetry")
 
 
 def build(session: zenoh.Session, cell_id: str, options: argparse.Namespace) -> StationService:
-    cell = Cell.load(options.cell_config) if options.cell_config else Cell.builtin("irb140")
+    cell = Cell.load_or_builtin(options.cell_config)
     return StationService(session, cell_id, cell, pose_hz=options.pose_hz)
