@@ -84,8 +84,8 @@ def test_tracking_mode_equals_the_full_8_branch_rule(robot: RobotModel) -> None:
     fast = ClosedFormIK(IRB140_ARM, robot.lower_rad, robot.upper_rad, robot.tool_T)
     full = ClosedFormIK(IRB140_ARM, robot.lower_rad, robot.upper_rad, robot.tool_T)
     full.tracking = False
-    qa, sa = fast.ik(T, smooth[0])
-    qb, sb = full.ik(T, smooth[0])
+    qa, sa = fast.solve(T, smooth[0])
+    qb, sb = full.solve(T, smooth[0])
     np.testing.assert_array_equal(sa, sb)
     np.testing.assert_allclose(qa, qb, atol=1e-12)
 

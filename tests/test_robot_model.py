@@ -149,3 +149,35 @@ def test_frame_helpers_round_trip() -> None:
     np.testing.assert_allclose(Rz[1, :, 0], np.array([2.0, 1.0, 0.0]) / np.sqrt(5.0), atol=1e-12)
     np.testing.assert_allclose(np.linalg.det(Rz), 1.0)
     np.testing.assert_allclose(frames.rot_about_z(R, 0.3), R @ frames.rot_z(0.3), atol=1e-12)
+
+
+def test_two_ik_solvers_one_interface(robot: RobotModel) -> None:
+    """The numeric solver needs only the Pinocchio model, limits and TCP frame; it agrees with the closed form."""
+    from fabric.robot.closed_form import ClosedFormIK
+    from fabric.robot.kinematics import IK_JOINT_LIMIT, IK_OK, IK_OUT_OF_REACH
+    from fabric.robot.numeric import NumericIK
+    assert isinstance(robot.solver, ClosedFormIK) and robot.solver is robot.closed_form
+    numeric = NumericIK(robot.pin_model, robot.lower_rad, robot.upper_rad, robot.tcp_frame_id)
+    q = np.radians([[10, 20, -30, 40, 50, 60], [12, 22, -28, 38, 52, 58]])
+    T = robot.fk(q)
+    q_cf, st_cf = robot.solver.solve(T, q[0])
+    q_num, st_num = numeric.solve(T, q[0])
+    assert st_cf.tolist() == st_num.tolist() == [IK_OK, IK_OK]
+    np.testing.assert_allclose(q_num, q_cf, atol=1e-6)
+    far = T[:1].copy()
+    far[0, :3, 3] = [3000.0, 0.0, 500.0]
+    assert numeric.solve(far, q[0])[1].tolist() == [IK_OUT_OF_REACH]
+    a5 = np.arange(6) == 4                                  # |A5| <= 0.5 rad: both wrists (+-50 deg) are beyond it
+    narrow = NumericIK(robot.pin_model, np.where(a5, -0.5, robot.lower_rad), np.where(a5, 0.5, robot.upper_rad),
+                       robot.tcp_frame_id)
+    assert narrow.solve(T[:1], q[0])[1].tolist() == [IK_JOINT_LIMIT]
+
+
+def test_limits_change_rebuilds_the_numeric_solver() -> None:
+    r = RobotModel.from_example_robot_data("ur5")
+    from fabric.robot.numeric import NumericIK
+    assert isinstance(r.solver, NumericIK) and r.closed_form is None
+    upper = r.upper_rad.copy()
+    upper[0] = 0.5
+    r.with_limits(upper_rad=upper)
+    np.testing.assert_allclose(r.solver.upper_rad, upper)

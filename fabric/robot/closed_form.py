@@ -121,9 +121,11 @@ class ClosedFormIK:
         """Joints (N, 6) and status (N,) uint8 for flange poses (N, 4, 4), continuous from ``q_seed``."""
         return self.ik_cols(pose_cols(T_flange), q_seed)
 
-    def ik(self, T_tcp: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """As :meth:`ik_flange` for TCP poses (``tool_T`` removed while gathering the columns)."""
-        return self.ik_cols(pose_cols(T_tcp, self._tool_inv), q_seed)
+    def solve(self, T_tcp_mm: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """As :meth:`ik_flange` for TCP poses (``tool_T`` removed while gathering the columns).
+
+        The solver interface shared with :class:`fabric.robot.numeric.NumericIK`."""
+        return self.ik_cols(pose_cols(T_tcp_mm, self._tool_inv), q_seed)
 
     def ik_cols(self, C: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """As :meth:`ik_flange` for flange poses given as columns ``C`` (9, N): position, z, y axes.

@@ -12,8 +12,9 @@ exactly the model in use.
 Kinematics: when the arm matches the closed-form IRB 140 geometry (checked
 numerically at load time against Pinocchio) FK and IK are the vectorised
 closed form of ``kinematics.py``; otherwise FK loops over Pinocchio and IK is
-the damped-least-squares fallback of ``numik.py``. Both share the status codes
-of ``kinematics.py``.
+the damped-least-squares solver of ``numeric.py``. The two solvers share one
+interface (``solve(T_tcp_mm, q_seed) -> (q, status)``) and the status codes of
+``kinematics.py``; :attr:`RobotModel.solver` is the one in use.
 
 Acceleration and jerk limits are not published for the IRB 140 (nor in URDFs):
 they default to ``ACC_PER_S`` = 4 x the velocity limit per second (a joint
@@ -33,6 +34,7 @@ from fabric.errors import ConfigError, NotFound, ValidationError
 from fabric.robot import frames
 from fabric.robot.closed_form import ClosedFormIK
 from fabric.robot.kinematics import IRB140_ARM
+from fabric.robot.numeric import NumericIK
 
 __all__ = ["RobotModel", "ToolGeometry", "DEFAULT_TOOL_T", "ACC_PER_S", "JERK_PER_S2", "IRB140_URDF"]
 
@@ -162,9 +164,10 @@ class RobotModel:
         self.acc_limit_rad_s2 = ACC_PER_S * self.vel_limit_rad_s
         self.jerk_limit_rad_s3 = JERK_PER_S2 * self.vel_limit_rad_s
         self._tool_inv = frames.inv_T(self.tool_T)
+        self._is_irb140 = self.nq == 6 and self._matches_irb140()
         self.closed_form: ClosedFormIK | None = None
-        if self.nq == 6 and self._matches_irb140():
-            self.closed_form = ClosedFormIK(IRB140_ARM, self.lower_rad, self.upper_rad, self.tool_T)
+        self.solver: ClosedFormIK | NumericIK
+        self._build_solver()
 
     # Construction ------------------------------------------------------
     @classmethod
@@ -222,8 +225,7 @@ class RobotModel:
         for attr in ("vel_limit_rad_s", "acc_limit_rad_s2", "jerk_limit_rad_s3"):
             if np.any(getattr(self, attr) <= 0):
                 raise ValidationError(f"{attr} must be > 0", field=attr)
-        if self.closed_form is not None:
-            self.closed_form = ClosedFormIK(IRB140_ARM, self.lower_rad, self.upper_rad, self.tool_T)
+        self._build_solver()
         return self
 
     # Kinematics --------------------------------------------------------
@@ -261,10 +263,7 @@ class RobotModel:
         q_seed = np.asarray(q_seed, dtype=float).reshape(-1)
         if q_seed.shape != (self.nq,):
             raise ValidationError(f"q_seed needs {self.nq} joints", field="q_seed")
-        if self.closed_form is not None:
-            return self.closed_form.ik(T, q_seed)
-        from fabric.robot.numeric import numeric_ik
-        return numeric_ik(self, T, q_seed)
+        return self.solver.solve(T, q_seed)
 
     def within_limits(self, q: np.ndarray, tol_rad: float = 1e-9) -> np.ndarray:
         """Rows of q (N, nq) inside the position limits: bool (N,)."""
@@ -281,6 +280,14 @@ class RobotModel:
         Path(path).write_text(self._urdf)
 
     # Internals ---------------------------------------------------------
+    def _build_solver(self) -> None:
+        """The IK solver for the current limits: the closed form for the IRB 140 geometry, else numeric."""
+        if self._is_irb140:
+            self.closed_form = ClosedFormIK(IRB140_ARM, self.lower_rad, self.upper_rad, self.tool_T)
+            self.solver = self.closed_form
+        else:
+            self.solver = NumericIK(self.pin_model, self.lower_rad, self.upper_rad, self.tcp_frame_id)
+
     def _matches_irb140(self) -> bool:
         """True if the closed-form IRB 140 reproduces Pinocchio's flange poses (1e-6 mm)."""
         rng = np.random.default_rng(1)
