@@ -164,9 +164,47 @@ class MotionPlanner:
         st.legs.append(self._lift_leg(pose, wobj, end_kind))
         self.pause_preview_s = None
 
+    # Instant stop -------------------------------------------------------------------------
+
+    def stop_dead(self, t: float, events: list) -> ResumePoint | None:
+        """Stop the running motion dead at ``t`` (a crashed controller): the rows up to ``t`` are
+        processed, the row in progress keeps its volume so far, the robot rests where it was.
+
+        Returns where the program would go on (the point reached inside the running program
+        row), or None when no program leg was running (the queue is dropped either way)."""
+        st = self.state
+        legs = st.legs
+        if not legs or not legs[0].placed:
+            st.legs = []
+            return None
+        head = legs[0]
+        tau = min(max(t - head.t0, 0.0), head.t_cut)
+        self.runner.run_leg(head, tau, False, events)
+        head.cut_at(tau)
+        head.end_kinds = []
+        st.legs = [head]
+        point = None
+        if head.main:
+            tl = head.tl
+            j = head.n_rows - 1
+            r = tl.start_row + j
+            smp = tl.sample(tau)
+            pose = PoseSpec(np.asarray(smp.q_rad, float), np.asarray(smp.xyz_mm, float),
+                            np.asarray(smp.quat_wxyz, float))
+            if not head.partial_end:
+                point = ResumePoint(r + 1, 0.0, pose)
+            elif tl.program.op[r] == MOVEL:
+                point = ResumePoint(r, float(smp.s_mm), pose)
+            else:                                   # a joint move, dwell, heat-up or retraction: redo it
+                point = ResumePoint(r, 0.0, pose)
+        self.runner.finish_leg(head, events)
+        st.legs = []
+        self.pause_preview_s = None
+        return point
+
     # Resume -------------------------------------------------------------------------------
 
-    def _resume_legs(self) -> list[Leg]:
+    def _resume_legs(self, end_kind: str = "resumed") -> list[Leg]:
         st = self.state
         at = st.job.resume_at
         assert at is not None and st.program is not None
@@ -175,16 +213,17 @@ class MotionPlanner:
         rows: list[dict[str, Any]] = [{"op": MOVEL, **back, "speed_mm_s": self.config.resume_speed_mm_s}]
         if st.job.pause_retract_mm > 0:
             rows.append({"op": RETRACT, "value": st.job.pause_retract_mm, **back})
-        down = self.aux_leg(rows, start, wobj, ["resumed"])
+        down = self.aux_leg(rows, start, wobj, [end_kind])
         if at.row >= len(st.program):
             down.end_kinds.append("finished")
             return [down]
         spec = ProgramLegSpec(at.row, PoseSpec(at.pose.q_rad, at.pose.xyz_mm, at.pose.quat_wxyz), at.s_mm, 0.0)
         return [down, Leg(spec, True, ["finished"])]
 
-    def resume(self) -> None:
-        """Queue the way back down, the unretraction and the rest of the program."""
-        for leg in self._resume_legs():
+    def resume(self, end_kind: str = "resumed") -> None:
+        """Queue the way back to the resume point, the unretraction and the rest of the program
+        (``end_kind``: the event fired when the nozzle is back on the path)."""
+        for leg in self._resume_legs(end_kind):
             self.runner.enqueue(leg)
         self.state.job.pause_retract_mm = 0.0
         self.pause_preview_s = None

@@ -152,7 +152,7 @@ class LegRunner:
             self.record_partial()
             st.t_ended_s = t
             self.emit(events, t, kind, {"extruded_mm3": job.extruded_mm3, "beads": len(st.beads)})
-        elif kind == "resumed":
+        elif kind in ("resumed", "recovered"):
             job.resume_at = None
             self.emit(events, t, kind)
         elif kind == "paused" and job.resume_at is not None:

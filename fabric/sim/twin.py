@@ -195,7 +195,7 @@ class Twin:
         remaining = 0.0
         if st.state == "printing":
             remaining = self.moves.remaining_s()
-        elif st.state == "paused":
+        elif st.state in ("paused", "interrupted"):
             remaining = self.moves.remaining_s() + self.moves.resume_preview_s()
         return TimeInfo(elapsed, elapsed + remaining, remaining, st.estimate_s)
 
@@ -288,6 +288,53 @@ class Twin:
         self.runner.enqueue(self.moves.home_leg())
         self._sample_cache = None
         self.s.reason = "homing"
+
+    def interrupt(self, reason: str) -> None:
+        """The controller died at the current instant (a crashed station, restored from its checkpoint
+        and advanced to its last recorded time): the robot stops dead where it was, the extruder stops.
+
+        A print (printing or paused) becomes ``interrupted`` with the point where it goes on; the row
+        in progress keeps its volume so far, so :meth:`recover` deposits no bead twice and none is
+        missing. A stop whose lift was cut short ends as stopped; other states keep their state, with
+        the robot resting where its move was cut."""
+        st = self.s
+        events = st.pending
+        was = st.state
+        t = st.t_sim_s
+        point = self.moves.stop_dead(t, events)
+        self._sample_cache = None
+        if point is not None:
+            st.job.resume_at = point
+        if st.job.extruder_on:
+            st.job.extruder_on = False
+            self.runner.emit(events, t, "extruder_off")
+        if was in ("printing", "paused") and st.job.resume_at is not None:
+            if not st.job.retracted:
+                st.job.pause_retract_mm = 0.0        # the pause's retraction had not happened yet
+            at = st.job.resume_at
+            st.state, st.reason = "interrupted", reason
+            self.runner.emit(events, t, "interrupted", {"reason": reason, "resume_row": at.row,
+                                                        "resume_s_mm": at.s_mm, "xyz_mm": at.pose.xyz_mm.tolist()})
+        elif was == "stopped" and st.t_ended_s is None:
+            self.runner.on_end("stopped", t, events)
+
+    def recover(self, collision_ok: bool = True) -> None:
+        """Go on with an interrupted print: back to the interrupted spot, unretract, continue
+        (``collision_ok``: the collision service's verdict on the move back)."""
+        self._refuse("recover", ("interrupted",))
+        if not collision_ok:
+            raise CollisionError("the move back to the interrupted spot was refused by the collision check",
+                                 command="recover")
+        self.s.state, self.s.reason = "printing", "recovering"
+        self._command(lambda: self.moves.resume("recovered"))
+
+    def recovery_move(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Joints where the robot rests and joints of the interrupted spot (for a collision check of the
+        move back), or None when nothing is interrupted."""
+        at = self.s.job.resume_at
+        if self.s.state != "interrupted" or at is None:
+            return None
+        return self.s.rest_q_rad.copy(), np.asarray(at.pose.q_rad, dtype=float).copy()
 
     def trip(self, reason: str) -> None:
         """Put the twin in ``fault`` now (e.g. a monitor saw something wrong): instant stop."""

@@ -1,0 +1,129 @@
+"""A twin interrupted at any instant (a crashed station restored from its last checkpoint) and recovered
+deposits exactly the beads of an uninterrupted run: no bead twice, none missing."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fabric.codec import pack, unpack
+from fabric.errors import CollisionError, StateError
+from fabric.motion.program import Program
+from fabric.motion.testprog import square_program
+from fabric.robot.cell import Cell
+from fabric.sim.twin import Twin
+
+
+@pytest.fixture(scope="module")
+def cell() -> Cell:
+    return Cell.builtin("irb140")
+
+
+@pytest.fixture(scope="module")
+def prog(cell: Cell) -> Program:
+    return square_program(cell, size_mm=20, layers=3, layer_height_mm=0.5, speed_mm_s=30, nozzle_c=200.0)
+
+
+def finish(twin: Twin, step_s: float = 0.43) -> list:
+    events: list = []
+    for _ in range(100_000):
+        if twin.state not in ("printing", "paused") and not twin.moving:
+            return events
+        events += twin.advance(step_s)
+    raise AssertionError("the job did not end")
+
+
+@pytest.fixture(scope="module")
+def reference(cell: Cell, prog: Program) -> Twin:
+    twin = Twin(cell)
+    twin.load(prog)
+    twin.start()
+    finish(twin)
+    assert twin.state == "idle" and len(twin.beads) == 12
+    return twin
+
+
+def assert_same_beads(got: Twin, want: Twin) -> None:
+    a, b = got.beads.to_arrays(), want.beads.to_arrays()
+    assert len(a["row"]) == len(b["row"])
+    np.testing.assert_array_equal(a["row"], b["row"])
+    np.testing.assert_allclose(a["start_mm"], b["start_mm"], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(a["end_mm"], b["end_mm"], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(a["volume_mm3"], b["volume_mm3"], rtol=1e-9, atol=0)
+
+
+def crash_and_recover(cell: Cell, prog: Program, t_checkpoint: float, t_crash: float,
+                      pause_at: float | None = None) -> Twin:
+    """Run to ``t_checkpoint`` (pausing at ``pause_at``), save, restore in a fresh twin, advance to the
+    crash instant, interrupt, recover and finish."""
+    twin = Twin(cell)
+    twin.load(prog)
+    twin.start()
+    if pause_at is not None:
+        twin.advance(pause_at)
+        twin.pause()
+        twin.advance(t_checkpoint - pause_at)
+    else:
+        twin.advance(t_checkpoint)
+    snap = unpack(pack(twin.snapshot()))
+    again = Twin.from_snapshot(cell, snap, prog)
+    again.advance(t_crash - t_checkpoint)
+    again.interrupt("station restarted")
+    assert again.state == "interrupted"
+    assert not again.extrusion().on
+    at = again.pose().xyz_mm.copy()
+    events = again.advance(5.0)
+    np.testing.assert_allclose(again.pose().xyz_mm, at, atol=1e-9)     # it does not move by itself
+    assert "interrupted" in [e.kind for e in again.s.pending + events] or again.state == "interrupted"
+    again.recover()
+    events = finish(again)
+    kinds = [e.kind for e in events]
+    assert kinds[0] == "recovered" and kinds[-1] == "finished"
+    return again
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_random_crash_instants_recover_to_identical_beads(cell: Cell, prog: Program, reference: Twin,
+                                                          seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    total = reference.time_info().total_s
+    first_bead = 89.5                                    # the heat-up takes most of the job's time
+    t_crash = float(rng.uniform(first_bead if seed < 15 else 1.0, total - 0.3))
+    t_checkpoint = float(max(0.0, t_crash - rng.uniform(0.0, 3.0)))
+    twin = crash_and_recover(cell, prog, t_checkpoint, t_crash)
+    assert twin.t_sim_s > t_crash
+    assert_same_beads(twin, reference)
+    assert twin.extrusion().extruded_mm3 == pytest.approx(reference.extrusion().extruded_mm3, rel=1e-9)
+
+
+@pytest.mark.parametrize("t_crash", [92.0 + 0.004, 92.0 + 0.05, 92.0 + 2.0])   # stopping, lifting, paused
+def test_crash_during_a_pause_recovers_to_identical_beads(cell: Cell, prog: Program, reference: Twin,
+                                                          t_crash: float) -> None:
+    twin = crash_and_recover(cell, prog, t_checkpoint=92.002, t_crash=t_crash, pause_at=92.0)
+    assert_same_beads(twin, reference)
+
+
+def test_recover_is_refused_unless_interrupted_and_checked(cell: Cell, prog: Program) -> None:
+    twin = Twin(cell)
+    twin.load(prog)
+    with pytest.raises(StateError):
+        twin.recover()
+    twin.start()
+    twin.advance(92.0)
+    twin.interrupt("station restarted")
+    rest, spot = twin.recovery_move()
+    np.testing.assert_allclose(rest, spot, atol=1e-12)               # it stopped dead on the path
+    with pytest.raises(CollisionError):
+        twin.recover(collision_ok=False)
+    assert twin.state == "interrupted"                               # a refused recover changes nothing
+    with pytest.raises(StateError):
+        twin.start()
+    twin.recover()
+    assert twin.state == "printing" and twin.recovery_move() is None
+
+
+def test_interrupt_of_an_idle_twin_changes_nothing(cell: Cell) -> None:
+    twin = Twin(cell)
+    before = twin.pose().q_rad.copy()
+    twin.interrupt("station restarted")
+    assert twin.state == "idle"
+    np.testing.assert_array_equal(twin.pose().q_rad, before)
