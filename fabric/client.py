@@ -15,7 +15,7 @@ from __future__ import annotations
 import queue
 import time
 from contextlib import contextmanager
-from typing import Any, Callable, Iterator
+from typing import Any, BinaryIO, Callable, Iterator
 
 import zenoh
 
@@ -25,7 +25,7 @@ from fabric.config import SessionSettings, zenoh_config
 from fabric.errors import DecodeError, FabricError, ServiceUnavailable, error_from_code
 from fabric.keys import ENDPOINTS, SERVICES, TOPICS, Keys, parse_alive
 
-__all__ = ["Client", "Subscription", "wait_connected"]
+__all__ = ["Client", "Subscription", "AliveSubscription", "wait_connected"]
 
 DISCOVERY_WINDOW_S = 1.0   # retry a get that found no queryable for this long (declarations in flight)
 CONNECT_WINDOW_S = 3.0     # how long connect() waits for the first link
@@ -55,6 +55,27 @@ class Subscription:
     def __iter__(self) -> Iterator[Any]:
         while True:
             yield self.get()
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+class AliveSubscription:
+    """Liveliness changes of the cell's services: ``get()`` returns ``(service, alive)``.
+
+    The Zenoh callback only parses the key (``keys.parse_alive``) and enqueues. Changes are hints;
+    the truth at any moment is :meth:`Client.alive` (a query)."""
+
+    def __init__(self, session: zenoh.Session, key: str) -> None:
+        self._q: queue.Queue[tuple[str, bool]] = queue.Queue()
+        self._sub = session.liveliness().declare_subscriber(key, self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        self._q.put((parse_alive(str(sample.key_expr))[1], sample.kind == zenoh.SampleKind.PUT))
+
+    def get(self, timeout: float | None = None) -> tuple[str, bool]:
+        """The next change; ``queue.Empty`` after ``timeout``."""
+        return self._q.get(timeout=timeout)
 
     def close(self) -> None:
         self._sub.undeclare()
@@ -111,6 +132,10 @@ class Client:
     def subscribe(self, service: str, topic: str) -> Subscription:
         return Subscription(self.session, self.keys.topic(service, topic), TOPICS[(service, topic)])
 
+    def subscribe_alive(self) -> AliveSubscription:
+        """Follow services appearing and vanishing (liveliness tokens); close it when done."""
+        return AliveSubscription(self.session, self.keys.alive_all())
+
     def alive(self, timeout: float = 2.0) -> dict[str, bool]:
         """Which services hold a liveliness token now (answers without the supervisor).
 
@@ -143,7 +168,8 @@ class Client:
         was listening, so it is not trusted on its own.)
         """
         end = time.monotonic() + deadline_s
-        with _liveliness_queue(self.session, self.keys.alive_all()) as changes:
+        changes = self.subscribe_alive()
+        try:
             while True:
                 alive = {k for k, v in self.alive(timeout=2.0).items() if v}
                 if set(services) <= alive:
@@ -157,6 +183,8 @@ class Client:
                     changes.get(timeout=min(left, 1.0))
                 except queue.Empty:
                     pass
+        finally:
+            changes.close()
 
     def artifact(self, service: str, artifact_id: str, timeout: float = 60.0) -> s.Artifact:
         return self._get_one(self.keys.artifact(service, artifact_id), None, s.Artifact, timeout,
@@ -221,6 +249,22 @@ class Client:
         return self.call("planner", "summary", s.ArtifactQuery(artifact_id=program_id))
     def export(self, program_id: str, fmt: str, module_targets: int = 5000) -> s.Artifact:
         return self.call("planner", "export", s.ExportRequest(program_id=program_id, fmt=fmt, module_targets=module_targets))
+    def export_chunk(self, program_id: str, fmt: str, offset: int = 0, limit_bytes: int = 4 << 20,
+                     module_targets: int = 5000) -> s.ExportChunk:
+        """One chunk of a streamed export (offset 0 starts it; then each offset where the last chunk ended)."""
+        return self.call("planner", "export_chunk", s.ExportChunkRequest(
+            program_id=program_id, fmt=fmt, offset=offset, limit_bytes=limit_bytes, module_targets=module_targets))
+
+    def export_to(self, program_id: str, fmt: str, out: BinaryIO, module_targets: int = 5000,
+                  limit_bytes: int = 4 << 20) -> int:
+        """Stream an export into ``out`` chunk by chunk (memory stays at one chunk); returns the bytes written."""
+        offset = 0
+        while True:
+            chunk = self.export_chunk(program_id, fmt, offset, limit_bytes, module_targets)
+            out.write(chunk.data)
+            offset += len(chunk.data)
+            if chunk.done:
+                return offset
     def check(self, request: s.CollisionRequest) -> s.CollisionReport: return self.call("collision", "check", request)
     def status(self) -> s.FabricStatus: return self.call("supervisor", "status")
     def submit(self, request: s.JobSubmit) -> s.JobAccepted: return self.call("supervisor", "submit", request)
@@ -260,17 +304,3 @@ def _error_of(payload: bytes) -> FabricError:
         return DecodeError(f"undecodable error reply: {payload[:80]!r}")
     return error_from_code(err.code, err.message, err.details)
 
-
-@contextmanager
-def _liveliness_queue(session: zenoh.Session, key: str) -> Iterator["queue.Queue[tuple[str, str]]"]:
-    events: queue.Queue[tuple[str, str]] = queue.Queue()
-
-    def on_sample(sample: zenoh.Sample) -> None:
-        kind = "put" if sample.kind == zenoh.SampleKind.PUT else "delete"
-        events.put((kind, parse_alive(str(sample.key_expr))[1]))
-
-    sub = session.liveliness().declare_subscriber(key, on_sample)
-    try:
-        yield events
-    finally:
-        sub.undeclare()

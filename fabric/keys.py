@@ -77,6 +77,8 @@ _TABLE = [
     _ep("planner", "job", s.JobQuery, s.JobStatus, doc="a planning job's status"),
     _ep("planner", "summary", s.ArtifactQuery, s.PlanSummary, doc="summary of a planned program"),
     _ep("planner", "export", s.ExportRequest, s.Artifact, 300.0, "RAPID / KRL / URScript / CSV"),
+    _ep("planner", "export_chunk", s.ExportChunkRequest, s.ExportChunk, 120.0,
+        "an export streamed in bounded chunks, read in order from offset 0"),
     # collision
     _ep("collision", "check", s.CollisionRequest, s.CollisionReport, 300.0, "sweep a program or a move"),
     # supervisor
@@ -109,6 +111,10 @@ class Keys:
 
     def cmd(self, service: str, command: str) -> str:
         return f"{self.prefix}/{service}/cmd/{command}"
+
+    def cmd_all(self, service: str) -> str:
+        """Every command queryable of ``service``."""
+        return f"{self.prefix}/{service}/cmd/*"
 
     def topic(self, service: str, topic: str) -> str:
         if (service, topic) not in TOPICS:

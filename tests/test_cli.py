@@ -115,8 +115,10 @@ def test_plan_unreachable_names_the_line(settings, tmp_path):
     r = cli(settings, "plan", str(bad))
     assert r.returncode == 2
     assert "line 6" in r.stdout and "out of reach" in r.stdout
-    r = cli(settings, "plan", str(bad), "--rapid", str(tmp_path / "x.mod"))
+    r = cli(settings, "plan", str(bad), "--csv", str(tmp_path / "x.csv"), "--rapid", str(tmp_path / "x.mod"))
     assert r.returncode == 1 and "error [unreachable]" in r.stderr and "line 6" in r.stderr
+    # all or nothing: the CSV (which could be written) is not left either, nor any temporary file
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["far.gcode"]
 
 
 def test_plan_garbled_gcode_names_the_line(settings, tmp_path):

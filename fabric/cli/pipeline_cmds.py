@@ -71,13 +71,14 @@ def plan_file(c: Client, data: bytes, filename: str, a: argparse.Namespace) -> s
 
 def cmd_plan(c: Client, a: argparse.Namespace) -> int:
     summary = plan_file(c, _read(a.gcode), Path(a.gcode).name, a)
+    from fabric.planning.post.atomic import AtomicFiles     # only this command needs it
     written = {}
-    for fmt in EXPORT_FLAGS:
-        out = getattr(a, fmt)
-        if out:
-            art = c.export(summary.program_id, fmt, a.module_targets)
-            Path(out).write_bytes(art.data)
-            written[fmt] = out
+    with AtomicFiles() as files:          # every export file, or none (temporary files renamed at the end)
+        for fmt in EXPORT_FLAGS:
+            out = getattr(a, fmt)
+            if out:
+                c.export_to(summary.program_id, fmt, files.open(out), a.module_targets)
+                written[fmt] = out
     result = {"summary": summary, "written": written}
 
     def text(_):

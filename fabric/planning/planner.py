@@ -270,13 +270,14 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
     report = Reachability.from_status(status, rot, motion, prog.gcode_line)
     t2 = time.perf_counter()
     estimate = float("nan")
-    slowed_rows = slowed_joint = None
+    slowed_rows = slowed_joint = t_end = None
     if report.reachable:
         from fabric.motion.timing import StartState, time_program
         start = StartState.at_joints(cell.robot, prog.wobj, np.asarray(cell.home_q_rad, dtype=float))
         timeline = time_program(prog, cell.robot, 1.0, start_state=start)
         estimate = float(timeline.total_s)
         slowed_rows, slowed_joint = timeline.slowed_rows, timeline.slowed_joint
+        t_end = timeline.t_end_s
     timing_s = time.perf_counter() - t2
     if progress is not None:
         progress(1.0)
@@ -295,4 +296,4 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
         parse_s=parse_s, ik_s=ik_s, timing_s=timing_s, total_s=parse_s + time.perf_counter() - t0)
     prog.meta.update(print_rows=n_print, options=opt.to_dict())
     return PlanResult(program=prog, report=report, estimate_s=estimate, stats=stats, toolpath=tp,
-                      slowed_rows=slowed_rows, slowed_joint=slowed_joint)
+                      slowed_rows=slowed_rows, slowed_joint=slowed_joint, t_end_s=t_end)

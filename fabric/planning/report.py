@@ -95,6 +95,7 @@ class PlanResult:
     toolpath: Toolpath | None = None
     slowed_rows: np.ndarray | None = None     # rows whose speed a joint velocity limit capped
     slowed_joint: np.ndarray | None = None    # the limiting joint (0-based) of each
+    t_end_s: np.ndarray | None = None         # time each row ends, from home (the estimate's timeline)
 
     def require_runnable(self) -> "PlanResult":
         """Raise :class:`UnreachableError` naming the first unreachable G-code line, else return self."""

@@ -6,6 +6,7 @@ from fabric.schemas.pipeline import (Backends, CollisionHit, CollisionReport, Co
                                      FabricStatus, JobList, JobRecord, JobSubmit, PlanRequest, PlanSummary,
                                      ProgramMsg, ServiceInfo, SliceRequest, SliceResult, SlowedMove,
                                      UnreachableTarget)
+from fabric.schemas.export import ExportChunk, ExportChunkRequest
 from fabric.schemas.station import (CalibrationReport, Check, Event, EventList, EventsQuery,
                                     Extrusion, LoadRequest, MeshRequest, Overrides, Pose,
                                     ReadyReport, StartRequest, StationState, Temps, TimeInfo)
@@ -16,6 +17,7 @@ __all__ = [
     "Backends", "CollisionHit", "CollisionReport", "CollisionRequest", "ExportRequest", "FabricStatus", "JobList",
     "JobRecord", "JobSubmit", "PlanRequest", "PlanSummary", "ProgramMsg", "ServiceInfo", "SliceRequest",
     "SliceResult", "SlowedMove", "UnreachableTarget",
+    "ExportChunk", "ExportChunkRequest",
     "CalibrationReport", "Check", "Event", "EventList", "EventsQuery", "Extrusion", "LoadRequest",
     "MeshRequest", "Overrides", "Pose", "ReadyReport", "StartRequest", "StationState", "Temps", "TimeInfo",
 ]

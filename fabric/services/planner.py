@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import argparse
 import io
+from typing import Callable, TextIO
 
 import numpy as np
 import zenoh
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.errors import BadRequest, NotFound, UnreachableError
+from fabric.errors import BadRequest, FabricError, NotFound, UnreachableError
 from fabric.jobs import Job, JobRunner
 from fabric.programs import content_id, program_artifact, program_from_artifact
 from fabric.config import add_cell_argument
@@ -25,11 +26,14 @@ from fabric.robot.frames import xyzrpy_to_T
 from fabric.motion.timing import StartState, time_program
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.post import write_export
+from fabric.planning.post.stream import ExportStream
 
 __all__ = ["PlannerService", "build", "add_arguments"]
 
 MEDIA = {"rapid": "text/x-rapid", "krl": "text/x-krl", "urscript": "text/x-urscript", "csv": "text/csv"}
 SUFFIX = {"rapid": "mod", "krl": "src", "urscript": "script", "csv": "csv"}
+KEEP_TIMELINES = 4          # plans whose timeline (t_end_s, 8 bytes a row) is kept for the CSV export
+MAX_EXPORT_STREAMS = 4      # streamed exports open at once (a reader that went away is dropped by the next)
 
 
 class PlannerService(Service):
@@ -45,6 +49,9 @@ class PlannerService(Service):
         self.handle("job", lambda q: self.jobs.get(q.job_id))
         self.handle("summary", self.on_summary)
         self.handle("export", self.on_export)
+        self.handle("export_chunk", self.on_export_chunk)
+        self.exports: dict[tuple[str, str, int], ExportStream] = {}   # streamed exports being read
+        self.timelines: dict[str, np.ndarray] = {}                    # program id -> t_end_s of its plan
 
     def close(self) -> None:
         super().close()
@@ -73,6 +80,10 @@ class PlannerService(Service):
         program = result.program
         art = program_artifact(program, name=req.filename.rsplit(".", 1)[0] + ".program")
         pid = self.store_artifact(art)
+        if result.t_end_s is not None:      # the CSV export's times, computed once by the plan
+            self.timelines[pid] = result.t_end_s
+            while len(self.timelines) > KEEP_TIMELINES:
+                self.timelines.pop(next(iter(self.timelines)))
         rep = result.report
         first = None
         if rep.first_unreachable is not None:
@@ -95,23 +106,61 @@ class PlannerService(Service):
         return self.summaries[req.artifact_id]
 
     def on_export(self, req: s.ExportRequest) -> s.Artifact:
-        summary = self.on_summary(s.ArtifactQuery(artifact_id=req.program_id))
+        write, name = self._exporter(req.program_id, req.fmt, req.module_targets)
+        buf = io.StringIO()
+        write(buf)
+        data = buf.getvalue().encode()
+        return s.Artifact(artifact_id=content_id(data), name=name, media_type=MEDIA[req.fmt], data=data)
+
+    def on_export_chunk(self, req: s.ExportChunkRequest) -> s.ExportChunk:
+        """The next chunk of a streamed export: offset 0 starts it, each next offset is where the last ended."""
+        key = (req.program_id, req.fmt, req.module_targets)
+        stream = self.exports.get(key)
+        if req.offset == 0:
+            write, name = self._exporter(req.program_id, req.fmt, req.module_targets)
+            if stream is not None:
+                stream.cancel()
+            stream = self.exports[key] = ExportStream(write, name)
+            while len(self.exports) > MAX_EXPORT_STREAMS:        # readers that went away
+                self.exports.pop(next(iter(self.exports))).cancel()
+        elif stream is None:
+            self.on_summary(s.ArtifactQuery(artifact_id=req.program_id))     # NotFound for an unknown program
+            raise BadRequest(f"no {req.fmt} export of {req.program_id} in progress: start it at offset 0",
+                             field="offset", value=req.offset)
+        try:
+            data = stream.read(req.offset, req.limit_bytes)
+        except FabricError:
+            self.exports.pop(key, None)
+            raise
+        if stream.done:
+            self.exports.pop(key, None)
+        return s.ExportChunk(program_id=req.program_id, fmt=req.fmt, offset=req.offset, data=data, done=stream.done,
+                             name=stream.name, media_type=MEDIA[req.fmt])
+
+    def _exporter(self, program_id: str, fmt: str, module_targets: int) -> tuple[Callable[[TextIO], None], str]:
+        """The writer of an export (text stream -> None) and its file name; typed errors up front."""
+        summary = self.on_summary(s.ArtifactQuery(artifact_id=program_id))
         fu = summary.first_unreachable
-        if fu is not None and req.fmt != "csv":
+        if fu is not None and fmt != "csv":
             raise UnreachableError(f"program is not runnable: first unreachable target at G-code line "
                                    f"{fu.gcode_line} ({fu.reason})", gcode_line=fu.gcode_line, reason=fu.reason,
                                    row=fu.row)
-        program = program_from_artifact(self.get_artifact(req.program_id))
+        art = self.get_artifact(program_id)
+        if art is None:
+            raise NotFound(f"planned program {program_id} is no longer stored", artifact_id=program_id)
+        program = program_from_artifact(art)
         t_end = None
-        if req.fmt == "csv" and summary.runnable:      # time at each target, from home, as the station runs it
-            start = StartState.at_joints(self.cell.robot, program.wobj, self.cell.home_q_rad)
-            t_end = time_program(program, self.cell.robot, 1.0, start_state=start).t_end_s
-        buf = io.StringIO()
-        write_export(program, req.fmt, buf, self.cell, module_targets=req.module_targets, t_end_s=t_end,
-                     name=str(program.meta.get("name", "am_print")))
-        data = buf.getvalue().encode()
-        name = f"{program.meta.get('name', 'program')}.{SUFFIX[req.fmt]}"
-        return s.Artifact(artifact_id=content_id(data), name=name, media_type=MEDIA[req.fmt], data=data)
+        if fmt == "csv" and summary.runnable:      # time at each target, from home, as the station runs it
+            t_end = self.timelines.get(program_id)
+            if t_end is None:
+                start = StartState.at_joints(self.cell.robot, program.wobj, self.cell.home_q_rad)
+                t_end = time_program(program, self.cell.robot, 1.0, start_state=start).t_end_s
+        name = str(program.meta.get("name", "am_print"))
+
+        def write(out: TextIO) -> None:
+            write_export(program, fmt, out, self.cell, module_targets=module_targets, t_end_s=t_end, name=name)
+
+        return write, f"{program.meta.get('name', 'program')}.{SUFFIX[fmt]}"
 
 
 def _first_slowed(result, program) -> s.SlowedMove | None:

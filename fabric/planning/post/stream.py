@@ -1,0 +1,150 @@
+"""An export as a stream of bounded chunks: a writer thread fills a short queue, readers take it in order.
+
+A post-processor writes to a text stream. :class:`ExportStream` runs it on
+its own thread into a :class:`_ChunkSink` that hands over ``piece_bytes``
+pieces through a queue of ``depth`` pieces, so the writer formats the next
+piece while the last one travels and is written to disk by the caller, and
+no process ever holds more than a few pieces of the export. Readers ask by
+byte offset: the next chunk must start where the previous one ended (a
+stream is read once, in order); anything else is a :class:`BadRequest`.
+"""
+from __future__ import annotations
+
+import queue
+import threading
+from typing import Callable, TextIO
+
+from fabric.errors import BadRequest, FabricError, InternalError, ServiceUnavailable
+
+__all__ = ["ExportStream", "PIECE_BYTES"]
+
+PIECE_BYTES = 4 << 20       # what the writer hands over at a time
+QUEUE_DEPTH = 2             # pieces formatted ahead of the reader
+STALL_S = 120.0             # a writer whose reader went away gives up after this long
+
+
+class _Cancelled(Exception):
+    """The reader went away: the writer thread ends."""
+
+
+class _Done:
+    """End of the export (``error`` set if the writer failed)."""
+
+    def __init__(self, error: FabricError | None = None) -> None:
+        self.error = error
+
+
+class _ChunkSink:
+    """A write-only text stream that hands ASCII/Latin-1 pieces of ``piece_bytes`` to a queue."""
+
+    def __init__(self, out: "queue.Queue[bytes | _Done]", piece_bytes: int, cancelled: threading.Event) -> None:
+        self._out, self._piece_bytes, self._cancelled = out, piece_bytes, cancelled
+        self._parts: list[str] = []
+        self._size = 0
+
+    def write(self, text: str) -> int:
+        self._parts.append(text)
+        self._size += len(text)
+        if self._size >= self._piece_bytes:
+            self.flush()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self._parts:
+            return
+        piece = "".join(self._parts).encode("latin-1")
+        self._parts, self._size = [], 0
+        self.put(piece)
+
+    def put(self, item: "bytes | _Done") -> None:
+        while True:
+            if self._cancelled.is_set():
+                raise _Cancelled()
+            try:
+                self._out.put(item, timeout=STALL_S)
+                return
+            except queue.Full:
+                self._cancelled.set()      # nobody read for STALL_S: give up
+
+
+class ExportStream:
+    """One export being written by ``write(text_stream)`` on a thread, read once in chunks from offset 0."""
+
+    def __init__(self, write: Callable[[TextIO], None], name: str = "", piece_bytes: int = PIECE_BYTES,
+                 depth: int = QUEUE_DEPTH) -> None:
+        self.name = name
+        self.offset = 0
+        self.done = False
+        self._queue: queue.Queue[bytes | _Done] = queue.Queue(maxsize=depth)
+        self._pending = b""
+        self._cancelled = threading.Event()
+        self._sink = _ChunkSink(self._queue, piece_bytes, self._cancelled)
+        self._thread = threading.Thread(target=self._run, args=(write,), name="export-writer", daemon=True)
+        self._thread.start()
+
+    def _run(self, write: Callable[[TextIO], None]) -> None:
+        try:
+            try:
+                write(self._sink)  # type: ignore[arg-type]  (write() is all a post-processor uses)
+                self._sink.flush()
+                end = _Done()
+            except FabricError as err:
+                end = _Done(err)
+            except _Cancelled:
+                return
+            except Exception as exc:  # a bug in a writer: the reader gets an internal error with its name
+                end = _Done(InternalError(f"export writer failed: {type(exc).__name__}: {exc}"))
+            self._sink.put(end)
+        except _Cancelled:
+            return
+
+    def read(self, offset: int, limit_bytes: int, timeout_s: float = 60.0) -> bytes:
+        """The next at most ``limit_bytes`` bytes from ``offset`` (which must be where the last read ended).
+
+        ``self.done`` is set once the last bytes have been returned.
+        """
+        if offset != self.offset:
+            raise BadRequest(f"export chunks are read in order: offset {offset}, the stream stands at {self.offset}",
+                             field="offset", value=offset, expected=self.offset)
+        if self.done:
+            return b""
+        while not self._pending:
+            try:
+                item = self._queue.get(timeout=timeout_s)
+            except queue.Empty:
+                raise ServiceUnavailable(f"export writer produced nothing within {timeout_s:g} s",
+                                         timeout_s=timeout_s) from None
+            if isinstance(item, _Done):
+                if item.error is not None:
+                    self.cancel()
+                    raise item.error
+                self.done = True
+                return b""
+            self._pending = item
+        data, self._pending = self._pending[:limit_bytes], self._pending[limit_bytes:]
+        self.offset += len(data)
+        if not self._pending:
+            self._peek_end()
+        return data
+
+    def _peek_end(self) -> None:
+        # mark the stream done with its last bytes when the writer has already finished
+        try:
+            item = self._queue.get_nowait()
+        except queue.Empty:
+            return
+        if isinstance(item, _Done) and item.error is None:
+            self.done = True
+        elif isinstance(item, _Done):
+            self._queue.put(item)          # the error is raised by the next read
+        else:
+            self._pending = item
+
+    def cancel(self) -> None:
+        """Stop the writer (it ends at its next piece) and drop what it queued."""
+        self._cancelled.set()
+        while True:
+            try:
+                self._queue.get_nowait()
+            except queue.Empty:
+                return

@@ -1,0 +1,31 @@
+"""Messages of the planner's streamed export: one bounded chunk of a program's RAPID / KRL / URScript / CSV."""
+from __future__ import annotations
+
+from fabric.schemas.base import f, schema
+from fabric.schemas.pipeline import EXPORT_FORMATS
+
+__all__ = ["ExportChunkRequest", "ExportChunk", "MAX_CHUNK_BYTES"]
+
+MAX_CHUNK_BYTES = 64 << 20
+
+
+@schema("planner.ExportChunkRequest")
+class ExportChunkRequest:
+    """The next chunk of an export. Offset 0 starts (or restarts) it; every next offset is where the last ended."""
+    program_id: str = f(max_len=128)
+    fmt: str = f(choices=EXPORT_FORMATS)
+    offset: int = f(0, ge=0)
+    limit_bytes: int = f(4 << 20, ge=4096, le=MAX_CHUNK_BYTES)
+    module_targets: int = f(5000, ge=10, le=1_000_000)
+
+
+@schema("planner.ExportChunk")
+class ExportChunk:
+    """Bytes ``[offset, offset + len(data))`` of the export; ``done`` with the last of them."""
+    program_id: str
+    fmt: str
+    offset: int
+    data: bytes
+    done: bool
+    name: str = ""            # a file name for the export (``<program>.<suffix>``)
+    media_type: str = ""
