@@ -150,3 +150,19 @@ def test_restore_refuses_another_program_or_version(cell: Cell, prog: Program) -
     snap["config"]["warp_factor"] = 9
     with pytest.raises(ValidationError, match="warp_factor"):
         Twin.from_snapshot(cell, snap, prog)
+
+
+def test_snapshot_without_beads_takes_them_apart(cell: Cell, prog: Program) -> None:
+    twin = Twin(cell)
+    twin.load(prog)
+    twin.start()
+    twin.advance(95.0)
+    snap = twin.snapshot(with_beads=False)
+    assert snap["state"]["beads"] is None and snap["state"]["bead_count"] == len(twin.beads) > 0
+    again = Twin.from_snapshot(cell, snap, prog, beads=twin.beads.to_arrays())
+    assert len(again.beads) == len(twin.beads)
+    short = {k: v[:-1] for k, v in twin.beads.to_arrays().items()}
+    with pytest.raises(ValidationError, match="beads"):
+        Twin.from_snapshot(cell, snap, prog, beads=short)
+    with pytest.raises(ValidationError, match="beads"):
+        Twin.from_snapshot(cell, snap, prog)

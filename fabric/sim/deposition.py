@@ -135,9 +135,9 @@ class Deposition:
     def __len__(self) -> int:
         return self._n
 
-    def to_arrays(self) -> dict[str, np.ndarray]:
-        """Every bead field as an array (copies), for a snapshot."""
-        return {k: self._buf[k][: self._n].copy() for k in _FIELDS}
+    def to_arrays(self, first: int = 0) -> dict[str, np.ndarray]:
+        """Every bead field of beads ``first ..`` as an array (copies), for a snapshot or a checkpoint."""
+        return {k: self._buf[k][first: self._n].copy() for k in _FIELDS}
 
     @classmethod
     def from_arrays(cls, program: Program | None, arrays: dict[str, np.ndarray]) -> "Deposition":

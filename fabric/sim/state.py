@@ -105,8 +105,10 @@ class TwinState:
     job: JobState = field(default_factory=JobState)
     pending: list[Event] = field(default_factory=list)     # events of commands, reported by the next advance
 
-    def to_dict(self) -> dict[str, Any]:
-        """The state as plain values and arrays (the program by its row count; see module docstring)."""
+    def to_dict(self, with_beads: bool = True) -> dict[str, Any]:
+        """The state as plain values and arrays (the program by its row count; see module docstring).
+        ``with_beads`` False leaves the bead arrays out (a checkpoint stores them incrementally) and
+        keeps their count."""
         return {
             "version": SNAPSHOT_VERSION,
             "state": self.state, "reason": self.reason, "t_sim_s": self.t_sim_s,
@@ -115,15 +117,17 @@ class TwinState:
             "thermal": thermal_to_dict(self.thermal), "speed_r": self.speed_r, "flow_r": self.flow_r,
             "program_rows": len(self.program) if self.program is not None else None,
             "estimate_s": self.estimate_s, "t_started_s": self.t_started_s, "t_ended_s": self.t_ended_s,
-            "seq": self.seq, "beads": self.beads.to_arrays(),
+            "seq": self.seq, "beads": self.beads.to_arrays() if with_beads else None,
+            "bead_count": len(self.beads),
             "legs": [leg.to_dict() for leg in self.legs], "job": self.job.to_dict(),
             "pending": [_event_to_dict(e) for e in self.pending],
         }
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any], program: Program | None) -> "TwinState":
-        """The state saved by :meth:`to_dict`, with ``program`` the one it was running. Leg timelines
-        are left unbuilt: the twin rebuilds them from their specs."""
+    def from_dict(cls, d: dict[str, Any], program: Program | None,
+                  beads: dict[str, np.ndarray] | None = None) -> "TwinState":
+        """The state saved by :meth:`to_dict`, with ``program`` the one it was running (and ``beads``,
+        when they were saved apart). Leg timelines are left unbuilt: the twin rebuilds them."""
         if d.get("version") != SNAPSHOT_VERSION:
             raise ValidationError(f"twin snapshot version {d.get('version')!r}, expected {SNAPSHOT_VERSION}",
                                   field="version")
@@ -131,6 +135,12 @@ class TwinState:
         if (rows is None) != (program is None) or (program is not None and len(program) != rows):
             have = len(program) if program is not None else None
             raise ValidationError(f"the snapshot ran a program of {rows} rows, got one of {have}", field="program")
+        bead_arrays = d["beads"] if d["beads"] is not None else beads
+        if not bead_arrays and d["bead_count"] == 0:
+            bead_arrays = Deposition().to_arrays()
+        if bead_arrays is None or len(bead_arrays["row"]) != d["bead_count"]:
+            have = None if bead_arrays is None else len(bead_arrays["row"])
+            raise ValidationError(f"the snapshot recorded {d['bead_count']} beads, got {have}", field="beads")
         rng = np.random.default_rng()
         rng.bit_generator.state = json.loads(d["rng"])
         return cls(
@@ -139,7 +149,7 @@ class TwinState:
             t_sim_s=float(d["t_sim_s"]), thermal=thermal_from_dict(d["thermal"]), speed_r=float(d["speed_r"]),
             flow_r=float(d["flow_r"]), program=program, estimate_s=float(d["estimate_s"]),
             t_started_s=_opt_float(d["t_started_s"]), t_ended_s=_opt_float(d["t_ended_s"]), seq=int(d["seq"]),
-            beads=Deposition.from_arrays(program, d["beads"]), legs=[Leg.from_dict(x) for x in d["legs"]],
+            beads=Deposition.from_arrays(program, bead_arrays), legs=[Leg.from_dict(x) for x in d["legs"]],
             job=JobState.from_dict(d["job"]), pending=[_event_from_dict(e) for e in d["pending"]],
         )
 

@@ -69,16 +69,19 @@ class Twin:
 
     # ------------------------------------------------------------------ saving
 
-    def snapshot(self) -> dict[str, Any]:
+    def snapshot(self, with_beads: bool = True) -> dict[str, Any]:
         """The twin's settings and whole state as plain values and arrays (msgpack-able with
-        :func:`fabric.codec.pack`). The loaded program is named by its row count only."""
-        return {"config": self.config.to_dict(), "state": self.s.to_dict()}
+        :func:`fabric.codec.pack`). The loaded program is named by its row count only; ``with_beads``
+        False leaves out the bead arrays (kept apart by a checkpoint that stores them incrementally)."""
+        return {"config": self.config.to_dict(), "state": self.s.to_dict(with_beads)}
 
     @classmethod
-    def from_snapshot(cls, cell: Any, snapshot: dict[str, Any], program: Program | None) -> "Twin":
-        """A twin in exactly the state ``snapshot`` saved, running ``program`` (the same one)."""
+    def from_snapshot(cls, cell: Any, snapshot: dict[str, Any], program: Program | None,
+                      beads: dict[str, np.ndarray] | None = None) -> "Twin":
+        """A twin in exactly the state ``snapshot`` saved, running ``program`` (the same one), with
+        ``beads`` when the snapshot was taken without them."""
         config = TwinConfig.from_dict(snapshot["config"])
-        state = TwinState.from_dict(snapshot["state"], program)
+        state = TwinState.from_dict(snapshot["state"], program, beads)
         twin = cls(cell, config, state=state)
         cache: dict[bytes, Any] = {}
         for leg in state.legs:

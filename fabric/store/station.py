@@ -1,0 +1,154 @@
+"""The station's durable state: the event log, the twin's checkpoint, its beads and the clock mark.
+
+Three things are written, at three rates, so that a station killed at any
+instant comes back exactly:
+
+- every simulation tick, in one transaction: the events of that tick (the
+  lossless stream, so ``seq`` goes on across restarts) and the *clock mark*,
+  the simulated time reached. Both are small;
+- at a bounded cadence and on every command: the *checkpoint*, the twin's
+  whole state without its beads (see :mod:`fabric.sim.state`) plus what the
+  station needs beside it (program id, job id, real-time factor);
+- with each checkpoint, the beads deposited since the previous one, appended
+  as a chunk: a million-bead print is never rewritten whole.
+
+On restart the station restores the checkpoint and advances the twin to the
+clock mark: the twin is deterministic, so it re-deposits exactly what was
+deposited after the checkpoint, and the events it re-emits are the ones
+already in the log.
+"""
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fabric import codec
+from fabric import schemas as s
+from fabric.store.sqlite import open_db
+
+__all__ = ["Checkpoint", "StationStore"]
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS events (
+    seq INTEGER PRIMARY KEY,
+    payload BLOB NOT NULL
+);
+CREATE TABLE IF NOT EXISTS clock (
+    id INTEGER PRIMARY KEY CHECK (id = 1),
+    t_sim_s REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS checkpoint (
+    id INTEGER PRIMARY KEY CHECK (id = 1),
+    epoch TEXT NOT NULL,
+    payload BLOB NOT NULL
+);
+CREATE TABLE IF NOT EXISTS beads (
+    first INTEGER PRIMARY KEY,
+    count INTEGER NOT NULL,
+    payload BLOB NOT NULL
+);
+"""
+
+
+@dataclass
+class Checkpoint:
+    """What a restarted station restores: the saved state, the beads up to it, the clock mark."""
+
+    state: dict[str, Any]
+    beads: dict[str, np.ndarray]
+    t_mark_s: float
+
+
+class StationStore:
+    """The station's SQLite database (WAL; see the module docstring). Thread-safe."""
+
+    def __init__(self, path: str | Path, keep_events: int = 200_000) -> None:
+        self.path = Path(path)
+        self.keep_events = int(keep_events)
+        self._lock = threading.Lock()
+        self._db = open_db(self.path, _SCHEMA, synchronous="NORMAL")
+        self._stored_beads = self._count_beads()
+        self._epoch = self._read_epoch()
+        self._since_prune = 0
+
+    # Events and the clock -------------------------------------------------------------------
+
+    def record_tick(self, events: list[s.Event], t_sim_s: float) -> None:
+        """Append this tick's events and move the clock mark, in one transaction."""
+        with self._lock, self._db:
+            if events:
+                self._db.executemany("INSERT OR REPLACE INTO events VALUES (?, ?)",
+                                     [(e.seq, codec.encode(e)) for e in events])
+                self._since_prune += len(events)
+            self._db.execute("INSERT OR REPLACE INTO clock VALUES (1, ?)", (float(t_sim_s),))
+            if self._since_prune > 1000:
+                self._since_prune = 0
+                self._db.execute("DELETE FROM events WHERE seq <= (SELECT MAX(seq) FROM events) - ?",
+                                 (self.keep_events,))
+
+    def last_seq(self) -> int:
+        """The sequence number of the last event recorded (0 when none)."""
+        row = self._db.execute("SELECT COALESCE(MAX(seq), 0) FROM events").fetchone()
+        return int(row[0])
+
+    def events(self, since_seq: int = 0, limit: int = 10_000) -> list[s.Event]:
+        """Recorded events with ``seq > since_seq``, oldest first."""
+        rows = self._db.execute("SELECT payload FROM events WHERE seq > ? ORDER BY seq LIMIT ?",
+                                (int(since_seq), int(limit))).fetchall()
+        return [codec.decode(r[0], s.Event) for r in rows]
+
+    def clock_mark(self) -> float | None:
+        """The simulated time last recorded (None before the first tick)."""
+        row = self._db.execute("SELECT t_sim_s FROM clock WHERE id = 1").fetchone()
+        return None if row is None else float(row[0])
+
+    # Checkpoints ------------------------------------------------------------------------------
+
+    def save_checkpoint(self, state: dict[str, Any], epoch: str, beads: Any) -> None:
+        """Save ``state`` (a dict of plain values, msgpack-able) and the beads of ``beads`` (a
+        :class:`~fabric.sim.deposition.Deposition`) not stored yet. ``epoch`` names the job the beads
+        belong to: a new epoch (a new job) starts the bead record afresh."""
+        with self._lock, self._db:
+            if epoch != self._epoch or len(beads) < self._stored_beads:
+                self._db.execute("DELETE FROM beads")
+                self._stored_beads = 0
+            n = len(beads)
+            if n > self._stored_beads:
+                chunk = beads.to_arrays(self._stored_beads)
+                self._db.execute("INSERT INTO beads VALUES (?, ?, ?)",
+                                 (self._stored_beads, n - self._stored_beads, codec.pack(chunk)))
+            self._db.execute("INSERT OR REPLACE INTO checkpoint VALUES (1, ?, ?)", (epoch, codec.pack(state)))
+        self._stored_beads = n
+        self._epoch = epoch
+
+    def load(self) -> Checkpoint | None:
+        """The last checkpoint with its beads and the clock mark (None when nothing was saved)."""
+        row = self._db.execute("SELECT payload FROM checkpoint WHERE id = 1").fetchone()
+        if row is None:
+            return None
+        state = codec.unpack(row[0])
+        chunks = [codec.unpack(r[0]) for r in self._db.execute("SELECT payload FROM beads ORDER BY first")]
+        if chunks:
+            beads = {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0]}
+        else:
+            beads = {}
+        mark = self.clock_mark()
+        return Checkpoint(state, beads, mark if mark is not None else 0.0)
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()
+
+    # Internals -------------------------------------------------------------------------------
+
+    def _count_beads(self) -> int:
+        row = self._db.execute("SELECT COALESCE(SUM(count), 0) FROM beads").fetchone()
+        return int(row[0])
+
+    def _read_epoch(self) -> str | None:
+        row = self._db.execute("SELECT epoch FROM checkpoint WHERE id = 1").fetchone()
+        return None if row is None else str(row[0])
