@@ -17,7 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from fabric import schemas as s
-from fabric.cli.up import Cell
+from fabric.cli.up import CellProcesses
 from fabric.client import Client
 from fabric.config import SessionSettings
 from fabric.errors import FabricError
@@ -117,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rtf", type=float, default=0.0, help="real-time factor (0 = as fast as possible)")
     a = p.parse_args(argv)
     settings = SessionSettings(connect=[f"tcp/127.0.0.1:{_free_port()}"], cell="demo")
-    cell = Cell(settings, log_dir=a.out / "logs")
+    cell = CellProcesses(settings, log_dir=a.out / "logs")
     print(f"starting the cell (5 services, logs in {a.out / 'logs'}) ...")
     try:
         cell.start(deadline_s=120)

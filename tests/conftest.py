@@ -10,7 +10,7 @@ import zenoh
 
 from fabric.client import wait_connected
 from fabric.config import SessionSettings, zenoh_config
-from fabric.cli.up import Cell as CellProcesses, hub_settings
+from fabric.cli.up import CellProcesses, hub_settings
 
 
 def free_port() -> int:

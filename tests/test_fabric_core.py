@@ -162,3 +162,21 @@ def test_session_settings_from_flags():
     conf = zenoh_config(SessionSettings(listen=["tcp/127.0.0.1:0"], connect=[]))
     assert "tcp/127.0.0.1:0" in conf.get_json("listen/endpoints")
     assert conf.get_json("scouting/multicast/enabled") == "false"
+
+
+def test_subscribe_alive_reports_services_coming_and_going(session, settings, client):
+    changes = client.subscribe_alive()
+    try:
+        token = session.liveliness().declare_token(Keys(settings.cell).alive("slicer"))
+        assert changes.get(timeout=10.0) == ("slicer", True)
+        token.undeclare()
+        assert changes.get(timeout=10.0) == ("slicer", False)
+    finally:
+        changes.close()
+
+
+def test_cmd_all_matches_every_command_of_a_service_only():
+    keys = Keys("cellA")
+    pattern = zenoh.KeyExpr(keys.cmd_all("planner"))
+    for service, command in ENDPOINTS:
+        assert pattern.intersects(zenoh.KeyExpr(keys.cmd(service, command))) == (service == "planner")

@@ -15,9 +15,9 @@ import zenoh
 from fabric.client import Client
 from fabric.config import SessionSettings, zenoh_config
 from fabric.errors import ServiceUnavailable
-from fabric.keys import SERVICES
+from fabric.keys import SERVICES, Keys
 
-__all__ = ["Cell", "hub_settings"]
+__all__ = ["CellProcesses", "hub_settings", "run_up"]
 
 
 def hub_settings(settings: SessionSettings) -> SessionSettings:
@@ -25,8 +25,10 @@ def hub_settings(settings: SessionSettings) -> SessionSettings:
     return replace(settings, mode="router", listen=list(settings.listen or settings.connect), connect=[])
 
 
-class Cell:
-    """The five service processes of one cell (plus the hub), started and stopped together."""
+class CellProcesses:
+    """The five service processes of one cell (plus the hub), started and stopped together.
+
+    (Not the cell *model*, ``fabric.robot.cell.Cell``: this is the set of running processes.)"""
 
     def __init__(self, settings: SessionSettings, services: tuple[str, ...] = SERVICES, host_hub: bool = True,
                  log_dir: Path | None = None, extra_args: dict[str, list[str]] | None = None) -> None:
@@ -92,7 +94,7 @@ class Cell:
 def run_up(settings: SessionSettings, services: tuple[str, ...], host_hub: bool, log_dir: Path | None,
            extra_args: dict[str, list[str]], out=print) -> int:
     """Start the cell, report where it is, supervise until Ctrl-C, then stop everything."""
-    cell = Cell(settings, services, host_hub, log_dir, extra_args)
+    cell = CellProcesses(settings, services, host_hub, log_dir, extra_args)
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
@@ -100,8 +102,9 @@ def run_up(settings: SessionSettings, services: tuple[str, ...], host_hub: bool,
     cell.start()
     out(f"cell '{settings.cell}' up in {time.monotonic() - t0:.1f} s; hub "
         f"{', '.join(settings.connect) if host_hub else '(external) ' + ', '.join(settings.connect)}")
+    keys = Keys(settings.cell)
     for name, p in cell.procs.items():
-        out(f"  {name:<11} pid {p.pid:<7} am/{settings.cell}/{name}/cmd/*")
+        out(f"  {name:<11} pid {p.pid:<7} {keys.cmd_all(name)}")
     out("Ctrl-C stops every service.")
     rc = 0
     try:

@@ -5,7 +5,6 @@ import queue
 import time
 from typing import Any, Callable
 
-import zenoh
 from rich.markup import escape
 from textual import work
 from textual.app import App, ComposeResult
@@ -13,9 +12,8 @@ from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.widgets import Button, Footer, Header, RichLog
 
-from fabric.client import Client
+from fabric.client import AliveSubscription, Client
 from fabric.errors import FabricError
-from fabric.keys import parse_alive
 from fabric.tui.messages import Liveliness, Telemetry
 from fabric.tui.widgets.services import ServicesPanel
 from fabric.tui.widgets.telemetry import ExtrusionPanel, PosePanel, StatePanel
@@ -69,7 +67,7 @@ class FabricConsole(App):
         self.alive: dict[str, bool] = {}
         self._last_ui: dict[str, float] = {}
         self._subs: list[Any] = []
-        self._live_sub: Any = None
+        self._alive_sub: AliveSubscription | None = None
 
     def compose(self) -> ComposeResult:
         yield Header()
@@ -89,15 +87,15 @@ class FabricConsole(App):
         for topic in TOPICS:
             self._subs.append(self.client.subscribe("station", topic))
             self.feed(topic, self._subs[-1])
-        self._live_sub = self.client.session.liveliness().declare_subscriber(
-            self.client.keys.alive_all(), self._zenoh_liveliness)
+        self._alive_sub = self.client.subscribe_alive()
+        self.feed_alive(self._alive_sub)
         self.refresh_alive()
 
     def on_unmount(self) -> None:
         for sub in self._subs:
             sub.close()
-        if self._live_sub is not None:
-            self._live_sub.undeclare()
+        if self._alive_sub is not None:
+            self._alive_sub.close()
 
     # --- feeds (threads) -----------------------------------------------------------
 
@@ -118,12 +116,14 @@ class FabricConsole(App):
                 self._last_ui[topic] = now
             self.post_message(Telemetry(topic, msg))
 
-    def _zenoh_liveliness(self, sample: zenoh.Sample) -> None:
-        # Zenoh callback: only note the change and hand it to the app (non-blocking)
-        name = parse_alive(str(sample.key_expr))[1]
-        alive = dict(self.alive)
-        alive[name] = sample.kind == zenoh.SampleKind.PUT
-        self.post_message(Liveliness(alive))
+    @work(thread=True, group="feeds")
+    def feed_alive(self, sub: AliveSubscription) -> None:
+        while self.is_running:
+            try:
+                name, alive = sub.get(timeout=0.5)
+            except queue.Empty:
+                continue
+            self.post_message(Liveliness({name: alive}))
 
     @work(thread=True, group="alive")
     def refresh_alive(self) -> None:
