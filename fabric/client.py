@@ -225,6 +225,7 @@ class Client:
     def start(self, rtf: float = 1.0) -> s.Ack: return self.call("station", "start", s.StartRequest(rtf=rtf))
     def pause(self) -> s.Ack: return self.call("station", "pause")
     def resume(self, rtf: float = 1.0) -> s.Ack: return self.call("station", "resume", s.StartRequest(rtf=rtf))
+    def recover(self, rtf: float = 1.0) -> s.Ack: return self.call("station", "recover", s.StartRequest(rtf=rtf))
     def stop(self) -> s.Ack: return self.call("station", "stop")
     def collisions(self) -> s.CollisionReport: return self.call("station", "collisions")
     def calibrate(self) -> s.CalibrationReport: return self.call("station", "calibrate")

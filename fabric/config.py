@@ -12,13 +12,15 @@ import argparse
 import json
 import os
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import zenoh
 
-__all__ = ["SessionSettings", "DEFAULT_HUB", "add_session_args", "add_cell_argument", "settings_from_args",
-           "zenoh_config"]
+__all__ = ["SessionSettings", "DEFAULT_HUB", "add_data_argument", "default_data_root", "service_data_dir",
+           "add_session_args", "add_cell_argument", "settings_from_args", "zenoh_config"]
 
 DEFAULT_HUB = os.environ.get("FABRIC_HUB", "tcp/127.0.0.1:7447")
+DATA_ROOT_ENV = "FABRIC_DATA_DIR"
 MODES = ("peer", "client", "router")
 
 
@@ -57,6 +59,28 @@ def add_session_args(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--listen", action="append", metavar="ENDPOINT", help="endpoint to listen on")
     g.add_argument("--multicast", action="store_true", help="enable multicast scouting (off by default)")
     g.add_argument("--cell", default=os.environ.get("FABRIC_CELL", "cell1"), help="cell name: the key prefix am/<cell>/")
+
+
+def default_data_root() -> Path:
+    """Where services keep their durable state: ``$FABRIC_DATA_DIR``, else ``$XDG_DATA_HOME/am-fabric``
+    (``~/.local/share/am-fabric``)."""
+    if os.environ.get(DATA_ROOT_ENV):
+        return Path(os.environ[DATA_ROOT_ENV])
+    base = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
+    return Path(base) / "am-fabric"
+
+
+def add_data_argument(parser: argparse.ArgumentParser) -> None:
+    """The ``--data-dir`` option: the root of the durable state (one folder per cell and service)."""
+    parser.add_argument("--data-dir", default=None, metavar="DIR",
+                        help=f"durable state (jobs, events, checkpoints, artifacts); default ${DATA_ROOT_ENV} or "
+                             f"{default_data_root()}")
+
+
+def service_data_dir(root: str | Path | None, cell: str, service: str) -> Path:
+    """The folder of ``service`` of ``cell`` under the data root (``root`` None: the default root)."""
+    base = Path(root) if root is not None else default_data_root()
+    return base / cell / service
 
 
 def add_cell_argument(parser: argparse.ArgumentParser, what: str = "") -> None:

@@ -57,6 +57,8 @@ _TABLE = [
     _ep("station", "start", s.StartRequest, s.Ack, doc="run the loaded program"),
     _ep("station", "pause", s.Empty, s.Ack, doc="controlled pause: extruder off, retract, lift"),
     _ep("station", "resume", s.StartRequest, s.Ack, doc="return to the paused spot and go on"),
+    _ep("station", "recover", s.StartRequest, s.Ack, 30.0,
+        "collision-checked move back to an interrupted print's spot, then go on"),
     _ep("station", "stop", s.Empty, s.Ack, doc="abort safely, keep the deposit record"),
     _ep("station", "collisions", s.Empty, s.CollisionReport, 120.0, "sweep the loaded program"),
     _ep("station", "calibrate", s.Empty, s.CalibrationReport, 30.0, "probe the plate, fit the work object"),

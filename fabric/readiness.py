@@ -69,8 +69,12 @@ def _collisions(facts: ReadyFacts) -> s.Check:
 
 
 def _pose(facts: ReadyFacts) -> s.Check:
+    name = "robot at a known pose"
+    if facts.state == "interrupted":
+        return s.Check(name=name, ok=False, detail="interrupted: the robot stopped where the station lost it; "
+                                                   "recover it (fabric-cli recover) before anything else moves")
     detail = "at home" if facts.at_home else ("within limits" if facts.pose_known else "outside its limits")
-    return s.Check(name="robot at a known pose", ok=facts.pose_known, detail=detail)
+    return s.Check(name=name, ok=facts.pose_known, detail=detail)
 
 
 def _temperature(facts: ReadyFacts) -> s.Check:

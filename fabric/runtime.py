@@ -12,18 +12,22 @@ with its traceback, answered as ``internal`` and marks the service degraded.
 """
 from __future__ import annotations
 
+import fcntl
 import logging
+import tempfile
 import threading
 import time
 import traceback
-from typing import Any, Callable
+from pathlib import Path
+from typing import IO, Any, Callable
 
 import zenoh
 
 from fabric import codec
-from fabric.errors import FabricError, InternalError, NotFound
+from fabric.errors import FabricError, InternalError, NotFound, StateError, ValidationError
 from fabric.keys import ENDPOINTS, TOPICS, Endpoint, Keys
 from fabric.schemas import Artifact, ErrorReply
+from fabric.store.artifacts import ArtifactStore
 
 __all__ = ["Service", "Publisher", "reply_error"]
 
@@ -60,8 +64,11 @@ class Service:
 
     name = "service"
 
-    def __init__(self, session: zenoh.Session, cell: str) -> None:
+    def __init__(self, session: zenoh.Session, cell: str, data_dir: str | Path | None = None) -> None:
+        """``data_dir``: this service's folder of durable state (artifacts, its database); None: a
+        temporary folder removed on :meth:`close` (tests, throw-away runs)."""
         self.session = session
+        self.cell = cell
         self.keys = Keys(cell)
         self.log = logging.getLogger(f"fabric.{self.name}")
         self.degraded: str | None = None
@@ -71,9 +78,10 @@ class Service:
         self._queryables: list[Any] = []
         self._threads: list[threading.Thread] = []
         self._token: Any = None
-        self._artifacts: dict[str, Artifact] = {}
-        self._artifact_bytes = 0
-        self._lock = threading.Lock()
+        self._tmp = tempfile.TemporaryDirectory(prefix=f"am-fabric-{self.name}-") if data_dir is None else None
+        self.data_dir = Path(self._tmp.name if self._tmp is not None else data_dir)
+        self._dir_lock = _lock_dir(self.data_dir, self.name, cell)
+        self.artifacts = ArtifactStore(self.data_dir / "artifacts")
         self.closed = threading.Event()
 
     # --- declaration -------------------------------------------------------
@@ -88,24 +96,26 @@ class Service:
         self._publishers.append(pub)
         return pub
 
-    def store_artifact(self, artifact: Artifact, max_total_bytes: int = 2 << 30) -> str:
-        """Keep a content-addressed result, served at ``<service>/artifact/<id>``; oldest evicted first."""
-        with self._lock:
-            if artifact.artifact_id not in self._artifacts:
-                self._artifacts[artifact.artifact_id] = artifact
-                self._artifact_bytes += len(artifact.data)
-            while self._artifact_bytes > max_total_bytes and len(self._artifacts) > 1:
-                old = next(iter(self._artifacts))
-                self._artifact_bytes -= len(self._artifacts.pop(old).data)
-        return artifact.artifact_id
+    def store_artifact(self, artifact: Artifact) -> str:
+        """Keep a content-addressed result on disk, served at ``<service>/artifact/<id>``."""
+        return self.artifacts.put(artifact)
 
     def get_artifact(self, artifact_id: str) -> Artifact | None:
-        with self._lock:
-            return self._artifacts.get(artifact_id)
+        """A stored artifact, or None when it is not (or no longer) here."""
+        try:
+            return self.artifacts.get(artifact_id)
+        except (NotFound, ValidationError):
+            return None
 
     # --- life cycle ---------------------------------------------------------
 
     def start(self) -> None:
+        """Serve every endpoint, then declare the liveliness token. Refuses (StateError) when another
+        service of the same role already serves this cell anywhere on the fabric."""
+        others = self.session.liveliness().get(self.keys.alive(self.name), timeout=1.0)
+        if any(r.ok is not None for r in others):
+            raise StateError(f"a {self.name} is already serving cell {self.cell!r}: stop it first, or run this "
+                             f"one with another --cell", state="running", command="start", service=self.name)
         for command, (ep, fn) in self._handlers.items():
             self._serve(self.keys.cmd(self.name, command), lambda q, ep=ep, fn=fn: self._answer(q, ep, fn))
         self._serve(self.keys.artifact_all(self.name), self._answer_artifact)
@@ -164,3 +174,21 @@ class Service:
             p.close()
         for t in self._threads:
             t.join(timeout=2.0)
+        self.artifacts.close()
+        self._dir_lock.close()
+        if self._tmp is not None:
+            self._tmp.cleanup()
+
+
+def _lock_dir(path: Path, name: str, cell: str) -> IO[bytes]:
+    """Hold an exclusive lock on ``path`` for this process's life: two services of one role and cell on
+    one host would write the same durable state (the liveliness check covers other hosts)."""
+    path.mkdir(parents=True, exist_ok=True)
+    fh = open(path / "lock", "wb")
+    try:
+        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        fh.close()
+        raise StateError(f"a {name} of cell {cell!r} is already running on this host (it holds {path}/lock)",
+                         state="running", command="start", service=name) from None
+    return fh

@@ -64,6 +64,11 @@ def test_pose_outside_limits_fails_and_away_from_home_passes() -> None:
     assert not item.ok and item.detail == "outside its limits"
 
 
+def test_an_interrupted_print_fails_the_pose_until_recovered() -> None:
+    item = check(replace(READY, state="interrupted", at_home=False), "robot at a known pose")
+    assert not item.ok and "recover" in item.detail
+
+
 def test_extruder_temperature_within_tolerance() -> None:
     item = check(replace(READY, nozzle_c=25.0), "extruder at temperature")
     assert not item.ok

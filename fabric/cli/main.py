@@ -11,7 +11,7 @@ from pathlib import Path
 from fabric.cli import pipeline_cmds, station_cmds
 from fabric.cli.output import emit, fail
 from fabric.client import Client
-from fabric.config import add_cell_argument, add_session_args, settings_from_args
+from fabric.config import add_cell_argument, add_data_argument, add_session_args, settings_from_args
 from fabric.errors import FabricError
 from fabric.keys import SERVICES
 
@@ -78,6 +78,7 @@ def service_parser(name: str) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fabric-cli serve " + name, parents=[_common()],
                                 description=f"Run the {name} service in this process.")
     p.add_argument("--log-level", default="INFO")
+    add_data_argument(p)
     module.add_arguments(p)
     return p
 

@@ -131,7 +131,8 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.set_defaults(run=cmd_status)
     simple("position", lambda c, a: c.position(), _pose_text, "TCP pose and joints of the twin now")
     simple("home", lambda c, a: c.home(), _ack_text, "collision-checked joint move to home")
-    for name, help_ in (("start", "start printing the loaded program"), ("resume", "resume a paused print")):
+    for name, help_ in (("start", "start printing the loaded program"), ("resume", "resume a paused print"),
+                        ("recover", "after a crash: collision-checked move back to the interrupted spot, go on")):
         p = simple(name, (lambda c, a, n=name: getattr(c, n)(rtf=a.rtf)), _ack_text, help_)
         p.add_argument("--rtf", type=float, default=1.0, help="real-time factor (0 = as fast as possible)")
     simple("pause", lambda c, a: c.pause(), _ack_text, "pause: extruder off, retract, lift")

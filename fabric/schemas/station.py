@@ -9,7 +9,7 @@ from typing import Any
 
 from fabric.schemas.base import f, schema
 
-STATES = ("idle", "ready", "printing", "paused", "stopped", "fault", "moving")
+STATES = ("idle", "ready", "printing", "paused", "stopped", "fault", "moving", "interrupted")
 
 
 @schema("station.Pose")

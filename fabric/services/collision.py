@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import zenoh
@@ -12,7 +13,7 @@ from fabric import schemas as s
 from fabric.client import Client
 from fabric.errors import BadRequest
 from fabric.programs import program_from_artifact
-from fabric.config import add_cell_argument
+from fabric.config import add_cell_argument, service_data_dir
 from fabric.runtime import Service
 from fabric.robot.cell import Cell
 from fabric.collision.sweep import CollisionChecker, layer_boxes
@@ -47,8 +48,8 @@ def sweep_program(checker: CollisionChecker, program: Program, step_deg: float, 
 class CollisionService(Service):
     name = "collision"
 
-    def __init__(self, session: zenoh.Session, cell_id: str, cell: Cell) -> None:
-        super().__init__(session, cell_id)
+    def __init__(self, session: zenoh.Session, cell_id: str, cell: Cell, data_dir: Path | None = None) -> None:
+        super().__init__(session, cell_id, data_dir)
         self.checker = CollisionChecker(cell)
         self.cell = cell
         self.client = Client(session, cell_id)
@@ -96,4 +97,4 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def build(session: zenoh.Session, cell_id: str, options: argparse.Namespace) -> CollisionService:
     cell = Cell.load_or_builtin(options.cell_config)
-    return CollisionService(session, cell_id, cell)
+    return CollisionService(session, cell_id, cell, service_data_dir(options.data_dir, cell_id, "collision"))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import io
+from pathlib import Path
 from typing import Callable, TextIO
 
 import numpy as np
@@ -19,7 +20,7 @@ from fabric.client import Client
 from fabric.errors import BadRequest, FabricError, NotFound, UnreachableError
 from fabric.jobs import Job, JobRunner
 from fabric.programs import content_id, program_artifact, program_from_artifact
-from fabric.config import add_cell_argument
+from fabric.config import add_cell_argument, service_data_dir
 from fabric.runtime import Service
 from fabric.robot.cell import Cell
 from fabric.robot.frames import xyzrpy_to_T
@@ -39,8 +40,8 @@ MAX_EXPORT_STREAMS = 4      # streamed exports open at once (a reader that went 
 class PlannerService(Service):
     name = "planner"
 
-    def __init__(self, session: zenoh.Session, cell_id: str, cell: Cell) -> None:
-        super().__init__(session, cell_id)
+    def __init__(self, session: zenoh.Session, cell_id: str, cell: Cell, data_dir: Path | None = None) -> None:
+        super().__init__(session, cell_id, data_dir)
         self.cell = cell
         self.client = Client(session, cell_id)
         self.jobs = JobRunner("planner", self.publisher("progress", lossless=True))
@@ -176,4 +177,4 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def build(session: zenoh.Session, cell_id: str, options: argparse.Namespace) -> PlannerService:
     cell = Cell.load_or_builtin(options.cell_config)
-    return PlannerService(session, cell_id, cell)
+    return PlannerService(session, cell_id, cell, service_data_dir(options.data_dir, cell_id, "planner"))

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import zenoh
 
@@ -9,7 +10,7 @@ from fabric import schemas as s
 from fabric.errors import NotFound
 from fabric.jobs import Job, JobRunner
 from fabric.programs import content_id
-from fabric.config import add_cell_argument
+from fabric.config import add_cell_argument, service_data_dir
 from fabric.runtime import Service
 from fabric.robot.cell import Cell
 from fabric.slicing import Placement, available_backends, list_profiles, load_profile, slice_model
@@ -23,8 +24,8 @@ class SlicerService(Service):
     name = "slicer"
 
     def __init__(self, session: zenoh.Session, cell_id: str, plate_size_mm: tuple[float, float],
-                 build_height_mm: float) -> None:
-        super().__init__(session, cell_id)
+                 build_height_mm: float, data_dir: Path | None = None) -> None:
+        super().__init__(session, cell_id, data_dir)
         self.plate_size_mm, self.build_height_mm = plate_size_mm, build_height_mm
         self.jobs = JobRunner("slicer", self.publisher("progress", lossless=True))
         self.results: dict[str, s.SliceResult] = {}
@@ -77,4 +78,5 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def build(session: zenoh.Session, cell_id: str, options: argparse.Namespace) -> SlicerService:
     cell = Cell.load_or_builtin(options.cell_config)
     size = tuple(float(v) for v in cell.plate_size_mm[:2])
-    return SlicerService(session, cell_id, size, options.build_height)
+    return SlicerService(session, cell_id, size, options.build_height,
+                         service_data_dir(options.data_dir, cell_id, "slicer"))

@@ -8,14 +8,23 @@ Simulated time is exact whatever the stepping, because the twin's timeline is
 analytic. Every twin event is published on the lossless ``events`` topic and
 kept for the ``events`` query; pose, extrusion and temperatures are published
 at a fixed wall-clock rate (latest value wins); state on every change.
+
+The station is durable (:mod:`fabric.store.journal`): each tick's events and
+the simulated time reached are written before they are published, and the
+twin is checkpointed at a bounded cadence and after every command. A station
+killed mid-print comes back ``interrupted`` at the spot where it was lost,
+with its program, deposit record and event numbering; ``recover`` goes on.
+A tick that comes much later than due (the process was frozen or starved)
+never makes simulated time jump: the station interrupts a running print
+there and records a ``stall`` event.
 """
 from __future__ import annotations
 
 import argparse
-import collections
 import threading
 import time
 import traceback
+from pathlib import Path
 
 import numpy as np
 import zenoh
@@ -25,33 +34,35 @@ from fabric.client import Client
 from fabric.errors import CollisionError, FabricError, NotFound, StateError
 from fabric.programs import content_id, program_from_artifact
 from fabric.readiness import ReadyFacts, print_temp_c, ready_report
-from fabric.config import add_cell_argument
+from fabric.config import add_cell_argument, service_data_dir
 from fabric.runtime import Service
 from fabric.robot.cell import Cell
 from fabric.robot.frames import T_to_xyzrpy
 from fabric.sim.twin import Twin
+from fabric.store.journal import DEFAULT_CHECKPOINT_PERIOD_S, StationJournal, StationMeta
+from fabric.store.station import StationStore
 
 __all__ = ["StationService", "build", "add_arguments"]
 
 TICK_S = 0.02
 STATE_PERIOD_S = 0.5          # state also re-published at this period (progress)
-EVENT_HISTORY = 200_000
+STALL_S = 0.5                 # a tick this late means the process was frozen or starved
 
 
 class StationService(Service):
     name = "station"
 
-    def __init__(self, session: zenoh.Session, cell_id: str, cell: Cell, pose_hz: float = 50.0) -> None:
-        super().__init__(session, cell_id)
-        self.cell, self.twin = cell, Twin(cell)
+    def __init__(self, session: zenoh.Session, cell_id: str, cell: Cell, pose_hz: float = 50.0,
+                 data_dir: Path | None = None, checkpoint_s: float = DEFAULT_CHECKPOINT_PERIOD_S) -> None:
+        super().__init__(session, cell_id, data_dir)
+        self.cell = cell
         self.client = Client(session, cell_id)
         self.pose_period_s = 1.0 / pose_hz
         self.lock = threading.RLock()
-        self.rtf = 1.0
-        self.program_id = self.job_id = ""
-        self.layers_total = 0
+        self.meta = StationMeta()
         self.collision_report: s.CollisionReport | None = None
-        self.history: collections.deque[s.Event] = collections.deque(maxlen=EVENT_HISTORY)
+        self.journal = StationJournal(StationStore(self.data_dir / "station.sqlite"), self.artifacts, checkpoint_s)
+        self.twin, self._backlog = self._restore()
         self._seq_pose = 0
         self._last_state: tuple = ()
         self._last_state_s = 0.0
@@ -61,8 +72,14 @@ class StationService(Service):
         self.pub_state = self.publisher("state", lossless=True)
         self.pub_events = self.publisher("events", lossless=True)
         for command in ("position", "home", "load", "start", "pause", "resume", "stop", "collisions",
-                        "calibrate", "ready", "time", "state", "events", "overrides", "rtf", "mesh"):
+                        "calibrate", "ready", "time", "state", "events", "overrides", "rtf", "mesh", "recover"):
             self.handle(command, getattr(self, f"on_{command}"))
+
+    # The meta's fields, as the rest of this module reads them.
+    program_id = property(lambda self: self.meta.program_id)
+    job_id = property(lambda self: self.meta.job_id)
+    layers_total = property(lambda self: self.meta.layers_total)
+    rtf = property(lambda self: self.meta.rtf)
 
     def start(self) -> None:
         super().start()
@@ -72,6 +89,31 @@ class StationService(Service):
     def close(self) -> None:
         super().close()
         self._thread.join(timeout=2.0)
+        with self.lock:
+            self.journal.checkpoint(self.twin, self.meta, force=True)
+            self.journal.store.close()
+
+    def _restore(self) -> tuple[Twin, list]:
+        """The twin as the last run left it (interrupted if it was printing), or a fresh one."""
+        try:
+            restored = self.journal.restore(self.cell)
+        except FabricError as err:
+            self.log.error("could not restore the last checkpoint (%s: %s): starting with a faulted twin",
+                           err.code, err.message)
+            twin = Twin(self.cell)
+            twin.number_events_after(self.journal.last_seq())
+            twin.trip(f"could not restore the last run ({err.message}): the robot's pose is unknown")
+            return twin, []
+        if restored is None:
+            twin = Twin(self.cell)
+            twin.number_events_after(self.journal.last_seq())
+            return twin, []
+        self.meta = restored.meta
+        return restored.twin, restored.events
+
+    def _checkpoint(self) -> None:
+        """Save the twin now (after a command; the lock is held)."""
+        self.journal.checkpoint(self.twin, self.meta, force=True)
 
     # --- simulation clock ------------------------------------------------------
 
@@ -90,9 +132,13 @@ class StationService(Service):
         last = time.monotonic()
         next_pose = last
         chunk_s = 1.0
+        backlog, self._backlog = self._backlog, []
         while not self.closed.wait(timeout=max(0.0, min(TICK_S, next_pose - time.monotonic()))):
             now = time.monotonic()
             with self.lock:
+                if now - last > STALL_S:
+                    self._stalled(now - last)
+                    last = now
                 if self.rtf > 0 or self.twin.state != "printing":
                     events = self.twin.advance((now - last) * (self.rtf if self.rtf > 0 else 1.0))
                 else:  # as fast as possible: whole chunks until this tick's wall budget is spent
@@ -102,14 +148,18 @@ class StationService(Service):
                     spent = time.monotonic() - t0
                     chunk_s = float(np.clip(chunk_s * (TICK_S / max(spent, 1e-4)) ** 0.5, 0.05, 600.0))
                 last = now
-                msgs = [self._event_msg(ev) for ev in events]
+                msgs = [self._event_msg(ev) for ev in backlog + events]
+                backlog = []
                 state = self._state_msg()
                 pose = self._pose_msg() if now >= next_pose else None
                 ext = self._extrusion_msg() if pose else None
                 temps = self._temps_msg() if pose else None
+                self.journal.record_tick(msgs, self.twin.t_sim_s)       # written before it is published
+                key = (state.state, state.reason, state.program_id, state.layer, state.rtf, state.speed_r,
+                       state.flow_r)
+                self.journal.checkpoint(self.twin, self.meta, force=key[:3] != self._last_state[:3])
             for m in msgs:
                 self.pub_events.send(m)
-            key = (state.state, state.reason, state.program_id, state.layer, state.rtf, state.speed_r, state.flow_r)
             if key != self._last_state or now - self._last_state_s >= STATE_PERIOD_S:
                 self._last_state, self._last_state_s = key, now
                 self.pub_state.send(state)
@@ -121,11 +171,17 @@ class StationService(Service):
 
     # --- message builders (called with the lock held) ---------------------------
 
+    def _stalled(self, gap_s: float) -> None:
+        """The tick came ``gap_s`` late: simulated time does not jump; a running print is interrupted."""
+        why = f"the station stalled for {gap_s:.1f} s (process frozen or starved)"
+        self.log.warning("%s: simulated time held at %.3f s", why, self.twin.t_sim_s)
+        self.twin.note("stall", {"stalled_s": round(gap_s, 3), "state": self.twin.state})
+        if self.twin.state in ("printing", "paused"):
+            self.twin.interrupt(why + ": recover to go on")
+
     def _event_msg(self, ev) -> s.Event:
-        msg = s.Event(seq=ev.seq, t_sim_s=ev.t_sim_s, kind=ev.kind, row=ev.row, gcode_line=ev.gcode_line,
-                      layer=ev.layer, data=dict(ev.data))
-        self.history.append(msg)
-        return msg
+        return s.Event(seq=ev.seq, t_sim_s=ev.t_sim_s, kind=ev.kind, row=ev.row, gcode_line=ev.gcode_line,
+                       layer=ev.layer, data=dict(ev.data))
 
     def _pose_msg(self) -> s.Pose:
         p = self.twin.pose()
@@ -178,6 +234,7 @@ class StationService(Service):
             raise CollisionError(f"the move home would collide: {hit.body_a} <-> {hit.body_b}", **s.to_plain(hit))
         with self.lock:
             self.twin.go_home()
+            self._checkpoint()
             return self._ack("moving home (collision-checked)")
 
     def on_load(self, req: s.LoadRequest) -> s.TimeInfo:
@@ -187,31 +244,56 @@ class StationService(Service):
             if self.twin.state in ("printing", "paused"):
                 raise StateError(f"cannot load while {self.twin.state}", state=self.twin.state, command="load")
             self.twin.load(program)
-            self.program_id, self.job_id = req.program_id, req.job_id
-            self.layers_total = int(program.layer.max() + 1) if len(program) else 0
+            self.journal.keep_program(art)
+            self.meta.program_id, self.meta.job_id = req.program_id, req.job_id
+            self.meta.layers_total = int(program.layer.max() + 1) if len(program) else 0
             self.collision_report = None
+            self._checkpoint()
             return self._time_msg()
 
     def on_start(self, req: s.StartRequest) -> s.Ack:
         with self.lock:
-            self.rtf = req.rtf
             self.twin.start()
+            self.meta.rtf = req.rtf
+            self._checkpoint()
             return self._ack(f"printing at {'max speed' if req.rtf == 0 else f'{req.rtf:g}x real time'}")
 
     def on_pause(self, _: s.Empty) -> s.Ack:
         with self.lock:
             self.twin.pause()
+            self._checkpoint()
             return self._ack("paused: extruder off, retracted, lifted clear")
 
     def on_resume(self, req: s.StartRequest) -> s.Ack:
         with self.lock:
-            self.rtf = req.rtf
             self.twin.resume()
+            self.meta.rtf = req.rtf
+            self._checkpoint()
             return self._ack("resuming at the paused spot")
+
+    def on_recover(self, req: s.StartRequest) -> s.Ack:
+        with self.lock:
+            move = self.twin.recovery_move()
+            if move is None:
+                raise StateError(f"nothing to recover while {self.twin.state}", state=self.twin.state,
+                                 command="recover")
+        q_from, q_to = move
+        report = self.client.check(s.CollisionRequest(q_from_deg=np.degrees(q_from).tolist(),
+                                                      q_to_deg=np.degrees(q_to).tolist()))
+        hit = report.first_hit
+        if hit is not None:
+            raise CollisionError(f"the move back to the interrupted spot would collide: {hit.body_a} <-> "
+                                 f"{hit.body_b}", **s.to_plain(hit))
+        with self.lock:
+            self.twin.recover()
+            self.meta.rtf = req.rtf
+            self._checkpoint()
+            return self._ack("recovering: back to the interrupted spot (collision-checked), then going on")
 
     def on_stop(self, _: s.Empty) -> s.Ack:
         with self.lock:
             self.twin.stop()
+            self._checkpoint()
             return self._ack("stopped: extruder off, moved clear; deposit kept on record")
 
     def on_collisions(self, _: s.Empty) -> s.CollisionReport:
@@ -226,6 +308,7 @@ class StationService(Service):
             if self.twin.state in ("printing", "paused"):
                 raise StateError("cannot calibrate during a print", state=self.twin.state, command="calibrate")
             r = self.twin.calibrate()
+            self._checkpoint()
             wobj_xyz, wobj_rpy = T_to_xyzrpy(self.twin.work_object_T)
         return s.CalibrationReport(correction_xyz_mm=list(map(float, r.correction_xyz_mm)),
                                    correction_rpy_deg=list(map(float, r.correction_rpy_deg)),
@@ -269,20 +352,21 @@ class StationService(Service):
             return self._state_msg()
 
     def on_events(self, req: s.EventsQuery) -> s.EventList:
-        with self.lock:
-            evs = [e for e in self.history if e.seq >= req.since_seq][: req.limit]
-            nxt = (self.history[-1].seq + 1) if self.history else 0
+        evs = self.journal.store.events(since_seq=req.since_seq - 1, limit=req.limit)
+        nxt = evs[-1].seq + 1 if evs else max(req.since_seq, self.journal.last_seq() + 1)
         return s.EventList(events=evs, next_seq=nxt)
 
     def on_overrides(self, req: s.Overrides) -> s.StationState:
         with self.lock:
             self.twin.set_overrides(speed_r=req.speed_r, flow_r=req.flow_r, nozzle_c=req.nozzle_c, bed_c=req.bed_c)
+            self._checkpoint()
             return self._state_msg()
 
     def on_rtf(self, req: s.StartRequest) -> s.StationState:
         """Change how fast simulated time runs; the simulation itself is unchanged (time is exact)."""
         with self.lock:
-            self.rtf = req.rtf
+            self.meta.rtf = req.rtf
+            self._checkpoint()
             return self._state_msg()
 
     def on_mesh(self, req: s.MeshRequest) -> s.Artifact:
@@ -297,8 +381,12 @@ class StationService(Service):
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_cell_argument(parser)
     parser.add_argument("--pose-hz", type=float, default=50.0, help="wall-clock rate of pose telemetry")
+    parser.add_argument("--checkpoint-s", type=float, default=DEFAULT_CHECKPOINT_PERIOD_S,
+                        help="wall-clock period of the twin's checkpoints (also taken after every command)")
 
 
 def build(session: zenoh.Session, cell_id: str, options: argparse.Namespace) -> StationService:
     cell = Cell.load_or_builtin(options.cell_config)
-    return StationService(session, cell_id, cell, pose_hz=options.pose_hz)
+    return StationService(session, cell_id, cell, pose_hz=options.pose_hz,
+                          data_dir=service_data_dir(options.data_dir, cell_id, "station"),
+                          checkpoint_s=options.checkpoint_s)

@@ -13,10 +13,12 @@ import dataclasses
 import queue
 import threading
 import time
+from pathlib import Path
 
 import zenoh
 
 from fabric import schemas as s
+from fabric.config import service_data_dir
 from fabric.client import Client
 from fabric.errors import CollisionError, UnreachableError
 from fabric.jobs import Job, JobRunner
@@ -29,8 +31,8 @@ __all__ = ["SupervisorService", "build", "add_arguments"]
 class SupervisorService(Service):
     name = "supervisor"
 
-    def __init__(self, session: zenoh.Session, cell: str) -> None:
-        super().__init__(session, cell)
+    def __init__(self, session: zenoh.Session, cell: str, data_dir: Path | None = None) -> None:
+        super().__init__(session, cell, data_dir)
         self.client = Client(session, cell)
         self._alive: dict[str, float] = {}           # service -> since (wall time)
         self._alive_lock = threading.Lock()
@@ -140,4 +142,4 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def build(session: zenoh.Session, cell: str, options: argparse.Namespace) -> SupervisorService:
-    return SupervisorService(session, cell)
+    return SupervisorService(session, cell, service_data_dir(options.data_dir, cell, "supervisor"))

@@ -339,6 +339,15 @@ class Twin:
             return None
         return self.s.rest_q_rad.copy(), np.asarray(at.pose.q_rad, dtype=float).copy()
 
+    def note(self, kind: str, data: dict[str, Any] | None = None) -> None:
+        """Record an event of the cell around the twin (e.g. the station stalled) in the twin's event
+        sequence; it is reported by the next :meth:`advance`."""
+        self.runner.emit(self.s.pending, self.s.t_sim_s, kind, data)
+
+    def number_events_after(self, seq: int) -> None:
+        """Go on numbering events after ``seq`` (a fresh twin continuing a station's event log)."""
+        self.s.seq = max(self.s.seq, int(seq))
+
     def trip(self, reason: str) -> None:
         """Put the twin in ``fault`` now (e.g. a monitor saw something wrong): instant stop."""
         self._fault(reason, self.s.pending)

@@ -143,6 +143,11 @@ class ArtifactStore:
         """Ids pinned by any owner."""
         return {r[0] for r in self._db.execute("SELECT DISTINCT artifact_id FROM pins")}
 
+    def close(self) -> None:
+        """Close the index (the files stay)."""
+        with self._lock:
+            self._db.close()
+
     # Internals ------------------------------------------------------------------------------------
 
     def _path(self, artifact_id: str) -> Path:
