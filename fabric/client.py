@@ -63,15 +63,22 @@ class Subscription:
 class AliveSubscription:
     """Liveliness changes of the cell's services: ``get()`` returns ``(service, alive)``.
 
-    The Zenoh callback only parses the key (``keys.parse_alive``) and enqueues. Changes are hints;
-    the truth at any moment is :meth:`Client.alive` (a query)."""
+    The Zenoh callback only parses the key (``keys.parse_alive``) and enqueues, or hands the change
+    to ``on_change`` when one is given (it runs inside the Zenoh callback: it must not block, e.g.
+    post a message to a UI). Changes are hints; the truth at any moment is :meth:`Client.alive`."""
 
-    def __init__(self, session: zenoh.Session, key: str) -> None:
+    def __init__(self, session: zenoh.Session, key: str,
+                 on_change: Callable[[str, bool], None] | None = None) -> None:
         self._q: queue.Queue[tuple[str, bool]] = queue.Queue()
+        self._on_change = on_change
         self._sub = session.liveliness().declare_subscriber(key, self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
-        self._q.put((parse_alive(str(sample.key_expr))[1], sample.kind == zenoh.SampleKind.PUT))
+        change = (parse_alive(str(sample.key_expr))[1], sample.kind == zenoh.SampleKind.PUT)
+        if self._on_change is not None:
+            self._on_change(*change)
+        else:
+            self._q.put(change)
 
     def get(self, timeout: float | None = None) -> tuple[str, bool]:
         """The next change; ``queue.Empty`` after ``timeout``."""
@@ -132,9 +139,12 @@ class Client:
     def subscribe(self, service: str, topic: str) -> Subscription:
         return Subscription(self.session, self.keys.topic(service, topic), TOPICS[(service, topic)])
 
-    def subscribe_alive(self) -> AliveSubscription:
-        """Follow services appearing and vanishing (liveliness tokens); close it when done."""
-        return AliveSubscription(self.session, self.keys.alive_all())
+    def subscribe_alive(self, on_change: Callable[[str, bool], None] | None = None) -> AliveSubscription:
+        """Follow services appearing and vanishing (liveliness tokens); close it when done.
+
+        Without ``on_change`` read the changes with ``get()``; with it, each change calls
+        ``on_change(service, alive)`` from the Zenoh callback (which must not block)."""
+        return AliveSubscription(self.session, self.keys.alive_all(), on_change)
 
     def alive(self, timeout: float = 2.0) -> dict[str, bool]:
         """Which services hold a liveliness token now (answers without the supervisor).

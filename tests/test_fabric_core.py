@@ -173,6 +173,15 @@ def test_subscribe_alive_reports_services_coming_and_going(session, settings, cl
         assert changes.get(timeout=10.0) == ("slicer", False)
     finally:
         changes.close()
+    seen: queue.Queue[tuple[str, bool]] = queue.Queue()
+    pushed = client.subscribe_alive(lambda name, alive: seen.put((name, alive)))     # as the console does
+    try:
+        token = session.liveliness().declare_token(Keys(settings.cell).alive("collision"))
+        assert seen.get(timeout=10.0) == ("collision", True)
+        token.undeclare()
+        assert seen.get(timeout=10.0) == ("collision", False)
+    finally:
+        pushed.close()
 
 
 def test_cmd_all_matches_every_command_of_a_service_only():

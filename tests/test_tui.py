@@ -42,3 +42,20 @@ def test_console_shows_services_pose_and_runs_commands(running_cell):
                 await pilot.click("#cmd-pause")            # nothing is printing: a clear, typed refusal
                 await until(pilot, lambda: "pause failed [state]" in log_text(app))
     asyncio.run(scenario())
+
+
+def test_console_follows_services_coming_and_going(hub, session, settings):
+    """Liveliness changes reach the services panel through the client's subscription (no polling)."""
+    from fabric.keys import Keys
+
+    async def scenario() -> None:
+        with Client.connect(replace(settings, mode="client")) as client:
+            app = FabricConsole(client)
+            async with app.run_test(size=(120, 40)) as pilot:
+                panel = app.query_one(ServicesPanel)
+                await until(pilot, lambda: panel.alive.get("planner") is False)     # the first query: nobody
+                token = session.liveliness().declare_token(Keys(settings.cell).alive("planner"))
+                await until(pilot, lambda: panel.alive.get("planner") is True)
+                token.undeclare()
+                await until(pilot, lambda: panel.alive.get("planner") is False)
+    asyncio.run(scenario())

@@ -87,8 +87,9 @@ class FabricConsole(App):
         for topic in TOPICS:
             self._subs.append(self.client.subscribe("station", topic))
             self.feed(topic, self._subs[-1])
-        self._alive_sub = self.client.subscribe_alive()
-        self.feed_alive(self._alive_sub)
+        # liveliness changes are posted straight from the Zenoh callback (non-blocking): no worker thread
+        # is held for them (thread workers share a small pool with the feeds and the commands)
+        self._alive_sub = self.client.subscribe_alive(lambda name, alive: self.post_message(Liveliness({name: alive})))
         self.refresh_alive()
 
     def on_unmount(self) -> None:
@@ -115,15 +116,6 @@ class FabricConsole(App):
                     continue
                 self._last_ui[topic] = now
             self.post_message(Telemetry(topic, msg))
-
-    @work(thread=True, group="feeds")
-    def feed_alive(self, sub: AliveSubscription) -> None:
-        while self.is_running:
-            try:
-                name, alive = sub.get(timeout=0.5)
-            except queue.Empty:
-                continue
-            self.post_message(Liveliness({name: alive}))
 
     @work(thread=True, group="alive")
     def refresh_alive(self) -> None:
