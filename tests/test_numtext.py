@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fabric.planning.post.numtext import FixedColumn, format_rows
+from fabric.planning.post.numtext import ChoiceColumn, FixedColumn, format_rows, trimmed_text
 
 _EDGES = [0.0, -0.0, -1e-9, 1e-9, 0.5, 1.5, 2.5, -2.5, 0.125, -0.125, 0.0005, 1.00005, 1e20, -1e20, np.nan, np.inf,
           -np.inf, 123456789.123456, 9.99995, 99999.99995]
@@ -28,3 +28,20 @@ def test_integer_and_constant_columns_and_separator() -> None:
 def test_bad_decimals_refused() -> None:
     with pytest.raises(ValueError):
         FixedColumn(np.zeros(3), 13)
+
+
+@pytest.mark.parametrize("decimals", [1, 2, 3, 6])
+def test_trimmed_same_text_as_rapid_numbers(decimals: int) -> None:
+    rng = np.random.default_rng(10 + decimals)
+    values = np.concatenate([rng.normal(0, 300, 20_000), np.round(rng.normal(0, 50, 20_000), 1),
+                             np.round(rng.uniform(-1, 1, 20_000), decimals) + 0.5 * 10.0 ** -decimals,
+                             -np.abs(rng.uniform(0, 0.4, 100)) * 10.0 ** -decimals, _EDGES])
+    got = format_rows([FixedColumn(values, decimals, trim=True)]).decode()
+    assert got == "".join(trimmed_text(v, decimals) + "\n" for v in values.tolist())
+    assert trimmed_text(-0.0001, 3) == "0" and trimmed_text(100.0, 3) == "100" and trimmed_text(0.25, 3) == "0.25"
+
+
+def test_choice_column_writes_the_chosen_text() -> None:
+    text = format_rows([ChoiceColumn(np.array([1, 0, 2, 1]), [b"a", b"bcd", b""]), FixedColumn(np.arange(4), 0)],
+                       sep=b"|").decode()
+    assert text == "bcd|0\na|1\n|2\nbcd|3\n"

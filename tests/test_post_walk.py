@@ -7,7 +7,7 @@ import pytest
 from fabric.errors import ValidationError
 from fabric.motion.program import BED, MOVEJ, MOVEL, NOZZLE, PRINT, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
 from fabric.planning.post.walk import (BED_HEATER, NOZZLE_HEATER, Block, ExtruderOff, ExtruderOn, ExtruderRate,
-                                       JointMove, LayerStart, LinearMove, Retract, RowWalker, SetTemp, Wait,
+                                       JointMove, LayerStart, LinearMove, LinearRun, Retract, RowWalker, SetTemp, Wait,
                                        WaitTemp)
 
 
@@ -75,3 +75,28 @@ def test_walk_covers_every_motion_row_of_a_plan() -> None:
     p = _program([(MOVEJ if k in (0, 9) else MOVEL, 0.1 * (k % 2), 10, 0, 0, 0) for k in range(10)])
     moves = [ev.row for ev in _events(p, block_rows=4) if isinstance(ev, (JointMove, LinearMove))]
     assert moves == list(np.flatnonzero(p.op <= MOVEL))
+
+
+def test_runs_are_the_plain_linear_moves() -> None:
+    # runs=True yields LinearRun for stretches of moves that switch nothing; expanded, the events are the same
+    rng = np.random.default_rng(3)
+    n = 5000
+    ops = np.where(rng.random(n) < 0.003, MOVEJ, MOVEL)
+    ops[rng.random(n) < 0.002] = WAIT
+    flow = np.repeat(rng.choice([0.0, 0.1, 0.12], n // 50), 50) * (rng.random(n) > 0.002)
+    speed = np.repeat(rng.choice([10.0, 20.0], n // 100), 100)
+    layer = np.repeat(np.arange(n // 700 + 1), 700)[:n]
+    p = _program([(int(o), float(f), float(v), 0.5, 0, int(k)) for o, f, v, k in zip(ops, flow, speed, layer)])
+    p.section[:300] = 0
+    with_runs, reference = RowWalker(p, block_rows=1000, runs=True), RowWalker(p, block_rows=1000)
+    expanded, expected, runs = [], [], 0
+    for lo, hi in ((0, 1200), (1200, n)):          # two ranges: state carries over, a range starts afresh
+        for ev in with_runs.walk(lo, hi):
+            if isinstance(ev, LinearRun):
+                runs += 1
+                expanded += [LinearMove(i, None) for i in range(ev.start, ev.stop)]
+            elif not isinstance(ev, Block):
+                expanded.append(ev)
+        expected += [ev for ev in reference.walk(lo, hi) if not isinstance(ev, Block)]
+    assert expanded == expected
+    assert runs > 20

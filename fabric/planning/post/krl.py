@@ -22,8 +22,9 @@ import numpy as np
 
 from fabric.errors import ValidationError
 from fabric.planning.post.common import check_program, extrusion_rate, quat_to_zyx_deg, write_lines, R_to_zyx_deg
+from fabric.planning.post.numtext import ChoiceColumn, Column, FixedColumn, format_rows
 from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LinearMove,
-                                       Retract, RowWalker, SetTemp, Wait, WaitTemp, heater_index)
+                                       LinearRun, Retract, RowWalker, SetTemp, Wait, WaitTemp, heater_index)
 from fabric.motion.program import MOVEL, Program
 
 __all__ = ["write_krl"]
@@ -62,11 +63,14 @@ def write_krl(program: Program, src: TextIO, dat: TextIO | None, *, name: str = 
                       "  $ACC.CP=2.0", "  $ORI_TYPE=#VAR"])
     fmt = _Formatter(program, flow_max)
     lines: list[str] = []
-    for ev in RowWalker(program).walk():
-        if isinstance(ev, Block):
+    for ev in RowWalker(program, runs=True).walk():
+        if isinstance(ev, (Block, LinearRun)):
             write_lines(src, lines)
             lines = []
-        fmt.event(ev, lines)
+        if isinstance(ev, LinearRun):
+            fmt.run(ev, src)
+        else:
+            fmt.event(ev, lines)
     write_lines(src, lines)
     write_lines(src, ["  $OUT[1]=FALSE", "  $ANOUT[1]=0.0", "END"])
     return int((program.op <= MOVEL).sum())
@@ -108,6 +112,31 @@ class _Formatter:
             lines.append(f"  WAIT FOR $IN[{1 + heater_index(ev.heater)}]")
         elif isinstance(ev, Retract):
             lines += [f"  $ANOUT[4]={ev.length_mm / 10.0:.5f}", "  PULSE($OUT[2],TRUE,0.1)"]
+
+    def run(self, run: LinearRun, out: TextIO) -> None:
+        """A run of plain linear moves: where the speed or zone changes a row goes through :meth:`_linear`
+        (which writes ``$VEL.CP`` / ``$APO.CDIS`` and keeps them), the rows between as columns."""
+        p = self.p
+        speed, zone = p.speed_mm_s[run.start:run.stop], p.zone_mm[run.start:run.stop]
+        changes = np.flatnonzero((speed[1:] != speed[:-1]) | (zone[1:] != zone[:-1])) + 1
+        cuts = [0, *changes.tolist(), run.stop - run.start]
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            lines: list[str] = []
+            self._linear(LinearMove(run.start + a), lines)
+            write_lines(out, lines)
+            if b > a + 1:
+                out.write(self._lin_rows(run.start + a + 1, run.start + b).decode("ascii"))
+
+    def _lin_rows(self, start: int, stop: int) -> bytes:
+        """``LIN`` lines of rows ``[start, stop)`` as columns (the same text as :meth:`_linear` writes)."""
+        p, rows, k = self.p, slice(start, stop), slice(start - self.base, stop - self.base)
+        xyz, abc = p.xyz_mm[rows], self.abc[k]
+        columns: list[Column] = [b"  LIN {X ", FixedColumn(xyz[:, 0], 3), b",Y ", FixedColumn(xyz[:, 1], 3),
+                                 b",Z ", FixedColumn(xyz[:, 2], 3), b",A ", FixedColumn(abc[:, 0], 4),
+                                 b",B ", FixedColumn(abc[:, 1], 4), b",C ", FixedColumn(abc[:, 2], 4), b"}",
+                                 ChoiceColumn(p.zone_mm[rows] > 0, [b"", b" C_DIS"]), b" ; ",
+                                 FixedColumn(p.gcode_line[rows], 0)]
+        return format_rows(columns, sep=b"")
 
     def _linear(self, ev: LinearMove, lines: list[str]) -> None:
         p, i, k = self.p, ev.row, ev.row - self.base

@@ -12,12 +12,18 @@ double can only disagree when the scaled value lies within its own rounding
 error of a half (a tie, or nearly). Those few values (and non-finite or huge
 ones) are formatted by Python itself and written into their cells, so the
 output is always the same characters as ``"%.<d>f" % v``.
+
+Trimmed columns (RAPID's numbers) drop the trailing zeros of the fraction, and
+the point when nothing is left after it, and write a value that rounds to
+zero without its sign: while the fractional digits are peeled off from the
+last one, a digit is blanked as long as every digit after it was a zero.
+A :class:`ChoiceColumn` writes one of a few fixed texts per row (names).
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["format_rows", "FixedColumn"]
+__all__ = ["format_rows", "FixedColumn", "ChoiceColumn", "Column", "trimmed_text"]
 
 _ZERO, _DOT, _MINUS = ord("0"), ord("."), ord("-")
 _MAX_SCALED = 1e15          # beyond this the int64 digits path is not trusted: Python formats the value
@@ -26,13 +32,42 @@ _POW10 = 10 ** np.arange(1, 19, dtype=np.int64)
 
 
 class FixedColumn:
-    """One column: values and their decimals (``0``: an integer column, written like ``%d``)."""
+    """One column: values and their decimals (``0``: an integer column, written like ``%d``).
 
-    def __init__(self, values: np.ndarray, decimals: int) -> None:
+    ``trim``: written as :func:`trimmed_text` does (trailing zeros of the
+    fraction dropped, no ``-0``); only for columns with decimals.
+    """
+
+    def __init__(self, values: np.ndarray, decimals: int, trim: bool = False) -> None:
         if not 0 <= decimals <= 12:
             raise ValueError(f"decimals must be in 0..12, got {decimals}")
+        if trim and decimals == 0:
+            raise ValueError("a trimmed column needs decimals")
         self.values = np.asarray(values)
         self.decimals = decimals
+        self.trim = trim
+
+    def __len__(self) -> int:
+        return len(self.values)
+
+
+class ChoiceColumn:
+    """One column of fixed texts: row ``i`` writes ``texts[index[i]]`` (texts without zero bytes)."""
+
+    def __init__(self, index: np.ndarray, texts: list[bytes]) -> None:
+        if any(b"\0" in t for t in texts):
+            raise ValueError("choice texts cannot hold zero bytes")
+        self.index = np.asarray(index, dtype=np.intp)
+        self.texts = texts
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+
+def trimmed_text(v: float, decimals: int) -> str:
+    """``"%.<d>f" % v`` without the trailing zeros of the fraction (nor a bare point); ``-0`` is ``0``."""
+    text = f"{v:.{decimals}f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
 
 
 def _digits_count(iv: np.ndarray) -> np.ndarray:
@@ -52,8 +87,8 @@ def _divmod(x: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     return q, x - q * k
 
 
-def _python_text(v: float, decimals: int) -> bytes:
-    return (f"%.{decimals}f" % v).encode("ascii")
+def _python_text(v: float, decimals: int, trim: bool) -> bytes:
+    return (trimmed_text(v, decimals) if trim else f"%.{decimals}f" % v).encode("ascii")
 
 
 def _cells(col: FixedColumn) -> np.ndarray:
@@ -81,18 +116,24 @@ def _cells(col: FixedColumn) -> np.ndarray:
     ip, fp = _divmod(iv, 10 ** d) if d else (iv, None)
     n_int = _digits_count(ip)
     slow_rows = np.flatnonzero(slow)
-    slow_text = [_python_text(float(v[i]), d) for i in slow_rows]
+    slow_text = [_python_text(float(v[i]), d, col.trim) for i in slow_rows]
     width = max(int(n_int.max(initial=1)) + 1 + (d + 1 if d else 0), max(map(len, slow_text), default=0))
     # built transposed: one contiguous row of bytes per character position
     cells = np.zeros((width, n), dtype=np.uint8)
     pos = width - 1
+    trailing = np.ones(n, dtype=bool) if col.trim else None     # every fractional digit so far was a zero
     for _ in range(d):                              # fractional digits, then the point
         fp, digit = _divmod(fp, 10)
         cells[pos] = digit
         cells[pos] += _ZERO
+        if trailing is not None:
+            trailing &= digit == 0
+            cells[pos] *= ~trailing
         pos -= 1
     if d:
         cells[pos] = _DOT
+        if trailing is not None:
+            cells[pos] *= ~trailing
         pos -= 1
     rest = ip                                       # integer digits (as many as each value has)
     for j in range(int(n_int.max(initial=1))):
@@ -101,7 +142,7 @@ def _cells(col: FixedColumn) -> np.ndarray:
         cells[pos - j] += _ZERO
         if j:
             cells[pos - j] *= n_int > j
-    rows = np.flatnonzero(neg)
+    rows = np.flatnonzero(neg & (iv != 0) if col.trim else neg)
     cells[pos - n_int[rows], rows] = _MINUS         # the sign
     for i, text in zip(slow_rows, slow_text):       # the values Python formats
         cells[:, i] = 0
@@ -109,17 +150,34 @@ def _cells(col: FixedColumn) -> np.ndarray:
     return cells
 
 
-def format_rows(columns: list[FixedColumn | bytes], sep: bytes = b",") -> bytes:
+def _choice_cells(col: ChoiceColumn) -> np.ndarray:
+    """(width, n) uint8: the chosen text of every row, zero bytes after it."""
+    width = max(map(len, col.texts), default=0)
+    table = np.zeros((width, len(col.texts)), dtype=np.uint8)
+    for k, text in enumerate(col.texts):
+        table[:len(text), k] = np.frombuffer(text, dtype=np.uint8)
+    return table[:, col.index]
+
+
+Column = FixedColumn | ChoiceColumn | bytes
+
+
+def format_rows(columns: list[Column], sep: bytes = b",") -> bytes:
     """Text of rows: the columns in order, ``sep`` between them, ``\\n`` after each row.
 
     A ``bytes`` column is a constant written on every row (e.g. ``b""`` for an empty field).
     """
-    n = next(len(c.values) for c in columns if isinstance(c, FixedColumn))
+    n = next(len(c) for c in columns if not isinstance(c, bytes))
     parts: list[np.ndarray] = []
     for k, col in enumerate(columns):
-        if k:
+        if k and sep:
             parts.append(_constant(sep, n))
-        parts.append(_cells(col) if isinstance(col, FixedColumn) else _constant(col, n))
+        if isinstance(col, FixedColumn):
+            parts.append(_cells(col))
+        elif isinstance(col, ChoiceColumn):
+            parts.append(_choice_cells(col))
+        else:
+            parts.append(_constant(col, n))
     parts.append(_constant(b"\n", n))
     flat = np.concatenate(parts, axis=0).T.ravel()       # row after row
     return flat[flat != 0].tobytes()

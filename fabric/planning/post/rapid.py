@@ -36,8 +36,9 @@ import numpy as np
 
 from fabric.errors import ValidationError
 from fabric.planning.post.common import check_program, write_lines
+from fabric.planning.post.numtext import ChoiceColumn, Column, FixedColumn, format_rows, trimmed_text
 from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LayerStart,
-                                       LinearMove, Retract, RowWalker, SetTemp, Wait, WaitTemp)
+                                       LinearMove, LinearRun, Retract, RowWalker, SetTemp, Wait, WaitTemp)
 from fabric.robot.frames import quat_from_R
 from fabric.motion.program import MOVEJ, MOVEL, Program
 
@@ -81,8 +82,7 @@ class RapidExport:
 
 
 def _num(v: float, nd: int = 3) -> str:
-    s = f"{v:.{nd}f}".rstrip("0").rstrip(".")
-    return "0" if s in ("-0", "") else s
+    return trimmed_text(v, nd)
 
 
 def _pose(xyz: np.ndarray, q: np.ndarray) -> str:
@@ -201,19 +201,38 @@ class _Emitter:
 
     def __init__(self, program: Program, opt: RapidOptions, names: _Names, speeds: np.ndarray) -> None:
         self.p, self.opt, self.names, self.speeds = program, opt, names, speeds
-        self.walker = RowWalker(program)
+        self.walker = RowWalker(program, runs=True)
         self.tw = f"{opt.tool_name}\\WObj:={opt.wobj_name};"
 
     def rows(self, out: TextIO, start: int, stop: int) -> None:
         lines: list[str] = []
         for ev in self.walker.walk(start, stop):
-            if isinstance(ev, Block):
+            if isinstance(ev, (Block, LinearRun)):
                 write_lines(out, lines)
                 lines = []
+            if isinstance(ev, Block):
                 self._block(ev)
+            elif isinstance(ev, LinearRun):
+                out.write(self._run(ev).decode("ascii"))
             else:
                 self._format(ev, lines)
         write_lines(out, lines)
+
+    def _run(self, run: LinearRun) -> bytes:
+        """The ``MoveL`` lines of a run of plain linear moves, formatted as columns (same text as ``_format``)."""
+        p, rows = self.p, slice(run.start, run.stop)
+        k = slice(run.start - self.base, run.stop - self.base)
+        xyz, quat, cf, cfx = p.xyz_mm[rows], p.quat_wxyz[rows], self.cf[k], self.cfx[k]
+        columns: list[Column] = [b"    MoveL [["]
+        columns += _joined([FixedColumn(xyz[:, j], 3, trim=True) for j in range(3)])
+        columns.append(b"],[")
+        columns += _joined([FixedColumn(quat[:, j], 6, trim=True) for j in range(4)])
+        columns.append(b"],[")
+        columns += _joined([FixedColumn(cf[:, j], 0) for j in range(3)] + [FixedColumn(cfx, 0)])
+        columns += [f"],{_E9}], ".encode(), _choices(self.speeds[rows], self.names.speed), b", ",
+                    _choices(p.zone_mm[rows], self.names.zone), f", {self.tw}  ! ".encode(),
+                    FixedColumn(p.gcode_line[rows], 0)]
+        return format_rows(columns, sep=b"")
 
     def _block(self, block: Block) -> None:
         # joints in degrees and the confdata quadrants of the block's rows
@@ -255,3 +274,17 @@ class _Emitter:
             lines.append(f"    WaitDI di{ev.heater.capitalize()}AtTemp, 1;")
         elif isinstance(ev, Retract):
             lines.append(f"    Retract {_num(ev.length_mm)};")
+
+
+def _joined(columns: list[FixedColumn]) -> list[Column]:
+    """The columns with a comma between each two."""
+    out: list[Column] = []
+    for k, col in enumerate(columns):
+        out += [b",", col] if k else [col]
+    return out
+
+
+def _choices(values: np.ndarray, name_of: Callable[[float], str]) -> ChoiceColumn:
+    """A column of names (speeddata / zonedata) of per-row values, each distinct value named once."""
+    distinct, index = np.unique(values, return_inverse=True)
+    return ChoiceColumn(index, [name_of(v).encode() for v in distinct])

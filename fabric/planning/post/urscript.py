@@ -21,8 +21,9 @@ import numpy as np
 
 from fabric.errors import ValidationError
 from fabric.planning.post.common import check_program, extrusion_rate, quat_to_rotvec, write_lines
+from fabric.planning.post.numtext import Column, FixedColumn, format_rows
 from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LinearMove,
-                                       Retract, RowWalker, SetTemp, Wait, WaitTemp, heater_index)
+                                       LinearRun, Retract, RowWalker, SetTemp, Wait, WaitTemp, heater_index)
 from fabric.robot.frames import quat_from_R
 from fabric.motion.program import MOVEL, Program
 
@@ -53,11 +54,14 @@ def write_urscript(program: Program, out: TextIO, *, name: str = "am_print", too
                       "  set_digital_out(0, False)", "  set_analog_out(0, 0.0)"])
     fmt = _Formatter(program, flow_max, joint_speed_rad_s, accel_m_s2)
     lines: list[str] = []
-    for ev in RowWalker(program).walk():
-        if isinstance(ev, Block):
+    for ev in RowWalker(program, runs=True).walk():
+        if isinstance(ev, (Block, LinearRun)):
             write_lines(out, lines)
             lines = []
-        fmt.event(ev, lines)
+        if isinstance(ev, LinearRun):
+            out.write(fmt.run(ev).decode("ascii"))
+        else:
+            fmt.event(ev, lines)
     write_lines(out, lines)
     write_lines(out, ["  set_digital_out(0, False)", "  set_analog_out(0, 0.0)", "end", f"{name}()"])
     return int((program.op <= MOVEL).sum())
@@ -94,6 +98,17 @@ class _Formatter:
         elif isinstance(ev, Retract):
             lines += [f"  set_analog_out(3, {ev.length_mm / 10.0:.5f})",
                       "  set_digital_out(1, True)", "  sleep(0.1)", "  set_digital_out(1, False)"]
+
+    def run(self, run: LinearRun) -> bytes:
+        """The ``movel`` lines of a run of plain linear moves as columns (the same text as :meth:`_linear`)."""
+        p, rows, k = self.p, slice(run.start, run.stop), slice(run.start - self.base, run.stop - self.base)
+        xyz_m, rotvec = p.xyz_mm[rows] / 1000.0, self.rotvec[k]
+        columns: list[Column] = [b"  movel(pose_trans(plate, p["]
+        for j, col in enumerate([*xyz_m.T, *rotvec.T]):
+            columns += [b",", FixedColumn(col, 6)] if j else [FixedColumn(col, 6)]
+        columns += [f"]), a={self.accel_m_s2:.3f}, v=".encode(), FixedColumn(p.speed_mm_s[rows] / 1000.0, 5),
+                    b", r=", FixedColumn(p.zone_mm[rows] / 1000.0, 5), b")  # ", FixedColumn(p.gcode_line[rows], 0)]
+        return format_rows(columns, sep=b"")
 
     def _linear(self, ev: LinearMove, lines: list[str]) -> None:
         p, i = self.p, ev.row

@@ -9,7 +9,18 @@ range and yields, in order:
   and write its lines out block by block (memory stays flat);
 - :class:`LayerStart` when a print row starts a new layer;
 - :class:`JointMove` and :class:`LinearMove` for the motion rows;
-- :class:`Wait`, :class:`SetTemp`, :class:`WaitTemp` and :class:`Retract` for the others.
+- :class:`Wait`, :class:`SetTemp`, :class:`WaitTemp` and :class:`Retract` for the others;
+- with ``runs=True``, :class:`LinearRun` for a run of consecutive linear moves
+  that change nothing (no extruder switch, no new layer), which a dialect
+  formats at once as columns of numbers (``numtext.py``) instead of row by row.
+
+Runs. A linear move right after another linear move of the same walk finds
+the extruder as that move left it: on at its rate if the rate was positive,
+off otherwise. So when both program exactly the same rate it switches
+nothing (compared rounded to 1e-3 mm^3/s as the switch does, see
+:func:`rounded_rates`), and when it is outside the print, or in the same layer as the row
+before, it starts no layer: such a row is *plain*. Plain rows leave every
+state as they found it; the walker finds them for a whole block at once.
 
 The extruder. A linear move whose programmed volumetric rate (flow per mm
 x speed, rounded to 1e-3 mm^3/s) is positive switches the extruder on, or
@@ -26,13 +37,16 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+import numpy as np
+
 from fabric.errors import ValidationError
 from fabric.planning.post.common import BLOCK_ROWS, extrusion_rate, row_blocks
 from fabric.motion.program import BED, MOVEJ, MOVEL, PRINT, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
 
-__all__ = ["RowWalker", "Event", "Block", "LayerStart", "JointMove", "LinearMove", "ExtruderOn", "ExtruderRate",
+__all__ = ["RowWalker", "Event", "Block", "LayerStart", "JointMove", "LinearMove", "LinearRun", "ExtruderOn",
+           "ExtruderRate",
            "ExtruderOff", "Wait", "SetTemp", "WaitTemp", "Retract", "NOZZLE_HEATER", "BED_HEATER",
-           "heater_index"]
+           "heater_index", "rounded_rates"]
 
 NOZZLE_HEATER, BED_HEATER = "nozzle", "bed"
 
@@ -87,6 +101,14 @@ class LinearMove:
 
 
 @dataclass(frozen=True, slots=True)
+class LinearRun:
+    """Linear moves to the targets of rows ``[start, stop)``, none switching the extruder or starting a layer."""
+
+    start: int
+    stop: int
+
+
+@dataclass(frozen=True, slots=True)
 class Wait:
     """Dwell for ``duration_s``."""
 
@@ -120,9 +142,11 @@ class Retract:
     length_mm: float
 
 
-Event = (Block | LayerStart | JointMove | LinearMove | ExtruderOff | Wait | SetTemp | WaitTemp | Retract)
+Event = (Block | LayerStart | JointMove | LinearMove | LinearRun | ExtruderOff | Wait | SetTemp | WaitTemp
+         | Retract)
 
 _OFF = ExtruderOff()
+MIN_RUN_ROWS = 16       # shorter runs of plain rows go as single moves (a run costs a few column operations)
 
 
 class RowWalker:
@@ -132,10 +156,12 @@ class RowWalker:
     each from an extruder known to be off: :meth:`extruder_reset` says so.
     """
 
-    def __init__(self, program: Program, block_rows: int = BLOCK_ROWS) -> None:
+    def __init__(self, program: Program, block_rows: int = BLOCK_ROWS, runs: bool = False) -> None:
         self.program = program
         self.block_rows = block_rows
+        self.runs = runs
         self.rate_mm3_s = extrusion_rate(program)
+        self.rounded_rate_mm3_s = rounded_rates(self.rate_mm3_s) if runs else None
         self.extruding = False
         self.current_rate_mm3_s = -1.0
         self.layer = -2
@@ -150,21 +176,50 @@ class RowWalker:
         stop = len(p) if stop is None else stop
         for a, b in row_blocks(start, stop, self.block_rows):
             yield Block(a, b)
-            ops = p.op[a:b].tolist()
-            layers = p.layer[a:b].tolist()
-            in_print = (p.section[a:b] == PRINT).tolist()
-            for k, op in enumerate(ops):
-                i = a + k
-                if in_print[k] and layers[k] != self.layer:
-                    self.layer = layers[k]
-                    yield LayerStart(self.layer)
-                if op == MOVEL:
-                    yield LinearMove(i, self._switch(i))
-                elif op == MOVEJ:
-                    yield from self._off()
-                    yield JointMove(i)
-                else:
-                    yield from self._other(op, i)
+            if not self.runs:
+                yield from self._rows(a, b)
+                continue
+            first = a
+            for run_start, run_stop in self._plain_runs(a, b, start):
+                yield from self._rows(first, run_start)
+                yield LinearRun(run_start, run_stop)
+                first = run_stop
+            yield from self._rows(first, b)
+
+    def _rows(self, a: int, b: int) -> Iterator[Event]:
+        # rows [a, b) one by one, through the state machine
+        p = self.program
+        ops = p.op[a:b].tolist()
+        layers = p.layer[a:b].tolist()
+        in_print = (p.section[a:b] == PRINT).tolist()
+        for k, op in enumerate(ops):
+            i = a + k
+            if in_print[k] and layers[k] != self.layer:
+                self.layer = layers[k]
+                yield LayerStart(self.layer)
+            if op == MOVEL:
+                yield LinearMove(i, self._switch(i))
+            elif op == MOVEJ:
+                yield from self._off()
+                yield JointMove(i)
+            else:
+                yield from self._other(op, i)
+
+    def _plain_runs(self, a: int, b: int, walk_start: int) -> list[tuple[int, int]]:
+        """``[start, stop)`` of the runs of at least ``MIN_RUN_ROWS`` plain rows in ``[a, b)`` (module docstring)."""
+        p = self.program
+        lo = max(a, walk_start + 1)                 # a plain row follows a row of this walk
+        if b - lo < MIN_RUN_ROWS:
+            return []
+        prev, cur = slice(lo - 1, b - 1), slice(lo, b)
+        in_print = p.section[lo - 1:b] == PRINT
+        plain = ((p.op[cur] == MOVEL) & (p.op[prev] == MOVEL)
+                 & (self.rounded_rate_mm3_s[cur] == self.rounded_rate_mm3_s[prev])
+                 & (~in_print[1:] | (in_print[:-1] & (p.layer[cur] == p.layer[prev]))))
+        edges = np.diff(plain.astype(np.int8), prepend=np.int8(0), append=np.int8(0))
+        starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        keep = stops - starts >= MIN_RUN_ROWS
+        return [(lo + int(s0), lo + int(s1)) for s0, s1 in zip(starts[keep], stops[keep])]
 
     def _switch(self, i: int) -> ExtruderOn | ExtruderRate | ExtruderOff | None:
         # the rate a linear move programs, against what the extruder does now
@@ -209,3 +264,20 @@ class RowWalker:
 def heater_index(heater: str) -> int:
     """0 for the nozzle, 1 for the bed (the signal numbering the dialects share)."""
     return 1 if heater == BED_HEATER else 0
+
+
+def rounded_rates(rate_mm3_s: np.ndarray) -> np.ndarray:
+    """``round(rate, 3)`` of every rate, the same doubles as Python's ``round`` (what the switch compares).
+
+    ``np.round`` scales by 1000 and rounds to an integer: it can only disagree
+    with Python's correctly rounded ``round`` when the scaled value is within
+    its rounding error of a half; those few rates are rounded by Python.
+    """
+    rate = np.asarray(rate_mm3_s, dtype=np.float64)
+    rounded = np.round(rate, 3)
+    scaled = rate * 1000.0
+    with np.errstate(invalid="ignore"):
+        near_half = ~(np.abs(np.abs(scaled - np.floor(scaled)) - 0.5) > 1e-6 * np.maximum(np.abs(scaled), 1.0))
+    for i in np.flatnonzero(near_half):
+        rounded[i] = round(float(rate[i]), 3)
+    return rounded
