@@ -189,3 +189,29 @@ def test_cmd_all_matches_every_command_of_a_service_only():
     pattern = zenoh.KeyExpr(keys.cmd_all("planner"))
     for service, command in ENDPOINTS:
         assert pattern.intersects(zenoh.KeyExpr(keys.cmd(service, command))) == (service == "planner")
+
+
+def test_a_failed_job_carries_a_typed_error_the_client_raises_again():
+    from fabric.errors import UnreachableError, error_from_code
+    from fabric.jobs import JobRunner
+
+    def fail(job):
+        raise UnreachableError("G-code line 6 is out of reach", reason="out of reach", gcode_line=6, row=3)
+
+    def bug(job):
+        raise KeyError("oops")
+
+    runner = JobRunner("test", None)
+    try:
+        bad, broken = runner.submit("plan", fail), runner.submit("plan", bug)
+        runner.close()                                       # the worker finishes the queue, then stops
+        assert bad.state == "failed" and isinstance(bad.error, s.ErrorReply)
+        assert bad.error.code == "unreachable" and bad.error.details == {"reason": "out of reach",
+                                                                          "gcode_line": 6, "row": 3}
+        back = codec.decode(codec.encode(bad), s.JobStatus)
+        assert back.error == bad.error
+        again = error_from_code(back.error.code, back.error.message, back.error.details)   # as Client.wait_job does
+        assert isinstance(again, UnreachableError) and again.details["reason"] == "out of reach"
+        assert broken.state == "failed" and broken.error.code == "internal" and "KeyError" in broken.message
+    finally:
+        runner.close()
