@@ -4,11 +4,20 @@ Results are content-addressed: the program is stored as an artifact whose id
 is the sha256 of its encoded bytes, served at ``planner/artifact/<id>`` so
 that the station and the collision checker fetch it over the fabric (no
 shared filesystem between hosts).
+
+The last few plans stay in memory (program and CSV times), so an export starts
+formatting at once, without reading the artifact back and decoding it. The
+artifact is written to the durable store by a background thread once its id
+is known (the job ends with that id); until it is on disk it is served from
+memory, and closing the service waits for the writes still under way.
 """
 from __future__ import annotations
 
 import argparse
 import io
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, TextIO
 
@@ -24,6 +33,7 @@ from fabric.config import add_cell_argument, service_data_dir
 from fabric.runtime import Service
 from fabric.robot.cell import Cell
 from fabric.robot.frames import xyzrpy_to_T
+from fabric.motion.program import Program
 from fabric.motion.timing import StartState, time_program
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.post import write_export
@@ -33,8 +43,16 @@ __all__ = ["PlannerService", "build", "add_arguments"]
 
 MEDIA = {"rapid": "text/x-rapid", "krl": "text/x-krl", "urscript": "text/x-urscript", "csv": "text/csv"}
 SUFFIX = {"rapid": "mod", "krl": "src", "urscript": "script", "csv": "csv"}
-KEEP_TIMELINES = 4          # plans whose timeline (t_end_s, 8 bytes a row) is kept for the CSV export
+KEEP_PLANS = 2              # plans kept in memory for their exports (a million-row program is ~160 MB)
 MAX_EXPORT_STREAMS = 4      # streamed exports open at once (a reader that went away is dropped by the next)
+
+
+@dataclass
+class PlannedProgram:
+    """A recent plan kept in memory for its exports: the program and the time at each row (CSV ``t_s``)."""
+
+    program: Program
+    t_end_s: np.ndarray | None
 
 
 class PlannerService(Service):
@@ -52,11 +70,37 @@ class PlannerService(Service):
         self.handle("export", self.on_export)
         self.handle("export_chunk", self.on_export_chunk)
         self.exports: dict[tuple[str, str, int], ExportStream] = {}   # streamed exports being read
-        self.timelines: dict[str, np.ndarray] = {}                    # program id -> t_end_s of its plan
+        self.recent: dict[str, PlannedProgram] = {}                   # program id -> the last plans
+        self._unstored: dict[str, s.Artifact] = {}                    # artifacts not yet on disk
+        self._unstored_lock = threading.Lock()
+        self._storer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner-store")
 
     def close(self) -> None:
-        super().close()
         self.jobs.close()
+        self._storer.shutdown(wait=True)        # artifacts still being written reach the disk first
+        super().close()
+
+    def get_artifact(self, artifact_id: str) -> s.Artifact | None:
+        with self._unstored_lock:
+            art = self._unstored.get(artifact_id)
+        return art if art is not None else super().get_artifact(artifact_id)
+
+    def _store_later(self, art: s.Artifact) -> str:
+        """Serve ``art`` from memory at once and write it to the durable store on the background thread."""
+        with self._unstored_lock:
+            self._unstored[art.artifact_id] = art
+
+        def store() -> None:
+            try:
+                self.store_artifact(art)
+            except Exception:      # noqa: BLE001 - logged; the artifact stays served from memory
+                self.log.exception("could not store program artifact %s", art.artifact_id)
+                return
+            with self._unstored_lock:
+                self._unstored.pop(art.artifact_id, None)
+
+        self._storer.submit(store)
+        return art.artifact_id
 
     def on_plan(self, req: s.PlanRequest) -> s.JobAccepted:
         if not req.gcode and not req.gcode_id:
@@ -80,11 +124,11 @@ class PlannerService(Service):
                             filename=req.filename)
         program = result.program
         art = program_artifact(program, name=req.filename.rsplit(".", 1)[0] + ".program")
-        pid = self.store_artifact(art)
-        if result.t_end_s is not None:      # the CSV export's times, computed once by the plan
-            self.timelines[pid] = result.t_end_s
-            while len(self.timelines) > KEEP_TIMELINES:
-                self.timelines.pop(next(iter(self.timelines)))
+        pid = self._store_later(art)
+        self.recent.pop(pid, None)
+        self.recent[pid] = PlannedProgram(program, result.t_end_s)    # for its exports (CSV times computed once)
+        while len(self.recent) > KEEP_PLANS:
+            self.recent.pop(next(iter(self.recent)))
         rep = result.report
         first = None
         if rep.first_unreachable is not None:
@@ -146,13 +190,16 @@ class PlannerService(Service):
             raise UnreachableError(f"program is not runnable: first unreachable target at G-code line "
                                    f"{fu.gcode_line} ({fu.reason})", gcode_line=fu.gcode_line, reason=fu.reason,
                                    row=fu.row)
-        art = self.get_artifact(program_id)
-        if art is None:
-            raise NotFound(f"planned program {program_id} is no longer stored", artifact_id=program_id)
-        program = program_from_artifact(art)
+        planned = self.recent.get(program_id)
+        if planned is None:                         # an older plan: read its artifact back
+            art = self.get_artifact(program_id)
+            if art is None:
+                raise NotFound(f"planned program {program_id} is no longer stored", artifact_id=program_id)
+            planned = PlannedProgram(program_from_artifact(art), None)
+        program = planned.program
         t_end = None
         if fmt == "csv" and summary.runnable:      # time at each target, from home, as the station runs it
-            t_end = self.timelines.get(program_id)
+            t_end = planned.t_end_s
             if t_end is None:
                 start = StartState.at_joints(self.cell.robot, program.wobj, self.cell.home_q_rad)
                 t_end = time_program(program, self.cell.robot, 1.0, start_state=start).t_end_s
