@@ -35,43 +35,33 @@ continuity and tested for joint jumps (:func:`joint_jumps`): a row is marked
 ``IK_JUMP`` when its move from the previous row is not a continuous motion of
 one configuration (row 0 is reached by a joint move from ``q_start``, not tested).
 
-Jump test. A fixed joint-step threshold cannot tell a long travel move (250 mm
-across the plate legitimately turns A2/A3 by tens of degrees) from a
-configuration change. So rows whose largest joint step exceeds ``jump_deg``
-(default 10 deg) get a midpoint test: the pose halfway along the linear move
-(position midpoint, orientation slerp midpoint) is solved from the previous
-row's joints, and the move is continuous only if that solution lies near the
-joint-space midpoint, within ``JUMP_RATIO`` (25 %) of the step plus 1 deg. A
-branch change (wrist flip, elbow or shoulder change) or a 2*pi relocation of a
-multi-turn joint puts the continuous midpoint solution next to the start, half
-a step (50 %) away from the joint midpoint, and is caught; the curvature of a
-smooth move between two points of one configuration stays well under 25 %.
+The joint-jump test is :func:`fabric.robot.joint_jumps.joint_jumps`; the nozzle frames
+and their quaternions are :class:`fabric.robot.nozzle_frames.NozzleFrames`.
 """
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from fabric.errors import ValidationError
-from fabric.robot import frames
-from fabric.robot.kinematics import IK_JUMP, IK_OK, pose_cols
+from fabric.robot.joint_jumps import joint_jumps
+from fabric.robot.kinematics import IK_JUMP, IK_OK
 from fabric.robot.model import RobotModel
+from fabric.robot.nozzle_frames import NozzleFrames, unit_axes
 
 __all__ = ["PathIK", "solve_path", "candidate_rotations_deg", "joint_jumps"]
 
-SAMPLE_ROWS = 2048
-SAMPLE_ROWS_NUMERIC = 64
-REPAIR_MAX_ROWS = 2000
-VERIFY_TOP = 3
-MAX_BLOCKS = 2000
-INFEASIBLE_COST = 1.0e3
-ROT_CHANGE_COST = 1.0
-LIMIT_MARGIN_R = 0.15
+SAMPLE_ROWS = 2048              # subsample of step 1 (closed-form arms)
+SAMPLE_ROWS_NUMERIC = 64        # ... numeric-IK arms
+REPAIR_MAX_ROWS = 2000          # rows step 3 repairs at most
+VERIFY_TOP = 3                  # best constant rotations verified on every row
+MAX_BLOCKS = 2000               # blocks of the Viterbi pass
+INFEASIBLE_COST = 1.0e3         # row cost of an infeasible candidate in step 2
+ROT_CHANGE_COST = 1.0           # per candidate step of rotation change between blocks
+LIMIT_MARGIN_R = 0.15           # joints nearer a limit than this share of their range are penalised
 WRIST_SIN_SOFT = np.sin(np.radians(15.0))
-JUMP_RATIO = 0.25
-JUMP_SLACK_RAD = np.radians(1.0)
 
 
 @dataclass
@@ -84,6 +74,29 @@ class PathIK:
     quat_wxyz: np.ndarray      # (N, 4) resulting TCP orientation, base frame
     feasible_r: float          # share of rows with status IK_OK
     strategy: str = "constant"  # "constant", "viterbi" or "repair"
+
+
+class JointSolution(NamedTuple):
+    """Joints of some rows and their IK status codes."""
+
+    q_rad: np.ndarray          # (M, nq)
+    status: np.ndarray         # (M,) uint8
+
+
+class ConstantRotation(NamedTuple):
+    """Step 1's result: one rotation for the whole path and its verified solution."""
+
+    theta_deg: float
+    solution: JointSolution
+
+
+class _Rank(NamedTuple):
+    """How step 1 ranks a feasible candidate (sorted ascending): worst row cost first."""
+
+    worst_cost: float
+    mean_cost: float
+    abs_theta_deg: float
+    candidate: int
 
 
 def candidate_rotations_deg(rot_range_deg: tuple[float, float], rot_step_deg: float) -> np.ndarray:
@@ -110,7 +123,7 @@ def solve_path(robot: RobotModel, xyz_mm: np.ndarray, z_axis: np.ndarray, q_star
     if xyz.ndim != 2 or xyz.shape[1] != 3 or not np.all(np.isfinite(xyz)):
         raise ValidationError("xyz_mm must be a finite (N, 3) array", field="xyz_mm")
     n = len(xyz)
-    z0 = _unit_axes(z_axis, n)
+    z0 = unit_axes(z_axis, n)
     q_start = np.asarray(q_start, dtype=float).reshape(-1)
     if q_start.shape != (robot.nq,):
         raise ValidationError(f"q_start needs {robot.nq} joints", field="q_start")
@@ -122,88 +135,24 @@ def solve_path(robot: RobotModel, xyz_mm: np.ndarray, z_axis: np.ndarray, q_star
         xr = np.stack([-p[0], -p[1], np.zeros(n)])
     else:
         xr = np.array(np.broadcast_to(np.asarray(x_ref, dtype=float), (n, 3)).T)
-    solver = _PathSolver(robot, p, _Frames(z0, xr), q_start, thetas, np.radians(jump_deg))
+    solver = _PathSolver(robot, p, NozzleFrames(z0, xr), q_start, thetas, np.radians(jump_deg))
     return solver.solve()
-
-
-def _unit_axes(z_axis: np.ndarray, n: int) -> np.ndarray:
-    """Nozzle axes as unit columns: (3, 1) when one axis serves every row (also a broadcast one), else (3, N)."""
-    z = np.asarray(z_axis, dtype=float)
-    if z.ndim == 2 and z.shape[1] == 3 and (len(z) == 1 or z.strides[0] == 0):
-        z = z[0]                                        # a broadcast (N, 3) of one axis
-    z = np.broadcast_to(z, (1 if z.ndim == 1 else n, 3))
-    zn = np.linalg.norm(z, axis=1)
-    if n and (not np.all(np.isfinite(zn)) or np.any(zn < 1e-9)):
-        bad = int(np.argmax(~np.isfinite(zn) | (zn < 1e-9)))
-        raise ValidationError(f"z_axis row {bad} is not a direction", field="z_axis", row=bad)
-    return np.ascontiguousarray((z / zn[:, None]).T)
-
-
-class _Frames:
-    """The nozzle frames ``R0_i`` (theta = 0) as columns ``x0, y0`` (3, N) and ``z0`` ((3, 1) or (3, N)).
-
-    Built like :func:`fabric.robot.frames.frame_from_z_axis`: ``x_ref`` projected
-    onto the plane normal to z (base x, then base y where it is parallel to z),
-    ``y = z x x``. Columns keep every operation on contiguous rows of N numbers.
-    """
-
-    def __init__(self, z0: np.ndarray, xr: np.ndarray) -> None:
-        n = xr.shape[1]
-        bad = np.zeros(n, dtype=bool)
-        for fallback in (None, (1.0, 0.0, 0.0), (0.0, 1.0, 0.0)):
-            if fallback is not None:
-                xr[:, bad] = np.asarray(fallback)[:, None]
-            x = xr - (xr * z0).sum(axis=0) * z0
-            nx = np.sqrt((x * x).sum(axis=0))
-            bad = nx < 1e-6
-            if not bad.any():
-                break
-        x /= nx
-        self.x0, self.z0 = x, z0
-        self.y0 = np.stack([z0[1] * x[2] - z0[2] * x[1], z0[2] * x[0] - z0[0] * x[2], z0[0] * x[1] - z0[1] * x[0]])
-        self.const = z0.shape[1] == 1
-
-    def cols(self, rows: slice | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``x0, y0, z0`` of some rows (z0 stays (3, 1) when constant)."""
-        return self.x0[:, rows], self.y0[:, rows], self.z0 if self.const else self.z0[:, rows]
-
-    def quats(self, theta_rad: np.ndarray) -> np.ndarray:
-        """(N, 4) quaternions ``(w, x, y, z)``, w >= 0, of ``R0_i @ Rz(theta_i)``.
-
-        With one nozzle axis every frame is ``B @ Rz(alpha_i)`` for a fixed ``B``
-        (z column the axis), so the quaternion is ``q_B * (cos h, 0, 0, sin h)``
-        with ``h = (alpha_i + theta_i) / 2``: no per-row matrix. Otherwise
-        Shepperd's method on ``R0`` and the same product with ``h = theta_i / 2``.
-        """
-        if self.const:
-            B = frames.frame_from_z_axis(self.z0[:, 0], np.array([1.0, 0.0, 0.0]))[0]
-            qa = frames.quat_from_R(B)
-            half = 0.5 * (np.arctan2(B[:, 1] @ self.x0, B[:, 0] @ self.x0) + theta_rad)
-            w1, x1, y1, z1 = qa
-        else:
-            qa = frames.quat_from_R(np.stack([self.x0.T, self.y0.T, self.z0.T], axis=-1))
-            half = 0.5 * np.broadcast_to(theta_rad, self.x0.shape[1:])
-            w1, x1, y1, z1 = qa.T
-        c, s = np.cos(half), np.sin(half)
-        cols = (w1 * c - z1 * s, x1 * c + y1 * s, y1 * c - x1 * s, z1 * c + w1 * s)
-        flip = cols[0] < 0.0
-        zero = np.flatnonzero(cols[0] == 0.0)              # w = 0: largest component positive, as Shepperd's
-        if len(zero):
-            sub = [col if len(zero) == len(c) else col[zero] for col in cols[1:]]
-            a = [np.abs(col) for col in sub]
-            big = np.where((a[0] >= a[1]) & (a[0] >= a[2]), sub[0], np.where(a[1] >= a[2], sub[1], sub[2]))
-            flip[zero] = big < 0.0
-        q = np.stack(cols, axis=1)
-        return np.negative(q, out=q, where=flip[:, None])
 
 
 class _PathSolver:
     """The three steps of the module docstring over one path."""
 
-    def __init__(self, robot: RobotModel, p: np.ndarray, fr: _Frames, q_start: np.ndarray,
+    def __init__(self, robot: RobotModel, p: np.ndarray, fr: NozzleFrames, q_start: np.ndarray,
                  thetas_deg: np.ndarray, jump_rad: float) -> None:
-        self.robot, self.p, self.fr, self.q_start, self.cf = robot, p, fr, q_start, robot.closed_form
-        self.thetas, self.jump_rad, self.n = thetas_deg, jump_rad, p.shape[1]
+        self.robot = robot
+        self.cf = robot.closed_form             # None for numeric-IK arms
+        self.p = p                              # (3, N) TCP positions
+        self.fr = fr
+        self.q_start = q_start
+        self.thetas = thetas_deg
+        self.jump_rad = jump_rad
+        self.n = p.shape[1]
+        self._costs_nk: np.ndarray | None = None    # step 2's row costs, reused by step 3
 
     def poses(self, rows: slice | np.ndarray, theta_deg: np.ndarray | float) -> np.ndarray:
         """TCP poses (M, 4, 4) of some rows at rotation(s) ``theta_deg``."""
@@ -242,12 +191,13 @@ class _PathSolver:
                 o += z0 * m[2]
         return out
 
-    def ik(self, rows: slice | np.ndarray, theta_deg: np.ndarray | float,
-           seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def ik(self, rows: slice | np.ndarray, theta_deg: np.ndarray | float, seed: np.ndarray) -> JointSolution:
         """IK of some rows at rotation(s) ``theta_deg``, continuous from ``seed``."""
         if self.cf is not None:
-            return self.cf.ik_cols(self.flange_cols(rows, theta_deg), seed)
-        return self.robot.ik(self.poses(rows, theta_deg), seed)
+            q, status = self.cf.ik_cols(self.flange_cols(rows, theta_deg), seed)
+        else:
+            q, status = self.robot.ik(self.poses(rows, theta_deg), seed)
+        return JointSolution(q, status)
 
     def row_cost(self, q: np.ndarray, status: np.ndarray) -> np.ndarray:
         """Per-row cost of a joint solution (inf when infeasible)."""
@@ -261,53 +211,60 @@ class _PathSolver:
 
     def solve(self) -> PathIK:
         found = self._constant()
-        strategy = "constant"
-        if found is None:
-            strategy = "viterbi" if self.robot.closed_form is not None else "repair"
-            rot = self._viterbi() if self.robot.closed_form is not None else np.zeros(self.n)
-            rot = self._repair(rot)
-            q, status = self._final(rot)
+        if found is not None:
+            rot = np.full(self.n, found.theta_deg)
+            sol = found.solution
+            strategy = "constant"
         else:
-            th, q, status = found
-            rot = np.full(self.n, th)
+            if self.cf is not None:
+                strategy = "viterbi"
+                rot = self._viterbi()
+            else:
+                strategy = "repair"
+                rot = np.zeros(self.n)
+            rot = self._repair(rot)
+            sol = self._final(rot)
         quat = self.fr.quats(np.radians(rot))
-        return PathIK(q, status, rot, quat, float(np.mean(status == IK_OK)), strategy)
+        return PathIK(sol.q_rad, sol.status, rot, quat, float(np.mean(sol.status == IK_OK)), strategy)
 
-    def _final(self, rot: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    def _final(self, rot: np.ndarray | float) -> JointSolution:
         """IK of the whole path at rotation(s) ``rot`` (deg) with the jump test."""
         q, status = self.ik(slice(None), rot, self.q_start)
-        jump = joint_jumps(self.robot, q, lambda r: self.poses(r, rot if np.ndim(rot) == 0 else rot[r]), self.jump_rad)
-        status[jump & (status == IK_OK)] = IK_JUMP
-        return q, status
 
-    def _constant(self) -> tuple[float, np.ndarray, np.ndarray] | None:
-        """Step 1: the best constant rotation verified on every row (theta, q, status), or None."""
-        m = SAMPLE_ROWS if self.robot.closed_form is not None else SAMPLE_ROWS_NUMERIC
+        def poses(rows: np.ndarray) -> np.ndarray:
+            return self.poses(rows, rot if np.ndim(rot) == 0 else rot[rows])
+
+        jump = joint_jumps(self.robot, q, poses, self.jump_rad)
+        status[jump & (status == IK_OK)] = IK_JUMP
+        return JointSolution(q, status)
+
+    def _constant(self) -> ConstantRotation | None:
+        """Step 1: the best constant rotation verified on every row, or None."""
+        m = SAMPLE_ROWS if self.cf is not None else SAMPLE_ROWS_NUMERIC
         rows = np.unique(np.linspace(0, self.n - 1, min(self.n, m)).round().astype(int))
-        keys = []
+        ranked: list[_Rank] = []
         for k, th in enumerate(self.thetas):
-            q, st = self.ik(rows, th, self.q_start)
-            c = self.row_cost(q, st)
+            c = self.row_cost(*self.ik(rows, th, self.q_start))
             if np.all(np.isfinite(c)):
-                keys.append((float(c.max()), float(c.mean()), abs(float(th)), k))
-        for _, _, _, k in sorted(keys)[:VERIFY_TOP]:
-            q, status = self._final(float(self.thetas[k]))
-            if np.all(status == IK_OK):
-                return float(self.thetas[k]), q, status
+                ranked.append(_Rank(float(c.max()), float(c.mean()), abs(float(th)), k))
+        for rank in sorted(ranked)[:VERIFY_TOP]:
+            theta = float(self.thetas[rank.candidate])
+            sol = self._final(theta)
+            if np.all(sol.status == IK_OK):
+                return ConstantRotation(theta, sol)
         return None
 
     def _costs(self) -> np.ndarray:
         """Row costs (N, K) of every candidate (finite; infeasible = INFEASIBLE_COST)."""
         C = np.empty((self.n, len(self.thetas)), dtype=np.float32)
         for k, th in enumerate(self.thetas):
-            q, st = self.ik(slice(None), th, self.q_start)
-            C[:, k] = np.minimum(self.row_cost(q, st), INFEASIBLE_COST)
+            C[:, k] = np.minimum(self.row_cost(*self.ik(slice(None), th, self.q_start)), INFEASIBLE_COST)
         return C
 
     def _viterbi(self) -> np.ndarray:
         """Step 2: a slowly changing rotation per block of rows."""
         C = self._costs()
-        self._C = C
+        self._costs_nk = C
         nb = min(self.n, MAX_BLOCKS)
         edges = np.linspace(0, self.n, nb + 1).round().astype(int)
         B = np.add.reduceat(C.astype(np.float64), edges[:-1], axis=0)       # (nb, K)
@@ -335,64 +292,15 @@ class _PathSolver:
         bad = np.flatnonzero(status != IK_OK)
         if not len(bad):
             return rot
-        C = getattr(self, "_C", None)
+        C = self._costs_nk
         rot = rot.copy()
         for i in bad[:REPAIR_MAX_ROWS]:
             if C is not None:
                 feas = np.flatnonzero(C[i] < INFEASIBLE_COST)
             else:
-                feas = [k for k, th in enumerate(self.thetas)
-                        if self.ik(np.array([i]), th, q[max(i - 1, 0)])[1][0] == IK_OK]
-                feas = np.asarray(feas, dtype=int)
+                seed = q[max(i - 1, 0)]
+                feas = np.asarray([k for k, th in enumerate(self.thetas)
+                                   if self.ik(np.array([i]), th, seed).status[0] == IK_OK], dtype=int)
             if len(feas):
                 rot[i] = self.thetas[feas[np.argmin(np.abs(self.thetas[feas] - rot[i]))]]
         return rot
-
-
-def _nearest_solution(robot: RobotModel, T: np.ndarray, q_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per row, the IK solution of T (M, 4, 4) nearest ``q_prev`` (M, nq), and whether it is valid."""
-    cf = robot.closed_form
-    if cf is None:
-        out = np.empty_like(q_prev)
-        ok = np.empty(len(T), dtype=bool)
-        for i in range(len(T)):
-            qi, st = robot.ik(T[i], q_prev[i])
-            out[i], ok[i] = qi[0], st[0] == IK_OK
-        return out, ok
-    qb, valid, _, _ = cf.branches_cols(pose_cols(T, cf.tool_inv_T))
-    d = qb - q_prev[:, None, :]
-    d -= 2.0 * np.pi * np.rint(d / (2.0 * np.pi))       # compare modulo 2*pi ...
-    dist = np.where(valid, np.einsum("ijk,ijk->ij", d, d), np.inf)
-    best = np.argmin(dist, axis=1)
-    rows = np.arange(len(T))
-    return q_prev + d[rows, best], valid[rows, best]     # ... and place next to q_prev
-
-
-def joint_jumps(robot: RobotModel, q: np.ndarray, T: np.ndarray | Callable[[np.ndarray], np.ndarray],
-                check_rad: float = np.radians(10.0)) -> np.ndarray:
-    """Rows (N,) whose move from the previous row is not continuous (module docstring: jump test).
-
-    ``q`` (N, nq) joints and ``T`` (N, 4, 4) the TCP poses they reach (mm), or
-    a function giving the poses of some rows (only the rows tested are built).
-    """
-    poses = T if callable(T) else (lambda rows: T[rows])
-    n = len(q)
-    jump = np.zeros(n, dtype=bool)
-    if n < 2:
-        return jump
-    dq = np.abs(q[1:] - q[:-1])
-    step = dq[:, 0].copy()
-    for j in range(1, dq.shape[1]):                      # column by column: a row max over 6 is slow
-        np.maximum(step, dq[:, j], out=step)
-    rows = np.flatnonzero(step > check_rad) + 1
-    if not len(rows):
-        return jump
-    Ta, Tb = poses(rows - 1), poses(rows)
-    qa = frames.quat_from_R(Ta[:, :3, :3])
-    qb = frames.quat_from_R(Tb[:, :3, :3])
-    qb *= np.where(np.sum(qa * qb, axis=1) < 0.0, -1.0, 1.0)[:, None]
-    T_mid = frames.make_T(frames.R_from_quat(qa + qb), 0.5 * (Ta[:, :3, 3] + Tb[:, :3, 3]))
-    q_mid, ok = _nearest_solution(robot, T_mid, q[rows - 1])
-    dev = np.max(np.abs(q_mid - 0.5 * (q[rows - 1] + q[rows])), axis=1)
-    jump[rows] = ~ok | (dev > JUMP_RATIO * step[rows - 1] + JUMP_SLACK_RAD)
-    return jump
