@@ -279,8 +279,45 @@ class Client:
     def check(self, request: s.CollisionRequest) -> s.CollisionReport: return self.call("collision", "check", request)
     def status(self) -> s.FabricStatus: return self.call("supervisor", "status")
     def submit(self, request: s.JobSubmit) -> s.JobAccepted: return self.call("supervisor", "submit", request)
-    def job(self, job_id: str) -> s.JobStatus: return self.call("supervisor", "job", s.JobQuery(job_id=job_id))
+    def pin(self, service: str, artifact_id: str, owner: str) -> s.Ack:
+        return self.call(service, "pin", s.PinRequest(artifact_id=artifact_id, owner=owner))
+    def unpin(self, service: str, owner: str) -> s.Ack:
+        return self.call(service, "pin", s.PinRequest(owner=owner, pinned=False))
+    def job(self, job_id: str) -> s.JobRecord: return self.call("supervisor", "job", s.JobQuery(job_id=job_id))
     def jobs(self) -> s.JobList: return self.call("supervisor", "jobs")
+    def job_remove(self, job_id: str) -> s.Ack:
+        return self.call("supervisor", "job_remove", s.JobQuery(job_id=job_id))
+    def job_move(self, job_id: str, position: int) -> s.JobList:
+        return self.call("supervisor", "job_move", s.JobMove(job_id=job_id, position=position))
+    def job_next(self) -> s.JobRecord: return self.call("supervisor", "job_next")
+
+    def wait_print_job(self, job_id: str, done: Callable[[s.JobRecord], bool], timeout: float = 600.0,
+                       on_change: Callable[[s.JobRecord], None] | None = None) -> s.JobRecord:
+        """Follow a print job (its record, then the ``jobs`` stream) until ``done(record)`` or its
+        state is final; raise its typed error if it failed."""
+        sub = self.subscribe("supervisor", "jobs")
+        try:
+            end = time.monotonic() + timeout
+            rec = self.job(job_id)
+            while not done(rec) and rec.state not in s.FINAL_JOB_STATES:
+                if on_change:
+                    on_change(rec)
+                left = end - time.monotonic()
+                if left <= 0:
+                    raise ServiceUnavailable(f"print job {job_id} still {rec.state} after {timeout:g} s",
+                                             timeout_s=timeout)
+                try:
+                    msg = sub.get(timeout=min(left, 2.0))
+                except queue.Empty:  # a missed message: ask once more (snapshot)
+                    rec = self.job(job_id)
+                    continue
+                if msg.job_id == job_id:
+                    rec = msg
+            if rec.state == "failed" and rec.error is not None:
+                raise error_from_code(rec.error.code, rec.error.message, rec.error.details)
+            return rec
+        finally:
+            sub.close()
 
 
 def _open(settings: SessionSettings) -> zenoh.Session:

@@ -53,13 +53,13 @@ def run_demo(client: Client, model: Path, out: Path, profile: str, backend: str,
         say(f"job {acc.job_id}: slice -> plan -> collision check -> load -> print")
         stages: list[str] = []
 
-        def progress(st: s.JobStatus) -> None:
-            if st.stage and (not stages or stages[-1] != st.stage):
-                stages.append(st.stage)
-                say(f"  {st.stage} ...")
-        client.wait_job("supervisor", acc.job_id, on_progress=progress)
-        rec = next(j for j in client.jobs().jobs if j.job_id == acc.job_id)
+        def progress(rec: s.JobRecord) -> None:
+            if rec.state and (not stages or stages[-1] != rec.state):
+                stages.append(rec.state)
+                say(f"  {rec.state} ...")
+        client.wait_print_job(acc.job_id, lambda r: r.state in ("printing", "loaded"), on_change=progress)
         end = follow_print(client, timeout_s=3600)
+        rec = client.wait_print_job(acc.job_id, lambda r: False, timeout=60)     # its final record
         t_wall = time.monotonic() - t0
         info = client.time()
         last_ext = None

@@ -19,10 +19,10 @@ def follow_print(client: Client, timeout_s: float | None = None) -> s.Event:
     """
     sub = client.subscribe("station", "events")
     try:
-        seen = client.events().next_seq
+        last = client.events().last_seq
         st = client.state()
         if st.state not in ("printing", "paused"):
-            for ev in reversed(client.events(max(0, seen - 50)).events):
+            for ev in reversed(client.events(max(0, last - 50)).events):
                 if ev.kind in END_EVENTS:
                     return ev
         while True:

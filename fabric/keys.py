@@ -6,7 +6,8 @@ Layout (``<cell>`` lets several cells share one Zenoh fabric)::
     am/<cell>/<service>/cmd/<command>         queryable per command (ENDPOINTS)
     am/<cell>/<service>/artifact/<sha256>     content-addressed results (G-code, programs)
     am/<cell>/station/{pose,extrusion,state,temps,events}   station telemetry
-    am/<cell>/<service>/progress              job progress (slicer, planner, supervisor)
+    am/<cell>/<service>/progress              job progress (slicer, planner)
+    am/<cell>/supervisor/jobs                 print job records, on every change
 """
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ TOPICS: dict[tuple[str, str], type] = {
     ("station", "events"): s.Event,
     ("slicer", "progress"): s.JobStatus,
     ("planner", "progress"): s.JobStatus,
-    ("supervisor", "progress"): s.JobStatus,
+    ("supervisor", "jobs"): s.JobRecord,
 }
 
 
@@ -83,11 +84,19 @@ _TABLE = [
         "an export streamed in bounded chunks, read in order from offset 0"),
     # collision
     _ep("collision", "check", s.CollisionRequest, s.CollisionReport, 300.0, "sweep a program or a move"),
+    # artifacts a print job needs are pinned where they live (never evicted while it needs them)
+    _ep("slicer", "pin", s.PinRequest, s.Ack, doc="pin an artifact for a job, or release the job's pins"),
+    _ep("planner", "pin", s.PinRequest, s.Ack, doc="pin an artifact for a job, or release the job's pins"),
     # supervisor
     _ep("supervisor", "status", s.Empty, s.FabricStatus, doc="services alive and the current job"),
-    _ep("supervisor", "submit", s.JobSubmit, s.JobAccepted, 30.0, "slice -> plan -> check -> load"),
-    _ep("supervisor", "job", s.JobQuery, s.JobStatus, doc="a pipeline job's status"),
-    _ep("supervisor", "jobs", s.Empty, s.JobList, doc="job history"),
+    _ep("supervisor", "submit", s.JobSubmit, s.JobAccepted, 30.0,
+        "queue a print job: slice -> plan -> check -> load (-> start)"),
+    _ep("supervisor", "job", s.JobQuery, s.JobRecord, doc="one print job's whole record"),
+    _ep("supervisor", "jobs", s.Empty, s.JobList, doc="every print job: the queue and the history"),
+    _ep("supervisor", "job_remove", s.JobQuery, s.Ack, doc="remove a job that is not on the station"),
+    _ep("supervisor", "job_move", s.JobMove, s.JobList, doc="reorder the waiting queue"),
+    _ep("supervisor", "job_next", s.Empty, s.JobRecord, 60.0,
+        "the plate is clear: load the next prepared job and start it"),
 ]
 ENDPOINTS: dict[tuple[str, str], Endpoint] = {(e.service, e.command): e for e in _TABLE}
 

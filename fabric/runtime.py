@@ -26,8 +26,9 @@ import zenoh
 from fabric import codec
 from fabric.errors import FabricError, InternalError, NotFound, StateError, ValidationError
 from fabric.keys import ENDPOINTS, TOPICS, Endpoint, Keys
-from fabric.schemas import Artifact, ErrorReply
+from fabric.schemas import Ack, Artifact, ErrorReply, PinRequest
 from fabric.store.artifacts import ArtifactStore
+from fabric.store.records import RecordStore
 
 __all__ = ["Service", "Publisher", "reply_error"]
 
@@ -82,6 +83,7 @@ class Service:
         self.data_dir = Path(self._tmp.name if self._tmp is not None else data_dir)
         self._dir_lock = _lock_dir(self.data_dir, self.name, cell)
         self.artifacts = ArtifactStore(self.data_dir / "artifacts")
+        self.records = RecordStore(self.data_dir / "records.sqlite")
         self.closed = threading.Event()
 
     # --- declaration -------------------------------------------------------
@@ -99,6 +101,19 @@ class Service:
     def store_artifact(self, artifact: Artifact) -> str:
         """Keep a content-addressed result on disk, served at ``<service>/artifact/<id>``."""
         return self.artifacts.put(artifact)
+
+    def serve_pins(self) -> None:
+        """Serve the ``pin`` endpoint: jobs pin the artifacts they need here (see ArtifactStore)."""
+        self.handle("pin", self._on_pin)
+
+    def _on_pin(self, req: PinRequest) -> Ack:
+        if not req.pinned:
+            self.artifacts.unpin(req.owner)
+            return Ack(ok=True, message=f"released the pins of {req.owner}")
+        if not self.artifacts.has(req.artifact_id):
+            raise NotFound(f"no artifact {req.artifact_id} at {self.name}", artifact_id=req.artifact_id)
+        self.artifacts.pin(req.artifact_id, req.owner)
+        return Ack(ok=True, message=f"pinned {req.artifact_id[:12]} for {req.owner}")
 
     def get_artifact(self, artifact_id: str) -> Artifact | None:
         """A stored artifact, or None when it is not (or no longer) here."""
@@ -175,6 +190,7 @@ class Service:
         for t in self._threads:
             t.join(timeout=2.0)
         self.artifacts.close()
+        self.records.close()
         self._dir_lock.close()
         if self._tmp is not None:
             self._tmp.cleanup()

@@ -98,16 +98,19 @@ def test_demo_path_through_the_processes(running_cell, client, tmp_path):
         model = sample_model()
         acc = client.submit(s.JobSubmit(model=model.read_bytes(), filename=model.name, profile="robot-1.2mm",
                                         start=True, rtf=0.0))
-        job = client.wait_job("supervisor", acc.job_id, timeout=240)
-        assert job.state == "done"
+        job = client.wait_print_job(acc.job_id, lambda r: r.state in ("printing", "loaded"), timeout=240)
+        assert job.state in ("printing", "loaded", "finished")
         end = follow_print(client, timeout_s=240)
         assert end.kind == "finished"
 
     assert not errors, errors[:3]
     assert len(received) > 5
     assert any(m["xyz_mm"][2] < 50 for m in received), "the monitor never saw the nozzle near the plate"
-    rec = next(j for j in client.jobs().jobs if j.job_id == acc.job_id)
-    assert rec.state == "done" and rec.collisions.collision_free
+    rec = client.wait_print_job(acc.job_id, lambda r: False, timeout=30)
+    assert rec.state == "finished" and rec.collisions.collision_free
+    assert rec.started_s > 0 and rec.ended_s >= rec.started_s and rec.sim_elapsed_s > 0
+    assert rec.deposited_mm3 == pytest.approx(rec.plan.extruded_mm3, rel=1e-6)
+    assert [j.state for j in client.jobs().jobs] == ["finished"]
     info = client.time()
     assert info.total_s == pytest.approx(rec.plan.estimate_s, rel=1e-6)
     assert info.remaining_s == pytest.approx(0.0, abs=1e-6)

@@ -80,7 +80,7 @@ def test_invalid_field_is_a_validation_error_naming_it(supervisor, client):
 
 
 def test_unknown_job_is_not_found(supervisor, client):
-    with pytest.raises(NotFound, match="no supervisor job"):
+    with pytest.raises(NotFound, match="no job deadbeef"):
         client.job("deadbeef")
 
 

@@ -26,7 +26,8 @@ class StandInStation(Service):
         self.events_out = self.publisher("events", lossless=True)
         self.handle("state", lambda _: s.StationState(state=self.state))
         self.handle("events", lambda q: s.EventList(events=[e for e in self.history if e.seq >= q.since_seq],
-                                                    next_seq=len(self.history)))
+                                                    next_seq=len(self.history) + 1,
+                                                    last_seq=len(self.history)))
 
 
 def _event(seq: int, kind: str) -> s.Event:

@@ -8,7 +8,7 @@ import sys
 import threading
 from pathlib import Path
 
-from fabric.cli import pipeline_cmds, station_cmds
+from fabric.cli import job_cmds, pipeline_cmds, station_cmds
 from fabric.cli.output import emit, fail
 from fabric.client import Client
 from fabric.config import add_cell_argument, add_data_argument, add_session_args, settings_from_args
@@ -53,6 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     station_cmds.register(sub, common)
     pipeline_cmds.register(sub, common)
+    job_cmds.register(sub, common)
 
     cell = sub.add_parser("cell", help="the cell configuration")
     csub = cell.add_subparsers(dest="cell_cmd", required=True)

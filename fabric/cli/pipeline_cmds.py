@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import queue
 import sys
 from pathlib import Path
 
@@ -10,9 +9,8 @@ from fabric import schemas as s
 from fabric.cli.output import emit
 from fabric.client import Client
 from fabric.errors import BadRequest
-from fabric.follow import follow_print
 
-__all__ = ["register", "parse_sets"]
+__all__ = ["register", "parse_sets", "read_input"]
 
 EXPORT_FLAGS = {"csv": "csv", "rapid": "rapid", "krl": "krl", "urscript": "urscript"}
 
@@ -27,7 +25,8 @@ def parse_sets(items: list[str] | None) -> dict[str, str]:
     return out
 
 
-def _read(path: str) -> bytes:
+def read_input(path: str) -> bytes:
+    """The bytes of an input file the user named (a clear error when it is not there)."""
     p = Path(path)
     if not p.is_file():
         raise BadRequest(f"no such file: {path}", file=path)
@@ -43,7 +42,7 @@ def _progress(quiet: bool):
 
 
 def cmd_slice(c: Client, a: argparse.Namespace) -> int:
-    req = s.SliceRequest(model=_read(a.model), filename=Path(a.model).name, profile=a.profile,
+    req = s.SliceRequest(model=read_input(a.model), filename=Path(a.model).name, profile=a.profile,
                          backend=a.backend, overrides=parse_sets(a.set),
                          center_xy_mm=list(a.center) if a.center else None)
     acc = c.slice(req)
@@ -70,7 +69,7 @@ def plan_file(c: Client, data: bytes, filename: str, a: argparse.Namespace) -> s
 
 
 def cmd_plan(c: Client, a: argparse.Namespace) -> int:
-    summary = plan_file(c, _read(a.gcode), Path(a.gcode).name, a)
+    summary = plan_file(c, read_input(a.gcode), Path(a.gcode).name, a)
     from fabric.planning.post.atomic import AtomicFiles     # only this command needs it
     written = {}
     with AtomicFiles() as files:          # every export file, or none (temporary files renamed at the end)
@@ -98,28 +97,6 @@ def cmd_plan(c: Client, a: argparse.Namespace) -> int:
     return 0 if summary.runnable else 2
 
 
-def cmd_job_submit(c: Client, a: argparse.Namespace) -> int:
-    req = s.JobSubmit(model=_read(a.model), filename=Path(a.model).name, profile=a.profile, backend=a.backend,
-                      overrides=parse_sets(a.set), start=a.start, rtf=a.rtf)
-    acc = c.submit(req)
-    if not (a.wait or a.follow):
-        emit(acc, a.json, lambda r: f"job {r.job_id} accepted")
-        return 0
-    st = c.wait_job("supervisor", acc.job_id, on_progress=_progress(a.json))
-    if not a.json:
-        print(file=sys.stderr)
-    result = {"job": st}
-    if a.follow and a.start:
-        try:
-            result["end"] = follow_print(c, timeout_s=a.timeout)
-        except queue.Empty:
-            result["end"] = None
-        result["time"] = c.time()
-    emit(result, a.json, lambda r: f"job {st.job_id}: {st.state} ({st.stage})"
-         + (f"; print {r['end'].kind} at t={r['end'].t_sim_s:.1f} s" if r.get("end") else ""))
-    return 0
-
-
 def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     p = sub.add_parser("slice", parents=[common], help="slice a model (STL/OBJ/3MF) into G-code")
     p.add_argument("model")
@@ -140,22 +117,3 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--rot-step", type=float, default=15.0, help="free-rotation search step (deg)")
     p.add_argument("--module-targets", type=int, default=5000, help="targets per RAPID/KRL module")
     p.set_defaults(run=cmd_plan)
-
-    job = sub.add_parser("job", help="print jobs (slice -> plan -> check -> load)")
-    jsub = job.add_subparsers(dest="job_cmd", required=True)
-    p = jsub.add_parser("submit", parents=[common], help="submit a model as a print job")
-    p.add_argument("model")
-    p.add_argument("--profile", default="taz-pla-medium")
-    p.add_argument("--backend", default="builtin", choices=s.pipeline.BACKENDS)
-    p.add_argument("--set", action="append", metavar="KEY=VALUE")
-    p.add_argument("--start", action="store_true", help="start printing once loaded")
-    p.add_argument("--rtf", type=float, default=0.0, help="real-time factor when started (0 = max)")
-    p.add_argument("--wait", action="store_true", help="wait for the pipeline to finish")
-    p.add_argument("--follow", action="store_true", help="with --start: wait for the print to end")
-    p.add_argument("--timeout", type=float, default=None)
-    p.set_defaults(run=cmd_job_submit)
-    p = jsub.add_parser("status", parents=[common], help="a job's status")
-    p.add_argument("job_id")
-    p.set_defaults(run=lambda c, a: (emit(c.job(a.job_id), a.json), 0)[1])
-    p = jsub.add_parser("list", parents=[common], help="job history")
-    p.set_defaults(run=lambda c, a: (emit(c.jobs(), a.json), 0)[1])

@@ -61,6 +61,14 @@ class ArtifactQuery:
     artifact_id: str = f(max_len=128)
 
 
+@schema("common.PinRequest")
+class PinRequest:
+    """Keep an artifact from eviction while ``owner`` (a print job) needs it, or release the owner's pins."""
+    owner: str = f(max_len=128)
+    artifact_id: str = f("", max_len=128)
+    pinned: bool = True
+
+
 @schema("common.Artifact")
 class Artifact:
     """Content-addressed bytes (``artifact_id`` = sha256 of ``data``)."""

@@ -7,10 +7,15 @@ import numpy as np
 
 from fabric.errors import UNREACHABLE_REASONS
 from fabric.schemas.base import f, schema
-from fabric.schemas.common import JOB_STATES
+from fabric.schemas.common import ErrorReply
 
 BACKENDS = ("builtin", "prusaslicer", "slic3r")
 EXPORT_FORMATS = ("rapid", "krl", "urscript", "csv")
+JOB_SOURCES = ("model", "gcode")
+PRINT_JOB_STATES = ("queued", "slicing", "planning", "checking", "loaded", "printing", "paused",
+                    "finished", "stopped", "failed", "interrupted")
+FINAL_JOB_STATES = ("finished", "stopped", "failed")
+ON_STATION_JOB_STATES = ("loaded", "printing", "paused", "interrupted")
 MAX_MODEL_BYTES = 256 << 20
 
 
@@ -155,22 +160,48 @@ class ServiceInfo:
     since_s: float = 0.0
 
 
-@schema("supervisor.JobRecord")
+@schema("supervisor.JobRecord", version=3)
 class JobRecord:
-    """One print job: what was submitted, where the pipeline is, and what each stage produced."""
+    """One print job: what was submitted, where it is, what each stage produced, and how it ended.
+
+    ``state`` goes queued -> slicing -> planning -> checking -> (queued, prepared) -> loaded ->
+    printing <-> paused -> finished | stopped | failed | interrupted (see PRINT_JOB_STATES).
+    Times ending in ``_s`` without "elapsed" are wall-clock epoch seconds (0 = not yet)."""
     job_id: str
     filename: str
+    source: str = f("model", choices=JOB_SOURCES)      # a model to slice, or G-code to plan as it is
     profile: str = ""
     backend: str = ""
+    model_id: str = ""                          # the submitted file (an artifact at the supervisor)
+    overrides: dict[str, str] = f(factory=dict)  # slicing profile overrides
+    start: bool = False                         # start printing once loaded
+    rtf: float = f(1.0, ge=0.0, le=1e6)
+    state: str = f("queued", choices=PRINT_JOB_STATES)
+    prepared: bool = False                      # sliced, planned and checked: can be loaded
+    reason: str = ""                            # why it is in its state (a failure, an interruption, a stop)
+    stage: str = ""                             # what it is doing now, in words
+    progress_r: float = f(0.0, ge=0.0, le=1.0)
+    layer: int = -1                             # the last layer begun (0-based), while printing
     created_s: float = 0.0
-    state: str = f("queued", choices=JOB_STATES)
-    stage: str = ""
-    message: str = ""
-    result_id: str = ""
+    updated_s: float = 0.0
+    started_s: float = 0.0                      # the print began
+    ended_s: float = 0.0                        # the print ended (finished, stopped, failed)
+    sim_elapsed_s: float = 0.0                  # simulated duration of the print so far
+    wall_elapsed_s: float = 0.0                 # wall-clock duration of the print so far
+    filament_mm: float = 0.0                    # filament pushed by the print
+    deposited_mm3: float = 0.0                  # volume deposited by the print
     gcode_id: str = ""                          # the slicer's G-code artifact, once sliced
     program_id: str = ""                        # the planner's program artifact, once planned
     plan: PlanSummary | None = None
     collisions: CollisionReport | None = None
+    error: ErrorReply | None = None             # the typed error of a failed job
+
+
+@schema("supervisor.JobMove")
+class JobMove:
+    """Put a waiting job at ``position`` of the queue (0 = next)."""
+    job_id: str = f(max_len=128)
+    position: int = f(0, ge=0, le=100000)
 
 
 @schema("supervisor.Status", version=2)
@@ -181,11 +212,13 @@ class FabricStatus:
     job_error: str = ""                         # why the latest job could not be read (then ``job`` is nil)
 
 
-@schema("supervisor.JobSubmit")
+@schema("supervisor.JobSubmit", version=2)
 class JobSubmit:
-    """STL/OBJ/3MF bytes -> slice -> plan -> collision check -> load (-> start)."""
+    """STL/OBJ/3MF bytes -> slice -> plan -> collision check -> load (-> start); or G-code bytes
+    (``source`` "gcode") -> plan -> check -> load (-> start)."""
     model: bytes
     filename: str = f(max_len=255)
+    source: str = f("model", choices=JOB_SOURCES)
     profile: str = "taz-pla-medium"
     backend: str = f("builtin", choices=BACKENDS)
     overrides: dict[str, str] = f(factory=dict)
@@ -193,6 +226,6 @@ class JobSubmit:
     rtf: float = f(0.0, ge=0.0, le=1e6)
 
 
-@schema("supervisor.JobList", version=2)
+@schema("supervisor.JobList", version=3)
 class JobList:
     jobs: list[JobRecord]

@@ -84,10 +84,12 @@ class EventsQuery:
     limit: int = f(10000, ge=1, le=100000)
 
 
-@schema("station.EventList")
+@schema("station.EventList", version=2)
 class EventList:
+    """Events from the log, oldest first; ``next_seq`` pages on, ``last_seq`` is the newest logged."""
     events: list[Event]
     next_seq: int
+    last_seq: int = 0
 
 
 @schema("station.TimeInfo")

@@ -63,12 +63,12 @@ class PlannerService(Service):
         self.cell = cell
         self.client = Client(session, cell_id)
         self.jobs = JobRunner("planner", self.publisher("progress", lossless=True))
-        self.summaries: dict[str, s.PlanSummary] = {}
         self.handle("plan", self.on_plan)
         self.handle("job", lambda q: self.jobs.get(q.job_id))
         self.handle("summary", self.on_summary)
         self.handle("export", self.on_export)
         self.handle("export_chunk", self.on_export_chunk)
+        self.serve_pins()
         self.exports: dict[tuple[str, str, int], ExportStream] = {}   # streamed exports being read
         self.recent: dict[str, PlannedProgram] = {}                   # program id -> the last plans
         self._unstored: dict[str, s.Artifact] = {}                    # artifacts not yet on disk
@@ -136,19 +136,21 @@ class PlannerService(Service):
             first = s.UnreachableTarget(gcode_line=int(line), reason=reason, row=int(rep.first_unreachable_row))
         st = result.stats
         estimate = float(result.estimate_s) if np.isfinite(result.estimate_s) else -1.0
-        self.summaries[pid] = s.PlanSummary(
+        summary = s.PlanSummary(
             program_id=pid, targets=int(st.targets), moves=int(st.moves), layers=int(st.layers),
             feasible_r=float(rep.feasible_r), runnable=first is None, estimate_s=estimate,
             extruded_mm3=float(st.extruded_volume_mm3), path_mm=float(st.path_length_mm), first_unreachable=first,
             unreachable_by_reason={str(k): int(v) for k, v in rep.counts.items() if k != "ok"},
             elapsed_s=float(st.total_s), slowed_targets=0 if result.slowed_rows is None else len(result.slowed_rows),
             first_slowed=_first_slowed(result, program))
+        self.records.put("summary", pid, summary)
         return pid
 
     def on_summary(self, req: s.ArtifactQuery) -> s.PlanSummary:
-        if req.artifact_id not in self.summaries:
+        summary = self.records.get("summary", req.artifact_id, s.PlanSummary)
+        if summary is None:
             raise NotFound(f"no planned program {req.artifact_id}", artifact_id=req.artifact_id)
-        return self.summaries[req.artifact_id]
+        return summary
 
     def on_export(self, req: s.ExportRequest) -> s.Artifact:
         write, name = self._exporter(req.program_id, req.fmt, req.module_targets)

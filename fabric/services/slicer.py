@@ -28,11 +28,11 @@ class SlicerService(Service):
         super().__init__(session, cell_id, data_dir)
         self.plate_size_mm, self.build_height_mm = plate_size_mm, build_height_mm
         self.jobs = JobRunner("slicer", self.publisher("progress", lossless=True))
-        self.results: dict[str, s.SliceResult] = {}
         self.handle("slice", self.on_slice)
         self.handle("job", lambda q: self.jobs.get(q.job_id))
         self.handle("result", self.on_result)
         self.handle("backends", self.on_backends)
+        self.serve_pins()
 
     def close(self) -> None:
         super().close()
@@ -53,18 +53,21 @@ class SlicerService(Service):
                           plate_size_mm=self.plate_size_mm, build_height_mm=self.build_height_mm,
                           progress=lambda fr: job.progress(fr, "slicing"))
         data = res.gcode.encode() if isinstance(res.gcode, str) else bytes(res.gcode)
-        gid = self.store_artifact(s.Artifact(artifact_id=content_id(data), name=req.filename.rsplit(".", 1)[0] + ".gcode",
+        name = req.filename.rsplit(".", 1)[0] + ".gcode"
+        gid = self.store_artifact(s.Artifact(artifact_id=content_id(data), name=name,
                                              media_type=GCODE_MEDIA_TYPE, data=data))
-        self.results[gid] = s.SliceResult(gcode_id=gid, backend=res.backend, layers=int(res.layers),
-                                          extruded_mm3=float(res.extruded_mm3), filament_mm=float(res.filament_mm),
-                                          model_volume_mm3=float(res.model_volume_mm3), faces=int(res.faces),
-                                          elapsed_s=float(res.elapsed_s), warnings=list(res.warnings))
+        result = s.SliceResult(gcode_id=gid, backend=res.backend, layers=int(res.layers),
+                               extruded_mm3=float(res.extruded_mm3), filament_mm=float(res.filament_mm),
+                               model_volume_mm3=float(res.model_volume_mm3), faces=int(res.faces),
+                               elapsed_s=float(res.elapsed_s), warnings=list(res.warnings))
+        self.records.put("slice", gid, result)
         return gid
 
     def on_result(self, req: s.ArtifactQuery) -> s.SliceResult:
-        if req.artifact_id not in self.results:
+        result = self.records.get("slice", req.artifact_id, s.SliceResult)
+        if result is None:
             raise NotFound(f"no slicing result {req.artifact_id}", artifact_id=req.artifact_id)
-        return self.results[req.artifact_id]
+        return result
 
     def on_backends(self, _: s.Empty) -> s.Backends:
         return s.Backends(backends={k: v or "" for k, v in available_backends().items()}, profiles=list_profiles())

@@ -47,6 +47,7 @@ __all__ = ["StationService", "build", "add_arguments"]
 TICK_S = 0.02
 STATE_PERIOD_S = 0.5          # state also re-published at this period (progress)
 STALL_S = 0.5                 # a tick this late means the process was frozen or starved
+JOB_EVENTS = ("started", "layer", "paused", "resumed", "recovered", "finished", "stopped", "fault", "interrupted")
 
 
 class StationService(Service):
@@ -180,8 +181,14 @@ class StationService(Service):
             self.twin.interrupt(why + ": recover to go on")
 
     def _event_msg(self, ev) -> s.Event:
+        """The wire event; a job's events name the job and its simulated time so far."""
+        data = dict(ev.data)
+        if ev.kind in JOB_EVENTS and self.meta.job_id:
+            data.setdefault("job_id", self.meta.job_id)
+            t0 = self.twin.s.t_started_s
+            data.setdefault("elapsed_s", ev.t_sim_s - t0 if t0 is not None else 0.0)
         return s.Event(seq=ev.seq, t_sim_s=ev.t_sim_s, kind=ev.kind, row=ev.row, gcode_line=ev.gcode_line,
-                       layer=ev.layer, data=dict(ev.data))
+                       layer=ev.layer, data=data)
 
     def _pose_msg(self) -> s.Pose:
         p = self.twin.pose()
@@ -352,9 +359,10 @@ class StationService(Service):
             return self._state_msg()
 
     def on_events(self, req: s.EventsQuery) -> s.EventList:
+        last = self.journal.last_seq()
         evs = self.journal.store.events(since_seq=req.since_seq - 1, limit=req.limit)
-        nxt = evs[-1].seq + 1 if evs else max(req.since_seq, self.journal.last_seq() + 1)
-        return s.EventList(events=evs, next_seq=nxt)
+        nxt = evs[-1].seq + 1 if evs else max(req.since_seq, last + 1)
+        return s.EventList(events=evs, next_seq=nxt, last_seq=last)
 
     def on_overrides(self, req: s.Overrides) -> s.StationState:
         with self.lock:

@@ -146,12 +146,11 @@ class LegRunner:
         if kind == "finished":
             st.state, st.reason = "idle", "finished"
             st.t_ended_s = t
-            self.emit(events, t, kind, {"elapsed_s": t - (st.t_started_s or 0.0),
-                                        "extruded_mm3": job.extruded_mm3, "beads": len(st.beads)})
+            self.emit(events, t, kind, self._totals(t))
         elif kind == "stopped":
             self.record_partial()
             st.t_ended_s = t
-            self.emit(events, t, kind, {"extruded_mm3": job.extruded_mm3, "beads": len(st.beads)})
+            self.emit(events, t, kind, self._totals(t))
         elif kind in ("resumed", "recovered"):
             job.resume_at = None
             self.emit(events, t, kind)
@@ -161,6 +160,14 @@ class LegRunner:
                                         "xyz_mm": at.pose.xyz_mm.tolist()})
         else:
             self.emit(events, t, kind)
+
+    def _totals(self, t: float) -> dict[str, Any]:
+        """What a finished or stopped job did: simulated duration, volume, filament, beads."""
+        st = self.state
+        job = st.job
+        filament_mm = job.extruded_mm3 / self.builder.config.filament_area_mm2 + job.retract_total_mm
+        return {"elapsed_s": t - (st.t_started_s or 0.0), "extruded_mm3": job.extruded_mm3,
+                "filament_mm": filament_mm, "beads": len(st.beads)}
 
     def emit(self, events: list[Event], t: float, kind: str, data: dict[str, Any] | None = None) -> None:
         """Append the next event (``seq`` counts on across the twin's life)."""

@@ -255,6 +255,7 @@ class Twin:
         st.estimate_s = leg.tl.total_s
         st.t_started_s, st.t_ended_s = st.t_sim_s, None
         st.state, st.reason = "printing", "started"
+        self.runner.emit(st.pending, st.t_sim_s, "started", {"rows": len(st.program), "estimate_s": st.estimate_s})
 
     def pause(self) -> None:
         """Controlled stop, extruder off, retract, lift; ``paused`` event once the robot is clear."""

@@ -1,0 +1,121 @@
+"""CLI commands for print jobs: submit (a model or G-code), list, show, remove, move, next."""
+from __future__ import annotations
+
+import argparse
+import queue
+import sys
+import time
+from pathlib import Path
+
+from fabric import schemas as s
+from fabric.cli.output import emit
+from fabric.cli.pipeline_cmds import parse_sets, read_input
+from fabric.client import Client
+from fabric.follow import follow_print
+
+__all__ = ["register"]
+
+GCODE_SUFFIXES = (".gcode", ".gco", ".g", ".nc")
+
+
+def _settled(rec: s.JobRecord) -> bool:
+    """Submission is over: the job is on the station, prepared and waiting, or ended."""
+    return rec.state in s.ON_STATION_JOB_STATES or rec.prepared or rec.state in s.FINAL_JOB_STATES
+
+
+def _show_change(quiet: bool):
+    if quiet:
+        return None
+
+    def show(rec: s.JobRecord) -> None:
+        print(f"\r  {rec.state:<10} {rec.stage[:48]:<48}", end="", file=sys.stderr, flush=True)
+    return show
+
+
+def _when(t_s: float) -> str:
+    return time.strftime("%H:%M:%S", time.localtime(t_s)) if t_s else "-"
+
+
+def _row(rec: s.JobRecord) -> str:
+    took = f"{rec.sim_elapsed_s:8.1f}" if rec.started_s else "       -"
+    return (f"{rec.job_id}  {rec.state:<11} {_when(rec.created_s)}  {took}  {rec.deposited_mm3:10.0f}  "
+            f"{rec.filename[:28]:<28}  {rec.reason or rec.stage}")
+
+
+def _list_text(jobs: s.JobList) -> str:
+    if not jobs.jobs:
+        return "no jobs"
+    head = f"{'job':<12}  {'state':<11} {'created':<8}  {'sim s':>8}  {'mm3':>10}  {'file':<28}  stage / reason"
+    return "\n".join([head] + [_row(r) for r in jobs.jobs])
+
+
+def _record_text(rec: s.JobRecord) -> str:
+    lines = [f"job {rec.job_id}: {rec.filename} ({rec.source}) {rec.state}" + (" (prepared)" if rec.prepared else ""),
+             f"  stage      {rec.stage}"]
+    if rec.reason:
+        lines.append(f"  reason     {rec.reason}")
+    lines.append(f"  created    {_when(rec.created_s)}   started {_when(rec.started_s)}   ended {_when(rec.ended_s)}")
+    if rec.started_s:
+        lines.append(f"  duration   {rec.sim_elapsed_s:.1f} s simulated, {rec.wall_elapsed_s:.1f} s wall")
+        lines.append(f"  material   {rec.deposited_mm3:.0f} mm3 deposited, {rec.filament_mm:.0f} mm of filament")
+    if rec.plan is not None:
+        lines.append(f"  plan       {rec.plan.moves} moves, {rec.plan.layers} layers, "
+                     f"{rec.plan.extruded_mm3:.0f} mm3, estimate {rec.plan.estimate_s:.1f} s")
+    if rec.error is not None:
+        lines.append(f"  error      [{rec.error.code}] {rec.error.message}")
+    return "\n".join(lines)
+
+
+def cmd_submit(c: Client, a: argparse.Namespace) -> int:
+    source = "gcode" if Path(a.file).suffix.lower() in GCODE_SUFFIXES else "model"
+    req = s.JobSubmit(model=read_input(a.file), filename=Path(a.file).name, source=source, profile=a.profile,
+                      backend=a.backend, overrides=parse_sets(a.set), start=a.start, rtf=a.rtf)
+    acc = c.submit(req)
+    if not (a.wait or a.follow):
+        emit(acc, a.json, lambda r: f"job {r.job_id} queued")
+        return 0
+    rec = c.wait_print_job(acc.job_id, _settled, timeout=a.timeout or 3600.0, on_change=_show_change(a.json))
+    if not a.json:
+        print(file=sys.stderr)
+    result: dict = {"job": rec}
+    if a.follow and rec.state in ("printing", "loaded") and a.start:
+        try:
+            result["end"] = follow_print(c, timeout_s=a.timeout)
+        except queue.Empty:
+            result["end"] = None
+        result["job"] = c.job(acc.job_id)
+        result["time"] = c.time()
+    emit(result, a.json, lambda r: _record_text(r["job"])
+         + (f"\n  print {r['end'].kind} at t={r['end'].t_sim_s:.1f} s" if r.get("end") else ""))
+    return 1 if result["job"].state == "failed" else 0
+
+
+def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    job = sub.add_parser("job", help="print jobs: a durable queue (slice -> plan -> check -> load -> print)")
+    jsub = job.add_subparsers(dest="job_cmd", required=True)
+    p = jsub.add_parser("submit", parents=[common], help="queue a model (STL/OBJ/3MF) or a G-code file")
+    p.add_argument("file")
+    p.add_argument("--profile", default="taz-pla-medium")
+    p.add_argument("--backend", default="builtin", choices=s.pipeline.BACKENDS)
+    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a profile key")
+    p.add_argument("--start", action="store_true", help="start printing once loaded (when the plate is clear)")
+    p.add_argument("--rtf", type=float, default=0.0, help="real-time factor when started (0 = max)")
+    p.add_argument("--wait", action="store_true", help="wait until the job is prepared or loaded")
+    p.add_argument("--follow", action="store_true", help="with --start: wait for the print to end")
+    p.add_argument("--timeout", type=float, default=None)
+    p.set_defaults(run=cmd_submit)
+    p = jsub.add_parser("list", parents=[common], help="the queue and the history")
+    p.set_defaults(run=lambda c, a: (emit(c.jobs(), a.json, _list_text), 0)[1])
+    for name in ("show", "status"):
+        p = jsub.add_parser(name, parents=[common], help="one job's whole record")
+        p.add_argument("job_id")
+        p.set_defaults(run=lambda c, a: (emit(c.job(a.job_id), a.json, _record_text), 0)[1])
+    p = jsub.add_parser("remove", parents=[common], help="remove a job that is not on the station")
+    p.add_argument("job_id")
+    p.set_defaults(run=lambda c, a: (emit(c.job_remove(a.job_id), a.json, lambda r: r.message), 0)[1])
+    p = jsub.add_parser("move", parents=[common], help="move a waiting job to a place in the queue (0 = next)")
+    p.add_argument("job_id")
+    p.add_argument("position", type=int)
+    p.set_defaults(run=lambda c, a: (emit(c.job_move(a.job_id, a.position), a.json, _list_text), 0)[1])
+    p = jsub.add_parser("next", parents=[common], help="the plate is clear: load and start the next job")
+    p.set_defaults(run=lambda c, a: (emit(c.job_next(), a.json, _record_text), 0)[1])

@@ -1,0 +1,120 @@
+"""Preparing a print job: slice (unless it is G-code), plan, check collisions; each stage survives a
+restart of the service it calls.
+
+Every stage calls the owning service over the fabric and waits for its job.
+A stage whose service is gone (``unavailable``) or restarted and forgot the
+job (``not_found``) is retried from its start with a growing pause, within a
+budget: the launcher restarts dead services, and results are content-addressed
+and kept on disk, so a retried stage ends with the same artifact. Any other
+typed error (a broken mesh, an unreachable target, a collision) fails the job
+with that error.
+"""
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+from fabric import schemas as s
+from fabric.client import Client
+from fabric.errors import CollisionError, FabricError, NotFound, ServiceUnavailable, UnreachableError
+from fabric.store.artifacts import ArtifactStore
+
+__all__ = ["Preparer", "PrepareCancelled", "RETRY_BUDGET_S"]
+
+log = logging.getLogger("fabric.printjobs")
+RETRY_BUDGET_S = 180.0
+_PAUSES_S = (0.25, 0.5, 1.0, 2.0, 4.0)
+
+
+class PrepareCancelled(Exception):
+    """The job was removed (or the supervisor is closing) while it was being prepared."""
+
+
+class Preparer:
+    """Runs the preparation stages of one job at a time (see the module docstring)."""
+
+    def __init__(self, client: Client, models: ArtifactStore, save: Callable[[s.JobRecord], None],
+                 closed: threading.Event, budget_s: float = RETRY_BUDGET_S) -> None:
+        self.client = client
+        self.models = models
+        self.save = save
+        self.closed = closed
+        self.budget_s = budget_s
+
+    def prepare(self, rec: s.JobRecord) -> None:
+        """Slice, plan and check ``rec``: on success it is ``prepared`` (still queued); on a typed
+        error it is ``failed`` with the error. Progress is saved (and published) as it goes."""
+        try:
+            if rec.source == "model":
+                self._stage(rec, "slicing", 0.0, lambda: self._slice(rec))
+            self._stage(rec, "planning", 0.3, lambda: self._plan(rec))
+            self._stage(rec, "checking", 0.7, lambda: self._check(rec))
+        except FabricError as err:
+            wire = err.to_wire()
+            rec.state, rec.reason = "failed", f"{err.code}: {err.message}"
+            rec.error = s.ErrorReply(code=wire["code"], message=wire["message"], details=wire["details"])
+            rec.stage, rec.ended_s = "failed", time.time()
+            log.info("job %s failed: %s", rec.job_id, rec.reason)
+            self.save(rec)
+            return
+        rec.state, rec.prepared, rec.progress_r = "queued", True, 0.0
+        rec.stage = "prepared: waiting for the station"
+        self.save(rec)
+
+    # Stages -------------------------------------------------------------------------------
+
+    def _stage(self, rec: s.JobRecord, state: str, progress_r: float, run: Callable[[], None]) -> None:
+        rec.state, rec.stage, rec.progress_r = state, state, progress_r
+        self.save(rec)
+        deadline = time.monotonic() + self.budget_s
+        for attempt in range(1_000_000):
+            if self.closed.is_set():
+                raise PrepareCancelled(rec.job_id)
+            try:
+                run()
+                return
+            except (ServiceUnavailable, NotFound) as err:
+                if time.monotonic() >= deadline:
+                    raise ServiceUnavailable(f"{state} did not complete within {self.budget_s:g} s: {err.message}",
+                                             timeout_s=self.budget_s) from err
+                pause = _PAUSES_S[min(attempt, len(_PAUSES_S) - 1)]
+                rec.stage = f"{state}: retrying ({err.code}: {err.message})"
+                log.warning("job %s: %s failed (%s: %s); retrying in %.2f s", rec.job_id, state, err.code,
+                            err.message, pause)
+                self.save(rec)
+                self.closed.wait(pause)
+
+    def _slice(self, rec: s.JobRecord) -> None:
+        model = self.models.get(rec.model_id).data
+        acc = self.client.slice(s.SliceRequest(model=model, filename=rec.filename, profile=rec.profile,
+                                               backend=rec.backend, overrides=dict(rec.overrides)))
+        done = self.client.wait_job("slicer", acc.job_id, timeout=self.budget_s)
+        rec.gcode_id = done.result_id
+        self.client.pin("slicer", rec.gcode_id, rec.job_id)
+
+    def _plan(self, rec: s.JobRecord) -> None:
+        station = self.client.state()      # plan against the station's current (possibly calibrated) work object
+        name = rec.filename.rsplit(".", 1)[0] + ".gcode"
+        gcode = self.models.get(rec.model_id).data if rec.source == "gcode" else b""
+        acc = self.client.plan(s.PlanRequest(gcode=gcode, gcode_id=rec.gcode_id if not gcode else "",
+                                             filename=name, wobj_xyz_mm=station.wobj_xyz_mm,
+                                             wobj_rpy_deg=station.wobj_rpy_deg))
+        done = self.client.wait_job("planner", acc.job_id, timeout=self.budget_s)
+        summary = self.client.plan_summary(done.result_id)
+        rec.program_id, rec.plan = done.result_id, summary
+        self.client.pin("planner", rec.program_id, rec.job_id)
+        fu = summary.first_unreachable
+        if fu is not None:
+            raise UnreachableError(f"the program has unreachable targets, the first at G-code line "
+                                   f"{fu.gcode_line}: {fu.reason}", gcode_line=fu.gcode_line, reason=fu.reason,
+                                   row=fu.row)
+
+    def _check(self, rec: s.JobRecord) -> None:
+        report = self.client.check(s.CollisionRequest(program_id=rec.program_id))
+        rec.collisions = report
+        hit = report.first_hit
+        if hit is not None:
+            raise CollisionError(f"collision at t={hit.t_s:.2f} s, G-code line {hit.gcode_line}: "
+                                 f"{hit.body_a} hits {hit.body_b}", **s.to_plain(hit))
