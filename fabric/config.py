@@ -21,6 +21,8 @@ __all__ = ["SessionSettings", "DEFAULT_HUB", "add_data_argument", "default_data_
 
 DEFAULT_HUB = os.environ.get("FABRIC_HUB", "tcp/127.0.0.1:7447")
 DATA_ROOT_ENV = "FABRIC_DATA_DIR"
+DEFAULT_LEASE_MS = int(os.environ.get("FABRIC_LEASE_MS", "1000"))
+KEEP_ALIVE_PER_LEASE = 4
 MODES = ("peer", "client", "router")
 
 
@@ -34,6 +36,7 @@ class SessionSettings:
     multicast: bool = False
     gossip: bool = True
     cell: str = "cell1"
+    lease_ms: int = DEFAULT_LEASE_MS      # a link silent this long is closed: a frozen process is gone
 
     def to_args(self) -> list[str]:
         """The same settings as command-line flags (for launching child processes)."""
@@ -46,6 +49,8 @@ class SessionSettings:
             args += ["--config", self.config_file]
         if self.multicast:
             args += ["--multicast"]
+        if self.lease_ms != DEFAULT_LEASE_MS:
+            args += ["--lease-ms", str(self.lease_ms)]
         return args
 
 
@@ -59,6 +64,9 @@ def add_session_args(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--listen", action="append", metavar="ENDPOINT", help="endpoint to listen on")
     g.add_argument("--multicast", action="store_true", help="enable multicast scouting (off by default)")
     g.add_argument("--cell", default=os.environ.get("FABRIC_CELL", "cell1"), help="cell name: the key prefix am/<cell>/")
+    g.add_argument("--lease-ms", type=int, default=DEFAULT_LEASE_MS,
+                   help="link lease: a peer silent this long (frozen, cut off) is dropped and its services "
+                        "reported gone (default %(default)s, $FABRIC_LEASE_MS)")
 
 
 def default_data_root() -> Path:
@@ -105,6 +113,7 @@ def settings_from_args(ns: argparse.Namespace, default_mode: str = "peer") -> Se
         st.listen = list(ns.listen)
     st.config_file = ns.zconfig
     st.multicast = bool(ns.multicast)
+    st.lease_ms = int(getattr(ns, "lease_ms", DEFAULT_LEASE_MS))
     return st
 
 
@@ -114,6 +123,9 @@ def zenoh_config(st: SessionSettings) -> zenoh.Config:
     conf.insert_json5("mode", json.dumps(st.mode))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(st.multicast))
     conf.insert_json5("scouting/gossip/enabled", json.dumps(st.gossip))
+    if not st.config_file or st.lease_ms != DEFAULT_LEASE_MS:
+        conf.insert_json5("transport/link/tx/lease", json.dumps(st.lease_ms))
+        conf.insert_json5("transport/link/tx/keep_alive", json.dumps(KEEP_ALIVE_PER_LEASE))
     connect = [ep for ep in st.connect if ep not in st.listen]
     if connect:
         conf.insert_json5("connect/endpoints", json.dumps(connect))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import queue
+import shutil
 import socket
 import sys
 import time
@@ -117,7 +118,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rtf", type=float, default=0.0, help="real-time factor (0 = as fast as possible)")
     a = p.parse_args(argv)
     settings = SessionSettings(connect=[f"tcp/127.0.0.1:{_free_port()}"], cell="demo")
-    cell = CellProcesses(settings, log_dir=a.out / "logs")
+    data = a.out / "data"                    # the cell's durable state: fresh for every demo run
+    shutil.rmtree(data, ignore_errors=True)
+    cell = CellProcesses(settings, log_dir=a.out / "logs", data_dir=data)
     print(f"starting the cell (5 services, logs in {a.out / 'logs'}) ...")
     try:
         cell.start(deadline_s=120)

@@ -60,7 +60,7 @@ def running_cell(tmp_path_factory):
     """The five services as separate processes, awaited by liveliness with a deadline."""
     st = make_settings()
     logs = Path(tmp_path_factory.mktemp("cell-logs"))
-    cell = CellProcesses(st, log_dir=logs)
+    cell = CellProcesses(st, log_dir=logs, data_dir=Path(tmp_path_factory.mktemp("cell-data")))
     cell.start(deadline_s=90.0)
     yield cell
     cell.stop()

@@ -52,8 +52,7 @@ def test_status_lists_five_alive_and_a_killed_one_dead_within_a_second(running_c
     out = cli(running_cell.settings, "status", "--json")
     assert {i["name"]: i["alive"] for i in json.loads(out.stdout)["services"]}["slicer"] is False
     assert out.returncode == 3
-    running_cell.exited.pop("slicer", None)
-    running_cell.spawn("slicer")                     # restore for the other tests
+    running_cell.respawn("slicer")                   # restore for the other tests
     client.wait_alive(("slicer",), deadline_s=60)
 
 

@@ -45,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--services", nargs="+", choices=SERVICES, default=list(SERVICES))
     p.add_argument("--no-hub", action="store_true", help="do not host the hub (a router runs elsewhere)")
     p.add_argument("--log-dir", type=Path, default=None, help="write each service's log there")
+    add_data_argument(p)
     add_cell_argument(p, "for every service of the cell")
     p.set_defaults(local=_cmd_up)
 
@@ -97,7 +98,7 @@ def _cmd_up(a: argparse.Namespace) -> int:
     extra = {}
     if a.cell_config:
         extra = {n: ["--cell-config", a.cell_config] for n in ("station", "slicer", "planner", "collision")}
-    return run_up(settings_from_args(a), tuple(a.services), not a.no_hub, a.log_dir, extra)
+    return run_up(settings_from_args(a), tuple(a.services), not a.no_hub, a.log_dir, extra, a.data_dir)
 
 
 def _cmd_router(a: argparse.Namespace) -> int:

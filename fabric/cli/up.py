@@ -1,23 +1,40 @@
-"""``fabric-cli up``: host the fabric hub and run every service as its own process on one host."""
+"""``fabric-cli up``: host the fabric hub and run every service as its own supervised process on one host.
+
+The children run in one process group of their own (so Ctrl-C in the terminal
+reaches only the launcher, which stops a running print first) and die with
+the launcher even if it is killed (``PR_SET_PDEATHSIG``). A child that exits
+is reported and restarted with a growing pause (0.5 s, doubling up to 30 s;
+back to 0.5 s once it has run for a minute). With ``--listen`` the hub
+listens there and the children connect there; with ``--connect`` (and
+``--no-hub``) they join a hub elsewhere.
+"""
 from __future__ import annotations
 
+import ctypes
 import os
+import queue
 import signal
 import subprocess
 import sys
 import threading
 import time
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import zenoh
 
 from fabric.client import Client
 from fabric.config import SessionSettings, zenoh_config
-from fabric.errors import ServiceUnavailable
+from fabric.errors import FabricError, ServiceUnavailable
 from fabric.keys import SERVICES, Keys
 
 __all__ = ["CellProcesses", "hub_settings", "run_up"]
+
+BACKOFF_FIRST_S = 0.5
+BACKOFF_MAX_S = 30.0
+HEALTHY_AFTER_S = 60.0
+STOP_PRINT_WAIT_S = 30.0
+_PR_SET_PDEATHSIG = 1
 
 
 def hub_settings(settings: SessionSettings) -> SessionSettings:
@@ -25,94 +42,188 @@ def hub_settings(settings: SessionSettings) -> SessionSettings:
     return replace(settings, mode="router", listen=list(settings.listen or settings.connect), connect=[])
 
 
+def _die_with_parent() -> None:
+    """In the child, before exec: receive SIGTERM when the launcher dies (Linux)."""
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    except OSError:
+        pass                       # not Linux: the process group still lets the launcher stop them
+
+
+@dataclass
+class _Child:
+    """One supervised service: its process, restarts and when it may be started again."""
+
+    name: str
+    proc: subprocess.Popen
+    started_s: float
+    restarts: int = 0
+    backoff_s: float = BACKOFF_FIRST_S
+    due_s: float | None = None     # restart planned at this monotonic time
+    codes: list[int] = field(default_factory=list)
+
+
 class CellProcesses:
-    """The five service processes of one cell (plus the hub), started and stopped together.
+    """The five service processes of one cell (plus the hub), started, supervised and stopped together.
 
     (Not the cell *model*, ``fabric.robot.cell.Cell``: this is the set of running processes.)"""
 
     def __init__(self, settings: SessionSettings, services: tuple[str, ...] = SERVICES, host_hub: bool = True,
-                 log_dir: Path | None = None, extra_args: dict[str, list[str]] | None = None) -> None:
-        self.settings, self.services, self.host_hub = settings, services, host_hub
-        self.log_dir, self.extra_args = log_dir, extra_args or {}
-        self.procs: dict[str, subprocess.Popen] = {}
+                 log_dir: Path | None = None, extra_args: dict[str, list[str]] | None = None,
+                 data_dir: Path | None = None) -> None:
+        self.services, self.host_hub = services, host_hub
+        self.log_dir, self.extra_args, self.data_dir = log_dir, extra_args or {}, data_dir
+        # the hub listens on --listen (else on the --connect endpoint); everyone else connects there
+        hub_eps = list(settings.listen or settings.connect) if host_hub else list(settings.connect)
+        self.settings = replace(settings, connect=hub_eps, listen=[])
+        self.children: dict[str, _Child] = {}
         self.hub: zenoh.Session | None = None
-        self.exited: dict[str, int] = {}
+        self._pgid: int | None = None
+
+    @property
+    def procs(self) -> dict[str, subprocess.Popen]:
+        """The current process of each service."""
+        return {name: c.proc for name, c in self.children.items()}
 
     def start(self, deadline_s: float = 60.0) -> None:
+        """Host the hub, start every service and wait until all are alive (or stop them all)."""
         if self.host_hub:
             self.hub = zenoh.open(zenoh_config(hub_settings(self.settings)))
-        for name in self.services:
-            self.spawn(name)
-        with Client.connect(self.settings) as client:
-            try:
+        try:
+            for name in self.services:
+                self.children[name] = _Child(name, self._spawn(name), time.monotonic())
+            with Client.connect(self.settings) as client:
                 client.wait_alive(self.services, deadline_s)
-            except ServiceUnavailable:
-                dead = {n: p.poll() for n, p in self.procs.items() if p.poll() is not None}
-                self.stop()
-                raise ServiceUnavailable(f"services did not come up within {deadline_s:g} s; exited: {dead}",
-                                         exited=dead) from None
+        except (ServiceUnavailable, OSError) as exc:
+            dead = {n: c.proc.poll() for n, c in self.children.items() if c.proc.poll() is not None}
+            self.stop()
+            raise ServiceUnavailable(f"services did not come up within {deadline_s:g} s ({exc}); exited: {dead}",
+                                     exited=dead) from None
 
-    def spawn(self, name: str) -> subprocess.Popen:
-        child = replace(self.settings, listen=[])      # children connect to the hub; they never take its port
-        cmd = [sys.executable, "-m", "fabric.cli.main", "serve", name, *child.to_args(),
-               *self.extra_args.get(name, [])]
+    def _spawn(self, name: str) -> subprocess.Popen:
+        cmd = [sys.executable, "-m", "fabric.cli.main", "serve", name, *self.settings.to_args()]
+        if self.data_dir is not None:
+            cmd += ["--data-dir", str(self.data_dir)]
+        cmd += self.extra_args.get(name, [])
         out = None
         if self.log_dir is not None:
             self.log_dir.mkdir(parents=True, exist_ok=True)
             out = open(self.log_dir / f"{name}.log", "ab")
         env = dict(os.environ, PYTHONUNBUFFERED="1")
-        proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT if out else None, env=env,
-                                start_new_session=True)
-        self.procs[name] = proc
+        try:
+            proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT if out else None, env=env,
+                                    process_group=self._pgid or 0, preexec_fn=_die_with_parent)
+        except (PermissionError, subprocess.SubprocessError):
+            # the group is gone (all its members exited): start a new one
+            proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT if out else None, env=env,
+                                    process_group=0, preexec_fn=_die_with_parent)
+            self._pgid = proc.pid
+        if self._pgid is None:
+            self._pgid = proc.pid
         return proc
 
-    def poll_dead(self) -> dict[str, int]:
-        """Children that exited since the last call (name -> exit code)."""
-        new = {}
-        for name, p in self.procs.items():
-            rc = p.poll()
-            if rc is not None and name not in self.exited:
-                self.exited[name] = new[name] = rc
-        return new
+    def respawn(self, name: str) -> subprocess.Popen:
+        """Start service ``name`` again now (its previous process has exited)."""
+        c = self.children[name]
+        c.proc, c.started_s, c.due_s = self._spawn(name), time.monotonic(), None
+        return c.proc
 
-    def stop(self, grace_s: float = 5.0) -> None:
-        for p in self.procs.values():
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        end = time.monotonic() + grace_s
-        for p in self.procs.values():
+    def supervise(self, say=print) -> bool:
+        """Report children that exited, and restart them when their pause is over; True if any died."""
+        died = False
+        now = time.monotonic()
+        for c in self.children.values():
+            code = c.proc.poll()
+            if code is not None and c.due_s is None:
+                died = True
+                if now - c.started_s >= HEALTHY_AFTER_S:
+                    c.backoff_s = BACKOFF_FIRST_S
+                c.codes.append(code)
+                c.due_s = now + c.backoff_s
+                say(f"!! service {c.name} exited with code {code}; restarting it in {c.backoff_s:g} s"
+                    + (f" (see {self.log_dir / (c.name + '.log')})" if self.log_dir else ""))
+            elif c.due_s is not None and now >= c.due_s:
+                c.proc, c.started_s, c.due_s = self._spawn(c.name), now, None
+                c.restarts += 1
+                c.backoff_s = min(c.backoff_s * 2.0, BACKOFF_MAX_S)
+                say(f"   service {c.name} restarted (pid {c.proc.pid}, restart {c.restarts})")
+        return died
+
+    def stop(self, grace_s: float = 10.0) -> None:
+        """SIGTERM to every child (the group), then SIGKILL to those still running after ``grace_s``."""
+        for c in self.children.values():
+            if c.proc.poll() is None:
+                c.proc.send_signal(signal.SIGTERM)
+        if self._pgid is not None:
             try:
-                p.wait(timeout=max(0.1, end - time.monotonic()))
+                os.killpg(self._pgid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass                    # every member has already exited
+        end = time.monotonic() + grace_s
+        for c in self.children.values():
+            try:
+                c.proc.wait(timeout=max(0.1, end - time.monotonic()))
             except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+                c.proc.kill()
+                c.proc.wait()
         if self.hub is not None:
             self.hub.close()
             self.hub = None
 
 
+def stop_print_first(settings: SessionSettings, say=print, wait_s: float = STOP_PRINT_WAIT_S) -> None:
+    """Before the cell goes down: a print in progress is stopped cleanly (``stopped`` recorded)."""
+    try:
+        with Client.connect(settings) as client:
+            state = client.state().state
+            if state not in ("printing", "paused"):
+                return
+            events = client.subscribe("station", "events")
+            try:
+                client.stop()
+                end = time.monotonic() + wait_s
+                while time.monotonic() < end:
+                    try:
+                        ev = events.get(timeout=max(0.1, end - time.monotonic()))
+                    except queue.Empty:
+                        break
+                    if ev.kind in ("stopped", "fault"):
+                        say(f"   the print was {state}: stopped it at layer {ev.layer + 1} (recorded)")
+                        return
+                say(f"!! the print was {state}: asked it to stop, but saw no 'stopped' within {wait_s:g} s")
+            finally:
+                events.close()
+    except FabricError as err:
+        say(f"!! could not stop the print first ({err.code}: {err.message})")
+
+
 def run_up(settings: SessionSettings, services: tuple[str, ...], host_hub: bool, log_dir: Path | None,
-           extra_args: dict[str, list[str]], out=print) -> int:
-    """Start the cell, report where it is, supervise until Ctrl-C, then stop everything."""
-    cell = CellProcesses(settings, services, host_hub, log_dir, extra_args)
+           extra_args: dict[str, list[str]], data_dir: Path | None = None, out=print) -> int:
+    """Start the cell, report where it is, supervise until Ctrl-C, stop a running print, then stop everything."""
+    cell = CellProcesses(settings, services, host_hub, log_dir, extra_args, data_dir)
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
     t0 = time.monotonic()
-    cell.start()
-    out(f"cell '{settings.cell}' up in {time.monotonic() - t0:.1f} s; hub "
-        f"{', '.join(settings.connect) if host_hub else '(external) ' + ', '.join(settings.connect)}")
+    try:
+        cell.start()
+    except ServiceUnavailable as err:
+        out(f"!! {err.message}")
+        return 1
+    hub = ", ".join(cell.settings.connect)
+    out(f"cell '{settings.cell}' up in {time.monotonic() - t0:.1f} s; hub {hub if host_hub else '(external) ' + hub}")
     keys = Keys(settings.cell)
     for name, p in cell.procs.items():
         out(f"  {name:<11} pid {p.pid:<7} {keys.cmd_all(name)}")
-    out("Ctrl-C stops every service.")
+    out("Ctrl-C stops the print (if one runs), then every service.")
     rc = 0
     try:
         while not stop.wait(0.2):
-            for name, code in cell.poll_dead().items():
-                out(f"!! service {name} exited with code {code}" + (f" (see {log_dir / (name + '.log')})" if log_dir else ""))
+            if cell.supervise(out):
                 rc = 1
     finally:
+        if "station" in services:
+            stop_print_first(cell.settings, out)
         out("stopping services ...")
         cell.stop()
     return rc

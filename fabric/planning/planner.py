@@ -39,6 +39,7 @@ from fabric.motion.program import APPROACH, MOVEJ, MOVEL, PRINT, RETURN_HOME, SE
 __all__ = ["plan_gcode", "plan_gcode_file", "plan_toolpath"]
 
 Progress = Callable[[float], None]
+ProgramReady = Callable[[Program], None]     # told the program once it is final
 JUMP_DEG = 45.0          # joint step between consecutive linear targets flagged as a jump
 
 
@@ -50,26 +51,28 @@ def _sub(progress: Progress | None, a: float, b: float) -> Progress | None:
 
 
 def plan_gcode(text: str | bytes, cell: Any, options: PlanOptions | None = None,
-               progress: Progress | None = None, filename: str | None = None) -> PlanResult:
+               progress: Progress | None = None, filename: str | None = None,
+               on_program: ProgramReady | None = None) -> PlanResult:
     """Plan G-code held in memory for ``cell`` (a :class:`fabric.robot.cell.Cell`).
 
     ``filename`` (optional) names the job: the program's ``meta`` gets
-    ``filename`` and ``name`` (its stem), which exports use.
+    ``filename`` and ``name`` (its stem), which exports use. ``on_program`` is
+    called with the program as soon as it is final, before the cycle-time
+    estimate (e.g. to start encoding it on another thread); it must not change it.
     """
-    return _parse_and_plan(parse_gcode, text, cell, options, progress, filename)
+    return _parse_and_plan(parse_gcode, text, cell, options, progress, filename, on_program)
 
 
 def _parse_and_plan(parse: Callable[..., Toolpath], source: Any, cell: Any, options: PlanOptions | None,
-                    progress: Progress | None, filename: str | os.PathLike[str] | None) -> PlanResult:
+                    progress: Progress | None, filename: str | os.PathLike[str] | None,
+                    on_program: ProgramReady | None = None) -> PlanResult:
     """Parse (first quarter of the progress), plan the rest, name the program after ``filename``."""
     opt = options or PlanOptions()
     t0 = time.perf_counter()
     tp = parse(source, chord_tol_mm=opt.chord_tol_mm, progress=_sub(progress, 0.0, 0.25))
-    res = plan_toolpath(tp, cell, opt, _sub(progress, 0.25, 1.0), parse_s=time.perf_counter() - t0)
-    if filename:
-        path = Path(filename)
-        res.program.meta.update(filename=path.name, name=path.stem)
-    return res
+    meta = {"filename": Path(filename).name, "name": Path(filename).stem} if filename else {}
+    return plan_toolpath(tp, cell, opt, _sub(progress, 0.25, 1.0), parse_s=time.perf_counter() - t0, meta=meta,
+                         on_program=on_program)
 
 
 def plan_gcode_file(path: str | os.PathLike[str], cell: Any, options: PlanOptions | None = None,
@@ -254,8 +257,12 @@ def _joint_speeds(prog: Program, cell: Any, v_mm_s: float) -> None:
 
 
 def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
-                  progress: Progress | None = None, *, parse_s: float = 0.0) -> PlanResult:
-    """Plan an interpreted toolpath for ``cell`` (see the module docstring)."""
+                  progress: Progress | None = None, *, parse_s: float = 0.0, meta: dict[str, Any] | None = None,
+                  on_program: ProgramReady | None = None) -> PlanResult:
+    """Plan an interpreted toolpath for ``cell`` (see the module docstring).
+
+    ``meta`` is added to the program's; ``on_program`` gets the program once it is final (see :func:`plan_gcode`).
+    """
     opt = options or PlanOptions()
     t0 = time.perf_counter()
     prog, n_print = _assemble(tp, cell, opt)
@@ -268,6 +275,9 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
     motion = prog.op <= MOVEL
     motion[-1] = False                       # the home move is not an IK target
     report = Reachability.from_status(status, rot, motion, prog.gcode_line)
+    prog.meta.update(print_rows=n_print, options=opt.to_dict(), **(meta or {}))
+    if on_program is not None:               # the program is final: the estimate below only reads it
+        on_program(prog)
     t2 = time.perf_counter()
     estimate = float("nan")
     slowed_rows = slowed_joint = t_end = None
@@ -294,6 +304,5 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
         travel_lifts=int(prog.meta["travel_lifts"]), fan_events_dropped=int(prog.meta["fan_events_dropped"]),
         gcode_lines=tp.n_lines, unknown_commands=dict(tp.unknown_commands), slicer=tp.slicer,
         parse_s=parse_s, ik_s=ik_s, timing_s=timing_s, total_s=parse_s + time.perf_counter() - t0)
-    prog.meta.update(print_rows=n_print, options=opt.to_dict())
     return PlanResult(program=prog, report=report, estimate_s=estimate, stats=stats, toolpath=tp,
                       slowed_rows=slowed_rows, slowed_joint=slowed_joint, t_end_s=t_end)

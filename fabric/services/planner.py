@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import io
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, TextIO
@@ -74,9 +74,11 @@ class PlannerService(Service):
         self._unstored: dict[str, s.Artifact] = {}                    # artifacts not yet on disk
         self._unstored_lock = threading.Lock()
         self._storer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner-store")
+        self._encoder = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner-encode")
 
     def close(self) -> None:
         self.jobs.close()
+        self._encoder.shutdown(wait=True)
         self._storer.shutdown(wait=True)        # artifacts still being written reach the disk first
         super().close()
 
@@ -120,10 +122,17 @@ class PlannerService(Service):
             job.progress(0.0, "fetching G-code")
             data = self.client.artifact("slicer", req.gcode_id).data
         job.progress(0.0, "planning")
+        name = req.filename.rsplit(".", 1)[0] + ".program"
+        encoding: list[Future[s.Artifact]] = []
+
+        def encode(program: Program) -> None:
+            # the program is final: encode and hash it (its id) while the plan goes on with the cycle time
+            encoding.append(self._encoder.submit(program_artifact, program, name))
+
         result = plan_gcode(data, self.cell, options, progress=lambda fr: job.progress(fr, "planning"),
-                            filename=req.filename)
+                            filename=req.filename, on_program=encode)
         program = result.program
-        art = program_artifact(program, name=req.filename.rsplit(".", 1)[0] + ".program")
+        art = encoding[0].result() if encoding else program_artifact(program, name=name)
         pid = self._store_later(art)
         self.recent.pop(pid, None)
         self.recent[pid] = PlannedProgram(program, result.t_end_s)    # for its exports (CSV times computed once)

@@ -108,7 +108,7 @@ def _cli_runs(path: Path, tmp: Path, n_runs: int) -> dict:
     fresh process (imports, upload, planning, streamed export written to disk), timed from outside.
     """
     settings = SessionSettings(connect=[f"tcp/127.0.0.1:{_free_port()}"], cell="planbench")
-    cell = CellProcesses(settings, ("planner",), log_dir=tmp / "logs")
+    cell = CellProcesses(settings, ("planner",), log_dir=tmp / "logs", data_dir=tmp / "data")
     cell.start(deadline_s=90.0)
     client_args = SessionSettings(connect=settings.connect, cell=settings.cell, mode="client").to_args()
     out: dict = {}
