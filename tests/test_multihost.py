@@ -88,5 +88,5 @@ def test_a_print_job_across_two_hosts(hosts, tmp_path):
                 "--follow", "--timeout", "180")
     assert job.returncode == 0, job.stdout + job.stderr
     res = json.loads(job.stdout)
-    assert res["job"]["state"] == "done" and res["end"]["kind"] == "finished"
+    assert res["job"]["state"] == "finished" and res["end"]["kind"] == "finished"
     assert res["time"]["remaining_s"] == pytest.approx(0.0, abs=1e-6)

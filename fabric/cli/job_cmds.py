@@ -19,8 +19,9 @@ GCODE_SUFFIXES = (".gcode", ".gco", ".g", ".nc")
 
 
 def _settled(rec: s.JobRecord) -> bool:
-    """Submission is over: the job is on the station, prepared and waiting, or ended."""
-    return rec.state in s.ON_STATION_JOB_STATES or rec.prepared or rec.state in s.FINAL_JOB_STATES
+    """Submission is over: the job is on the station, prepared and waiting for something, or ended."""
+    return (rec.state in s.ON_STATION_JOB_STATES or rec.state in s.FINAL_JOB_STATES
+            or (rec.prepared and rec.waiting_for != ""))
 
 
 def _show_change(quiet: bool):

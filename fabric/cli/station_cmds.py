@@ -157,7 +157,8 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--count", type=int, default=0, help="stop after N messages (0 = forever)")
     p.add_argument("--timeout", type=float, default=0.0, help="stop after this long without a message")
     p.set_defaults(run=cmd_watch)
-    p = sub.add_parser("mesh", parents=[common], help="export the as-printed part")
+    p = sub.add_parser("mesh", parents=[common], help="export the as-printed part, or its bead list")
     p.add_argument("-o", "--output", required=True)
-    p.add_argument("--format", choices=("stl", "glb"), default="stl")
+    p.add_argument("--format", choices=s.station.MESH_FORMATS, default="stl",
+                   help="stl or glb: the as-printed mesh; csv: one row per bead (start, end, volume)")
     p.set_defaults(run=cmd_mesh)

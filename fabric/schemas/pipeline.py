@@ -16,6 +16,7 @@ PRINT_JOB_STATES = ("queued", "slicing", "planning", "checking", "loaded", "prin
                     "finished", "stopped", "failed", "interrupted")
 FINAL_JOB_STATES = ("finished", "stopped", "failed")
 ON_STATION_JOB_STATES = ("loaded", "printing", "paused", "interrupted")
+WAITING_FOR = ("", "plate", "station", "queue")    # the operator's `job next`, a busy station, jobs ahead
 MAX_MODEL_BYTES = 256 << 20
 
 
@@ -178,6 +179,7 @@ class JobRecord:
     rtf: float = f(1.0, ge=0.0, le=1e6)
     state: str = f("queued", choices=PRINT_JOB_STATES)
     prepared: bool = False                      # sliced, planned and checked: can be loaded
+    waiting_for: str = f("", choices=WAITING_FOR)   # why a prepared job is not loaded yet ("": it will be)
     reason: str = ""                            # why it is in its state (a failure, an interruption, a stop)
     stage: str = ""                             # what it is doing now, in words
     progress_r: float = f(0.0, ge=0.0, le=1.0)

@@ -9,6 +9,7 @@ from typing import Any
 
 from fabric.schemas.base import f, schema
 
+MESH_FORMATS = ("stl", "glb", "csv")
 STATES = ("idle", "ready", "printing", "paused", "stopped", "fault", "moving", "interrupted")
 
 
@@ -148,4 +149,6 @@ class CalibrationReport:
 
 @schema("station.MeshRequest")
 class MeshRequest:
-    fmt: str = f("stl", choices=("stl", "glb"))
+    """The as-printed part: a mesh (``stl``, ``glb``) or the bead list (``csv``: one row per bead in
+    deposition order, ``x0_mm,y0_mm,z0_mm,x1_mm,y1_mm,z1_mm,volume_mm3``, plate frame)."""
+    fmt: str = f("stl", choices=MESH_FORMATS)

@@ -381,8 +381,9 @@ class StationService(Service):
         with self.lock:
             if len(self.twin.beads) == 0:
                 raise NotFound("nothing has been deposited yet")
-            data = self.twin.beads.export_mesh(req.fmt)
-        media = "model/stl" if req.fmt == "stl" else "model/gltf-binary"
+            beads = self.twin.beads
+            data = beads.export_csv() if req.fmt == "csv" else beads.export_mesh(req.fmt)
+        media = {"stl": "model/stl", "glb": "model/gltf-binary", "csv": "text/csv"}[req.fmt]
         return s.Artifact(artifact_id=content_id(data), name=f"as-printed.{req.fmt}", media_type=media, data=data)
 
 

@@ -43,6 +43,9 @@ __all__ = ["SupervisorService", "build", "add_arguments"]
 WAITING_STATES = ("queued", "slicing", "planning", "checking")
 STATION_FREE = ("idle", "ready", "stopped", "fault")
 MODEL_MEDIA = {"model": "application/octet-stream", "gcode": "text/x-gcode"}
+WAITING_TEXT = {"plate": "prepared: confirm the plate is clear (job next)",
+                "station": "prepared: waiting for the station to be free",
+                "queue": "prepared: waiting behind the jobs ahead of it"}
 
 
 class SupervisorService(Service):
@@ -209,29 +212,43 @@ class SupervisorService(Service):
                 self.log.warning("job queue: %s: %s", err.code, err.message)
 
     def _load_next(self) -> None:
-        """Load the head of the queue when it is prepared, the station has no job and the plate is clear."""
+        """Load the head of the queue when it is prepared, the station has no job and the plate is clear;
+        otherwise say on each prepared job what it waits for."""
         with self.lock:
             waiting = self._waiting()
-            if not waiting or not waiting[0].prepared or self._on_station() is not None:
-                return
-            if not self.store.plate_clear():
-                head = waiting[0]
-                if head.stage != "prepared: confirm the plate is clear (job next)":
-                    head.stage = "prepared: confirm the plate is clear (job next)"
-                    self._save(head)
+            if not waiting:
                 return
             head = waiting[0]
+            for rec in waiting[1:]:
+                self._wait_for(rec, "queue")
+            if not head.prepared:
+                return
+            if self._on_station() is not None:
+                self._wait_for(head, "station")
+                return
+            if not self.store.plate_clear():
+                self._wait_for(head, "plate")
+                return
         station = self.client.state()
         if station.state not in STATION_FREE:
             self.log.info("job %s waits: the station is %s", head.job_id, station.state)
+            self._wait_for(head, "station")
             return
         self.client.load(head.program_id, job_id=head.job_id)
-        head.state, head.stage = "loaded", "loaded on the station"
+        head.state, head.stage, head.waiting_for = "loaded", "loaded on the station", ""
         self._save(head)
         self.log.info("job %s loaded on the station", head.job_id)
         if head.start:
             self.store.set_plate_clear(False)
             self.client.start(rtf=head.rtf)
+
+    def _wait_for(self, rec: s.JobRecord, what: str) -> None:
+        """Record (once) what a prepared job waits for."""
+        if not rec.prepared or rec.waiting_for == what:
+            return
+        rec.waiting_for = what
+        rec.stage = WAITING_TEXT[what]
+        self._save(rec)
 
     def _release(self, rec: s.JobRecord) -> None:
         """The job no longer needs its artifacts: release its pins everywhere (best effort, logged)."""

@@ -17,6 +17,7 @@ that area formula. The mesh draws each bead as an octagonal prism: the
 """
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass
 
 import numpy as np
@@ -200,6 +201,15 @@ class Deposition:
             raise ValidationError(f"mesh format {fmt!r}: use 'stl' or 'glb'", field="fmt")
         data = self.mesh().export(file_type=fmt)
         return data if isinstance(data, bytes) else bytes(data)
+
+    def export_csv(self) -> bytes:
+        """The bead list, one row per bead in deposition order (plate frame; full precision)."""
+        head = "x0_mm,y0_mm,z0_mm,x1_mm,y1_mm,z1_mm,volume_mm3\n"
+        rows = np.column_stack([self.start_mm, self.end_mm, self.volume_mm3])
+        buf = io.StringIO()
+        buf.write(head)
+        np.savetxt(buf, rows, fmt="%.17g", delimiter=",")
+        return buf.getvalue().encode()
 
     def volume_report(self, model_volume_mm3: float) -> VolumeReport:
         """Extruded volume vs the model's (ratio = extruded / model)."""
