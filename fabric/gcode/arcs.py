@@ -17,9 +17,11 @@ arc (the sagitta), so the largest chord angle within tolerance ``tol`` is
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-__all__ = ["expand_arcs", "MAX_ARC_SEGMENTS", "ARC_OK", "ARC_NO_CENTRE", "ARC_ZERO_RADIUS",
+__all__ = ["expand_arcs", "ArcChords", "MAX_ARC_SEGMENTS", "ARC_OK", "ARC_NO_CENTRE", "ARC_ZERO_RADIUS",
            "ARC_RADIUS_MISMATCH", "ARC_R_TOO_SMALL", "ARC_R_FULL_CIRCLE", "ARC_TOO_MANY", "ARC_REASONS"]
 
 MAX_ARC_SEGMENTS = 10_000
@@ -59,9 +61,17 @@ def _centres(s: np.ndarray, e: np.ndarray, cw: np.ndarray, ij: np.ndarray,
     return centre
 
 
+class ArcChords(NamedTuple):
+    """Arcs expanded into chords: the points of arc ``k`` are its ``count[k]`` chord end points in order."""
+
+    count: np.ndarray          # (A,) int64, 0 for a bad arc
+    points: np.ndarray         # (P, 3) mm
+    e_mm: np.ndarray           # (P,) filament of each chord
+    status: np.ndarray         # (A,) uint8 ARC_* (ARC_OK or why the arc is bad)
+
+
 def expand_arcs(start: np.ndarray, end: np.ndarray, cw: np.ndarray, ij: np.ndarray,
-                r: np.ndarray, e_mm: np.ndarray, chord_tol_mm: float
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                r: np.ndarray, e_mm: np.ndarray, chord_tol_mm: float) -> ArcChords:
     """Expand ``A`` arcs into chords.
 
     ``start``/``end`` (A, 3) mm, ``cw`` (A,) True for G2, ``ij`` (A, 2) NaN when
@@ -109,4 +119,4 @@ def expand_arcs(start: np.ndarray, end: np.ndarray, cw: np.ndarray, ij: np.ndarr
     ok = count > 0
     pts[last[ok]] = end[ok]                      # land exactly on the programmed point
     pe = (e_mm / np.maximum(count, 1))[idx]
-    return count, pts, pe, status
+    return ArcChords(count, pts, pe, status)

@@ -1,20 +1,17 @@
 """G-code interpreter: streams blocks of lines through the lexer and resolves modal state.
 
-Per block, every known command becomes one row of a parameter table (NaN =
-word absent) and the modal state is resolved with cumulative array ops instead
-of a loop over lines:
+Per block, every known command becomes one row of a command table
+(``table.py``: NaN = word absent) and the modal state is resolved with
+cumulative array ops (``modal.py``) instead of a loop over lines:
 
-* modes (G20/G21 units, G90/G91, M82/M83) and the feed rate are
-  *forward-filled*: the index of the last row that set them, carried with
-  ``maximum.accumulate``;
-* positions use an *anchored cumulative sum* per axis: an absolute move or a
-  G92 sets the logical coordinate (an anchor), relative moves add to it, so the
-  value after row ``k`` is ``anchor + (cumsum[k] - cumsum[anchor])``. A G92
-  also shifts the axis offset by ``(logical before - new value)`` so the machine
-  position ``logical + offset`` does not jump; G28 resets both to zero;
-* the state at the end of a block (position, modes, feed, layer, feature) is
-  carried into the next block, so memory is bounded by the block size plus the
-  output arrays.
+* modes (G20/G21 units, G90/G91, M82/M83) and the feed rate are forward-filled;
+* positions use an anchored cumulative sum per axis: an absolute move or a
+  G92 sets the logical coordinate (an anchor), relative moves add to it. A G92
+  also shifts the axis offset by ``(logical before - new value)`` so the
+  machine position ``logical + offset`` does not jump; G28 resets both to zero;
+* the state at the end of a block (position, modes, feed; layer and feature in
+  ``layers.py``) is carried into the next block, so memory is bounded by the
+  block size plus the output arrays.
 """
 from __future__ import annotations
 
@@ -24,59 +21,27 @@ import numpy as np
 
 from fabric.errors import GcodeError
 from fabric.gcode import arcs
-from fabric.gcode.commands import COL, FLAG_OK, KNOWN, LENGTH_COLS, PARAMS, code_of
-from fabric.gcode.dialects import MK_FEATURE, MK_LAYER, MK_Z, find_markers
-from fabric.gcode.lexer import W_BAD, W_EMPTY, W_OK, Lexed, lex_block
-from fabric.gcode.events import command_events
+from fabric.gcode.commands import KNOWN, LENGTH_COLS, PARAMS
+from fabric.gcode.events import ExtrudeOnly, command_events
+from fabric.gcode.layers import LayerTracker
+from fabric.gcode.lexer import Lexed, lex_block
+from fabric.gcode.modal import anchored, ffill, modal_setting, shifted
+from fabric.gcode.table import CommandTable, LineError, command_table
 from fabric.gcode.toolpath import RowColumns, Toolpath
 
 __all__ = ["Interpreter", "DEFAULT_FEED_MM_S"]
 
 DEFAULT_FEED_MM_S = 25.0     # feed before the first F word (Marlin's 1500 mm/min)
-MAX_ABS_VALUE = 1e9          # any parameter beyond this (mm, mm/min, deg C...) is an error
-_G = {name: code for name, code in KNOWN.items()}
+_G = dict(KNOWN)
 X, Y, Z, E, F, I, J, R, P, S, L = range(len(PARAMS))
 _G3 = _G["G3"]                 # G0, G1, G2, G3 are the first four codes: motion is ``code <= _G3``
-
-
-def _ffill(values: np.ndarray, present: np.ndarray, init: float) -> np.ndarray:
-    """Value of the last row at or before each row where ``present`` (``init`` before any)."""
-    idx = np.where(present, np.arange(len(values)), -1)
-    np.maximum.accumulate(idx, out=idx)
-    return np.where(idx >= 0, values[np.maximum(idx, 0)], init)
-
-
-def _anchored(anchor: np.ndarray, anchor_val: np.ndarray, delta: np.ndarray, init: float) -> np.ndarray:
-    """Running value: reset to ``anchor_val`` at anchors, plus ``delta`` elsewhere."""
-    c = np.cumsum(np.where(anchor, 0.0, delta))
-    a = np.where(anchor, np.arange(len(anchor)), -1)
-    np.maximum.accumulate(a, out=a)
-    ai = np.maximum(a, 0)
-    return np.where(a >= 0, anchor_val[ai] + (c - c[ai]), init + c)
-
-
-def _shift(after: np.ndarray, init: float) -> np.ndarray:
-    return np.concatenate([[init], after[:-1]])
-
-
-def _modal(r_code: np.ndarray, on: tuple[int, ...], off: tuple[int, ...], init: float,
-           on_val: float = 1.0, off_val: float = 0.0) -> np.ndarray | float:
-    """A modal setting per row (``on_val`` after an ``on`` code, ``off_val`` after an ``off`` one),
-    forward-filled from ``init``; just ``init`` when the block never sets it."""
-    is_on = np.zeros(len(r_code), bool)
-    is_off = np.zeros(len(r_code), bool)
-    for c in on:
-        is_on |= r_code == c
-    for c in off:
-        is_off |= r_code == c
-    setting = is_on | is_off
-    if not setting.any():
-        return init
-    return _ffill(np.where(is_on, on_val, off_val), setting, init)
+_EVENT_COLUMNS = ("ev_row", "ev_kind", "ev_value", "ev_aux", "ev_line")
 
 
 @dataclass
 class _State:
+    """What one block leaves to the next: modes, feed, logical position and offset (X, Y, Z, E), counts."""
+
     unit_mm: float = 1.0
     abs_xyz: float = 1.0
     abs_e: float = 1.0
@@ -85,9 +50,46 @@ class _State:
     offset: np.ndarray = field(default_factory=lambda: np.zeros(4))
     rows: int = 0
     lines: int = 0
-    layer_count: int = 0
-    last_marker_row: int = -1
-    feature: int = 0
+
+
+@dataclass
+class _Modes:
+    """Modal settings of each command row of a block (a plain float when the block never changes one)."""
+
+    unit_mm: np.ndarray | float
+    abs_xyz: np.ndarray | float
+    abs_e: np.ndarray | float
+    feed_mm_s: np.ndarray
+
+
+@dataclass
+class _Resets:
+    """The G92 (set position) and G28 (home) rows of a block, and those naming no axis (all axes)."""
+
+    g92: np.ndarray
+    g28: np.ndarray
+    g92_all: np.ndarray
+    g28_all: np.ndarray
+
+    @property
+    def none(self) -> bool:
+        return not (self.g92.any() or self.g28.any())
+
+
+@dataclass
+class _Positions:
+    """Machine positions of a block: before row 0, then after each row."""
+
+    machine: np.ndarray        # (4, k + 1) X, Y, Z, E
+    e_move: np.ndarray         # (k,) filament each row moves
+
+
+@dataclass
+class _MotionRows:
+    """Toolpath rows of a block's motion commands, and its extruder-only moves."""
+
+    rows: dict[str, np.ndarray]    # xyz, e, feed, line
+    eonly: ExtrudeOnly
 
 
 class Interpreter:
@@ -96,23 +98,12 @@ class Interpreter:
     def __init__(self, chord_tol_mm: float = 0.01, rows_hint: int = 0) -> None:   # rows_hint: a capacity
         self.chord_tol_mm = float(chord_tol_mm)
         self.state = _State()
+        self.layers = LayerTracker()
         self._rows = RowColumns({"xyz": ("f8", (3,)), "e": ("f8", ()), "feed": ("f8", ()), "line": ("i8", ()),
                                  "layer": ("i4", ()), "feature": ("i2", ())}, rows_hint)
-        self._out: dict[str, list[np.ndarray]] = {k: [] for k in ("ev_row", "ev_kind", "ev_value", "ev_aux", "ev_line")}
-        self._layer_z: dict[int, float] = {}
-        self._features: dict[str, int] = {"none": 0}
+        self._out: dict[str, list[np.ndarray]] = {k: [] for k in _EVENT_COLUMNS}
         self._unknown: dict[str, int] = {}
         self._start: np.ndarray | None = None
-
-    # -- errors ------------------------------------------------------------
-
-    def _raise_first(self, block: bytes | memoryview, lx: Lexed, errors: list[tuple[int, str]]) -> None:
-        if not errors:
-            return
-        ln, message = min(errors, key=lambda t: t[0])
-        stop = lx.line_start[ln + 1] if ln + 1 < lx.n_lines else len(block)
-        text = bytes(block[lx.line_start[ln]:stop]).decode("utf-8", "replace").strip()[:200]
-        raise GcodeError(f"{message}: {text!r}", line=self.state.lines + ln + 1, text=text)
 
     # -- one block ---------------------------------------------------------
 
@@ -120,39 +111,17 @@ class Interpreter:
         """Interpret one block of whole lines (the last line may lack its newline)."""
         lx = lex_block(block)
         st = self.state
-        errors: list[tuple[int, str]] = []
-        wf = np.flatnonzero(lx.word_first)
-        f_letter, f_value = lx.word_letter[wf], lx.word_value[wf]
-        f_status, f_line = lx.word_status[wf], lx.word_line[wf]
-        code = code_of(f_letter, f_value, f_status == W_OK)
-        gm = (f_letter == ord("G")) | (f_letter == ord("M"))
-        bad = np.flatnonzero(gm & (f_status == W_BAD))
-        if len(bad):
-            errors.append((int(f_line[bad[0]]), "malformed command number"))
-        self._count_unknown(f_letter, f_value, f_status, (code < 0) & ~(gm & (f_status == W_BAD)))
-        kr = np.flatnonzero(code >= 0)
-        r_line, r_code = f_line[kr], code[kr].astype(np.int64)
-        k = len(kr)
-        l2r = np.full(lx.n_lines, -1, np.int64)
-        l2r[r_line] = np.arange(k)
-        w_row = l2r[lx.word_line]
-        pw = (w_row >= 0) & ~lx.word_first
-        self._word_errors(lx, w_row, pw, r_code, l2r, errors)
-        col = COL[lx.word_letter]
-        sel = pw & (col >= 0)
-        par = np.full((k, len(PARAMS)), np.nan)
-        has = np.zeros((k, len(PARAMS)), bool)
-        flat = w_row[sel] * len(PARAMS) + col[sel]
-        vals = lx.word_value[sel]
-        par.ravel()[flat] = vals
-        has.ravel()[flat] = True
-        big = np.flatnonzero(np.abs(vals) > MAX_ABS_VALUE)
-        if len(big):
-            errors.append((int(lx.word_line[sel][big[0]]), f"value out of range (|v| > {MAX_ABS_VALUE:g})"))
+        errors: list[LineError] = []
+        table = command_table(lx, errors, self._unknown)
         self._raise_first(block, lx, errors)
-        rows, events = self._resolve(r_line, r_code, par, has, errors)
+        modes = self._modes(table, errors)
+        positions = self._positions(table, modes)
+        motion = self._motion_rows(table, positions, modes.feed_mm_s, errors)
+        rows = motion.rows
+        events = self._events(table, rows["line"], motion.eonly, errors)
         self._raise_first(block, lx, errors)
-        self._markers(block, lx, rows)
+        marked = self.layers.mark(block, lx, rows["line"], st.rows)
+        rows["layer"], rows["feature"] = marked.layer, marked.feature
         rows["line"] = st.lines + rows["line"] + 1
         st.rows += len(rows["line"])
         st.lines += lx.n_lines
@@ -160,137 +129,127 @@ class Interpreter:
         for name, arr in events.items():
             self._out[name].append(arr)
 
-    def _count_unknown(self, letter: np.ndarray, value: np.ndarray, status: np.ndarray,
-                       unknown: np.ndarray) -> None:
-        u = np.flatnonzero(unknown)
-        if len(u) == 0:
+    def _raise_first(self, block: bytes | memoryview, lx: Lexed, errors: list[LineError]) -> None:
+        """Raise the error of the earliest line, with its text (nothing when there is none)."""
+        if not errors:
             return
-        keys = np.stack([letter[u].astype(np.float64), np.where(status[u] == W_OK, value[u], np.nan)], 1)
-        uniq, counts = np.unique(keys, axis=0, return_counts=True)
-        for (let, val), n in zip(uniq, counts):
-            name = chr(int(let))
-            if np.isfinite(val):
-                name += str(int(val)) if val == int(val) and abs(val) < 1e15 else f"{val:g}"
-            self._unknown[name] = self._unknown.get(name, 0) + int(n)
-
-    def _word_errors(self, lx: Lexed, w_row: np.ndarray, pw: np.ndarray, r_code: np.ndarray,
-                     l2r: np.ndarray, errors: list[tuple[int, str]]) -> None:
-        st = lx.word_status
-        bad = np.flatnonzero(pw & (st == W_BAD))
-        if len(bad):
-            errors.append((int(lx.word_line[bad[0]]), f"malformed number after {chr(lx.word_letter[bad[0]])}"))
-        empty = pw & (st == W_EMPTY)
-        if empty.any():
-            flags = np.isin(r_code[np.maximum(w_row, 0)], list(FLAG_OK))
-            e = np.flatnonzero(empty & ~flags)
-            if len(e):
-                errors.append((int(lx.word_line[e[0]]), f"{chr(lx.word_letter[e[0]])} has no value"))
-        for lines, msg in ((lx.orphan_lines, "unexpected text (a number with no letter)"),
-                           (lx.checksum_bad_lines, "checksum mismatch")):
-            hit = lines[l2r[lines] >= 0] if len(lines) else lines
-            if len(hit):
-                errors.append((int(hit[0]), msg))
+        first = min(errors, key=lambda err: err.line)
+        ln = first.line
+        stop = lx.line_start[ln + 1] if ln + 1 < lx.n_lines else len(block)
+        text = bytes(block[lx.line_start[ln]:stop]).decode("utf-8", "replace").strip()[:200]
+        raise GcodeError(f"{first.message}: {text!r}", line=self.state.lines + ln + 1, text=text)
 
     # -- modal state -------------------------------------------------------
 
-    def _resolve(self, r_line: np.ndarray, r_code: np.ndarray, par: np.ndarray, has: np.ndarray,
-                 errors: list[tuple[int, str]]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-        st = self.state
-        g = _G
-        k = len(r_code)
-        unit = _modal(r_code, (g["G20"],), (g["G21"],), st.unit_mm, 25.4, 1.0)
+    def _modes(self, table: CommandTable, errors: list[LineError]) -> _Modes:
+        """Units (scaling the length columns of inch rows to mm), distance modes and feed of every row."""
+        st, g, code, par = self.state, _G, table.code, table.par
+        unit = modal_setting(code, (g["G20"],), (g["G21"],), st.unit_mm, 25.4, 1.0)
         if np.any(unit != 1.0):                     # inches somewhere in the block
             par[:, LENGTH_COLS] *= unit[:, None] if np.ndim(unit) else unit
-        absx = _modal(r_code, (g["G90"],), (g["G91"],), st.abs_xyz)
-        abse = _modal(r_code, (g["G90"], g["M82"]), (g["G91"], g["M83"]), st.abs_e)
-        motion = r_code <= _G3                       # G0..G3 are codes 0..3
-        fset = motion & has[:, F]
-        badf = np.flatnonzero(fset & ~(par[:, F] > 0))
-        if len(badf):
-            errors.append((int(r_line[badf[0]]), "feed rate F must be positive"))
-        feed = _ffill(par[:, F] / 60.0, fset, st.feed_mm_s)
-        g92 = r_code == g["G92"]
-        g28 = r_code == g["G28"]
-        plain = not (g92.any() or g28.any())
-        g92_all = g92 & ~has[:, [X, Y, Z, E]].any(axis=1)
-        g28_all = g28 & ~has[:, [X, Y, Z]].any(axis=1)
-        pos = np.empty((4, k + 1))                   # machine position before row 0, then after each row
-        pos[:, 0] = st.logical + st.offset
-        e_move = np.zeros(k)
-        for a in range(4):
-            v, h = par[:, a], has[:, a]
-            mode = abse if a == E else absx
-            mv = motion & h
-            init = st.logical[a]
-            off = None
-            if plain and np.ndim(mode) == 0:         # one distance mode, no G92 / G28: the common case
-                if mode:                             # absolute: the last programmed value
-                    lg = _ffill(v, mv, init)
-                    if a == E:
-                        e_move = np.where(mv, v - _shift(lg, init), 0.0)
-                else:                                # relative: a running sum
-                    delta = np.where(mv, v, 0.0)
-                    lg = init + np.cumsum(delta)
-                    if a == E:
-                        e_move = delta
-                pos[a, 1:] = lg + st.offset[a]
-            else:
-                setp = g92 & (h | g92_all)
-                home = g28 & (h | g28_all) if a != E else np.zeros_like(g28)
-                rel = mv & (mode == 0)
-                anchor = (mv & ~rel) | setp | home
-                vz = np.where(h, v, 0.0)
-                aval = np.where(home | (setp & ~h), 0.0, vz)
-                if rel.any():
-                    lg = _anchored(anchor, aval, np.where(rel, vz, 0.0), init)
-                else:                                # absolute only: a forward fill is enough
-                    lg = _ffill(aval, anchor, init)
-                lg_before = _shift(lg, init)
-                if setp.any() or home.any():
-                    off = _anchored(home, np.zeros(len(home)), np.where(setp, lg_before - aval, 0.0), st.offset[a])
-                    pos[a, 1:] = lg + off
-                else:                                # no G92 / G28 on this axis: the offset holds
-                    pos[a, 1:] = lg + st.offset[a]
-                if a == E:
-                    e_move = np.where(mv, np.where(rel, vz, aval - lg_before), 0.0)
-            if k:
-                st.logical[a] = lg[-1]
-                if off is not None:
-                    st.offset[a] = off[-1]
-        if k:
+        abs_xyz = modal_setting(code, (g["G90"],), (g["G91"],), st.abs_xyz)
+        abs_e = modal_setting(code, (g["G90"], g["M82"]), (g["G91"], g["M83"]), st.abs_e)
+        feed_set = (code <= _G3) & table.has[:, F]
+        bad_feed = np.flatnonzero(feed_set & ~(par[:, F] > 0))
+        if len(bad_feed):
+            errors.append(LineError(int(table.line[bad_feed[0]]), "feed rate F must be positive"))
+        feed = ffill(par[:, F] / 60.0, feed_set, st.feed_mm_s)
+        if len(code):
             st.feed_mm_s = feed[-1]
-            st.unit_mm, st.abs_xyz, st.abs_e = (float(m[-1]) if np.ndim(m) else m for m in (unit, absx, abse))
-        rows, eonly = self._motion_rows(r_line, r_code, par, pos, e_move, feed, errors)
-        events = self._events(r_line, r_code, par, has, rows["line"], eonly, errors)
-        return rows, events
+            st.unit_mm, st.abs_xyz, st.abs_e = (float(m[-1]) if np.ndim(m) else m for m in (unit, abs_xyz, abs_e))
+        return _Modes(unit, abs_xyz, abs_e, feed)
 
-    def _motion_rows(self, r_line: np.ndarray, r_code: np.ndarray, par: np.ndarray, pos: np.ndarray,
-                     e_move: np.ndarray, feed: np.ndarray, errors: list[tuple[int, str]]
-                     ) -> tuple[dict[str, np.ndarray], tuple[np.ndarray, np.ndarray]]:
-        """Toolpath rows of the motion commands; ``pos`` (4, k + 1) holds the positions before/after rows.
+    def _positions(self, table: CommandTable, modes: _Modes) -> _Positions:
+        """Machine positions of X, Y, Z, E after every row, and the filament each row moves."""
+        st, code, has = self.state, table.code, table.has
+        g92, g28 = code == _G["G92"], code == _G["G28"]
+        resets = _Resets(g92, g28, g92 & ~has[:, [X, Y, Z, E]].any(axis=1), g28 & ~has[:, [X, Y, Z]].any(axis=1))
+        machine = np.empty((4, len(code) + 1))
+        machine[:, 0] = st.logical + st.offset
+        e_move = np.zeros(len(code))
+        for a in range(4):
+            e = self._axis(a, table, modes.abs_e if a == E else modes.abs_xyz, resets, machine[a, 1:])
+            if e is not None:
+                e_move = e
+        return _Positions(machine, e_move)
 
-        Masks run over all k command rows (non-motion rows neither move nor extrude), so
-        no gather of the motion rows is needed.
+    def _axis(self, a: int, table: CommandTable, mode: np.ndarray | float, resets: _Resets,
+              out: np.ndarray) -> np.ndarray | None:
+        """Machine coordinate of axis ``a`` after every row into ``out``; for E, returns the filament
+        each row moves. Carries the axis' logical value and offset into the state."""
+        st = self.state
+        v, h = table.par[:, a], table.has[:, a]
+        moved = (table.code <= _G3) & h
+        init = st.logical[a]
+        offset = None
+        e_move = None
+        if resets.none and np.ndim(mode) == 0:      # one distance mode, no G92 / G28: the common case
+            if mode:                                # absolute: the last programmed value
+                logical = ffill(v, moved, init)
+                if a == E:
+                    e_move = np.where(moved, v - shifted(logical, init), 0.0)
+            else:                                   # relative: a running sum
+                delta = np.where(moved, v, 0.0)
+                logical = init + np.cumsum(delta)
+                if a == E:
+                    e_move = delta
+            out[:] = logical + st.offset[a]
+        else:
+            set_pos = resets.g92 & (h | resets.g92_all)
+            home = resets.g28 & (h | resets.g28_all) if a != E else np.zeros_like(resets.g28)
+            rel = moved & (mode == 0)
+            anchor = (moved & ~rel) | set_pos | home
+            value = np.where(h, v, 0.0)
+            anchor_value = np.where(home | (set_pos & ~h), 0.0, value)
+            if rel.any():
+                logical = anchored(anchor, anchor_value, np.where(rel, value, 0.0), init)
+            else:                                   # absolute only: a forward fill is enough
+                logical = ffill(anchor_value, anchor, init)
+            before = shifted(logical, init)
+            if set_pos.any() or home.any():
+                offset = anchored(home, np.zeros(len(home)), np.where(set_pos, before - anchor_value, 0.0),
+                                  st.offset[a])
+                out[:] = logical + offset
+            else:                                   # no G92 / G28 on this axis: the offset holds
+                out[:] = logical + st.offset[a]
+            if a == E:
+                e_move = np.where(moved, np.where(rel, value, anchor_value - before), 0.0)
+        if len(v):
+            st.logical[a] = logical[-1]
+            if offset is not None:
+                st.offset[a] = offset[-1]
+        return e_move
+
+    # -- rows and events ---------------------------------------------------
+
+    def _motion_rows(self, table: CommandTable, positions: _Positions, feed: np.ndarray,
+                     errors: list[LineError]) -> _MotionRows:
+        """Toolpath rows of the motion commands (arcs expanded into chords).
+
+        Masks run over all k command rows (non-motion rows neither move nor
+        extrude), so no gather of the motion rows is needed.
         """
-        s, e = pos[:3, :-1], pos[:3, 1:]                              # (3, k) start and end points
-        lin = r_code <= _G["G1"]
+        code, line, e_move = table.code, table.line, positions.e_move
+        s, e = positions.machine[:3, :-1], positions.machine[:3, 1:]       # (3, k) start and end points
+        lin = code <= _G["G1"]
         moved = (e[0] != s[0]) | (e[1] != s[1]) | (e[2] != s[2])
         lin_row = lin & moved
         eonly = lin & ~moved & (e_move != 0)
         count = lin_row.astype(np.int64)
-        arc = np.flatnonzero((r_code > _G["G1"]) & (r_code <= _G3))
+        arc = np.flatnonzero((code > _G["G1"]) & (code <= _G3))
+        chords = None
         if len(arc):
-            ac, pts, pe, status = arcs.expand_arcs(
-                np.ascontiguousarray(s[:, arc].T), np.ascontiguousarray(e[:, arc].T), r_code[arc] == _G["G2"],
-                par[arc][:, [I, J]], par[arc, R], e_move[arc], self.chord_tol_mm)
-            badk = np.flatnonzero(status)
-            if len(badk):
-                errors.append((int(r_line[arc[badk[0]]]), arcs.ARC_REASONS[int(status[badk[0]])]))
-            count[arc] = ac
+            chords = arcs.expand_arcs(np.ascontiguousarray(s[:, arc].T), np.ascontiguousarray(e[:, arc].T),
+                                      code[arc] == _G["G2"], table.par[arc][:, [I, J]], table.par[arc, R],
+                                      e_move[arc], self.chord_tol_mm)
+            bad = np.flatnonzero(chords.status)
+            if len(bad):
+                errors.append(LineError(int(line[arc[bad[0]]]), arcs.ARC_REASONS[int(chords.status[bad[0]])]))
+            count[arc] = chords.count
         total = int(count.sum())
-        if not len(arc):                             # straight moves only: one row per moving move
+        if chords is None:                          # straight moves only: one row per moving move
             xyz, e_rows = e[:, lin_row].T, e_move[lin_row]
-        else:
+        else:                                       # straight rows and chords in line order
             first = np.cumsum(count) - count
             xyz = np.empty((total, 3))
             e_rows = np.empty(total)
@@ -299,54 +258,22 @@ class Interpreter:
             if total:
                 ac = count[arc]
                 at = np.repeat(first[arc], ac) + (np.arange(int(ac.sum())) - np.repeat(np.cumsum(ac) - ac, ac))
-                xyz[at] = pts
-                e_rows[at] = pe
+                xyz[at] = chords.points
+                e_rows[at] = chords.e_mm
         if self._start is None and total:
             self._start = s[:, np.flatnonzero(count)[0]].copy()
-        rows = {"xyz": xyz, "e": e_rows, "feed": np.repeat(feed, count), "line": np.repeat(r_line, count)}
-        return rows, (r_line[eonly], e_move[eonly])
+        rows = {"xyz": xyz, "e": e_rows, "feed": np.repeat(feed, count), "line": np.repeat(line, count)}
+        return _MotionRows(rows, ExtrudeOnly(line[eonly], e_move[eonly]))
 
-    def _events(self, r_line: np.ndarray, r_code: np.ndarray, par: np.ndarray, has: np.ndarray,
-                row_line: np.ndarray, eonly: tuple[np.ndarray, np.ndarray],
-                errors: list[tuple[int, str]]) -> dict[str, np.ndarray]:
-        sub = np.flatnonzero(r_code > _G3)          # the few non-motion commands
-        lines, kinds, values, auxs, n_cnc = command_events(r_line[sub], r_code[sub], par[sub], has[sub], eonly, errors)
-        if n_cnc:
-            self._unknown["G10"] = self._unknown.get("G10", 0) + n_cnc
+    def _events(self, table: CommandTable, row_line: np.ndarray, eonly: ExtrudeOnly,
+                errors: list[LineError]) -> dict[str, np.ndarray]:
+        """Event columns of the block's non-motion commands, attached to the next toolpath row."""
+        ev = command_events(table.rows(np.flatnonzero(table.code > _G3)), eonly, errors)
+        if ev.n_cnc:
+            self._unknown["G10"] = self._unknown.get("G10", 0) + ev.n_cnc
         st = self.state
-        return {"ev_row": st.rows + np.searchsorted(row_line, lines, side="left"),
-                "ev_kind": kinds, "ev_value": values, "ev_aux": auxs, "ev_line": st.lines + lines + 1}
-
-    # -- layers and features -----------------------------------------------
-
-    def _markers(self, block: bytes | memoryview, lx: Lexed, rows: dict[str, np.ndarray]) -> None:
-        st = self.state
-        mk = find_markers(block, lx.line_start, lx.code_end)
-        row_line = rows["line"]
-        lay = np.flatnonzero(mk.kind == MK_LAYER)
-        ml = mk.line[lay]
-        mrow = st.rows + np.searchsorted(row_line, ml, side="left")
-        new = mrow != np.concatenate([[st.last_marker_row], mrow[:-1]])
-        newl = ml[new]
-        layer_at = st.layer_count + np.cumsum(new) - 1
-        for i in np.flatnonzero(np.isfinite(mk.z_mm[lay])):
-            self._layer_z[int(layer_at[i])] = float(mk.z_mm[lay][i])
-        zi = np.flatnonzero(mk.kind == MK_Z)
-        zl = st.layer_count - 1 + np.searchsorted(newl, mk.line[zi], side="right")
-        for layer, z in zip(zl, mk.z_mm[zi]):
-            if layer >= 0:
-                self._layer_z[int(layer)] = float(z)
-        rows["layer"] = (st.layer_count - 1 + np.searchsorted(newl, row_line, side="left")).astype(np.int32)
-        st.layer_count += int(new.sum())
-        if len(mrow):
-            st.last_marker_row = int(mrow[-1])
-        fi = np.flatnonzero(mk.kind == MK_FEATURE)
-        fcode = np.array([self._features.setdefault(mk.names[i], len(self._features)) for i in fi], np.int16)
-        j = np.searchsorted(mk.line[fi], row_line, side="left") - 1
-        rows["feature"] = np.where(j >= 0, fcode[np.maximum(j, 0)] if len(fcode) else 0,
-                                   st.feature).astype(np.int16)
-        if len(fcode):
-            st.feature = int(fcode[-1])
+        return {"ev_row": st.rows + np.searchsorted(row_line, ev.line, side="left"),
+                "ev_kind": ev.kind, "ev_value": ev.value, "ev_aux": ev.aux, "ev_line": st.lines + ev.line + 1}
 
     # -- result ------------------------------------------------------------
 
@@ -359,42 +286,14 @@ class Interpreter:
 
         rows = self._rows.take()
         xyz, e = rows["xyz"], rows["e"]
-        if self.state.layer_count == 0:
-            layer, layer_z = _infer_layers(xyz, e)
-        else:
-            layer = rows["layer"]
-            layer_z = np.full(self.state.layer_count, np.nan)
-            ext = np.flatnonzero((e > 0) & (layer >= 0))
-            u, first = np.unique(layer[ext], return_index=True)
-            layer_z[u] = xyz[ext[first], 2]
-            for li, z in self._layer_z.items():
-                layer_z[li] = z
+        layers = self.layers.layers(xyz, e, rows["layer"])
         end = self.state.logical[:3] + self.state.offset[:3]
         return Toolpath(
             start_xyz_mm=self._start if self._start is not None else end.copy(),
             xyz_mm=xyz, e_mm=e, feed_mm_s=rows["feed"], line=rows["line"],
-            layer=layer.astype(np.int32, copy=False), feature=rows["feature"],
-            feature_names=list(self._features), event_row=cat("ev_row", "i8"),
+            layer=layers.layer.astype(np.int32, copy=False), feature=rows["feature"],
+            feature_names=list(self.layers.features), event_row=cat("ev_row", "i8"),
             event_kind=cat("ev_kind", "u1"), event_value=cat("ev_value", "f8"),
             event_aux=cat("ev_aux", "i2"), event_line=cat("ev_line", "i8"),
-            layer_z_mm=layer_z, unknown_commands=dict(sorted(self._unknown.items())),
+            layer_z_mm=layers.layer_z_mm, unknown_commands=dict(sorted(self._unknown.items())),
             n_lines=self.state.lines)
-
-
-def _infer_layers(xyz: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Layers from Z: a new layer starts when an extruding move is higher than all before it.
-
-    The layer begins right after the previous layer's last extruding move, so
-    the travel (and lift) to the new layer belongs to it; rows before the first
-    extrusion are layer -1.
-    """
-    n = len(e)
-    ext = np.flatnonzero(e > 0)
-    if len(ext) == 0:
-        return np.full(n, -1, np.int32), np.zeros(0)
-    z = xyz[ext, 2]
-    new = np.concatenate([[True], z[1:] > np.maximum.accumulate(z)[:-1] + 1e-6])
-    ni = np.flatnonzero(new)
-    starts = np.where(ni == 0, ext[0], ext[np.maximum(ni - 1, 0)] + 1)
-    layer = np.searchsorted(starts, np.arange(n), side="right") - 1
-    return layer.astype(np.int32), z[ni]
