@@ -11,7 +11,7 @@ from fabric.robot.frames import R_from_quat
 from fabric.motion.program import MOVEL, Program
 
 __all__ = ["check_program", "row_blocks", "extrusion_rate", "quat_to_rotvec", "R_to_zyx_deg",
-           "quat_to_zyx_deg", "write_lines"]
+           "quat_to_zyx_deg", "write_lines", "write_ascii"]
 
 BLOCK_ROWS = 20_000     # rows formatted per write: output streams, memory stays flat
 
@@ -24,10 +24,14 @@ def check_program(program: Program) -> None:
         raise ValidationError("the program has no rows", field="program")
     motion = program.op <= MOVEL
     for name in ("q_rad", "xyz_mm", "quat_wxyz"):
-        arr = getattr(program, name)[motion]
-        bad = ~np.isfinite(arr).all(axis=1)
-        if bad.any():
-            row = int(np.flatnonzero(motion)[np.flatnonzero(bad)[0]])
+        arr = getattr(program, name)
+        # a row's sum is finite when all its values are (a huge finite sum may overflow: checked exactly below)
+        suspect = ~np.isfinite(arr @ np.ones(arr.shape[1])) & motion
+        if not suspect.any():
+            continue
+        bad = np.flatnonzero(suspect & ~np.isfinite(arr).all(axis=1))
+        if len(bad):
+            row = int(bad[0])
             raise ValidationError(f"row {row}: {name} is not finite", field=name, row=row,
                                   gcode_line=int(program.gcode_line[row]))
 
@@ -74,3 +78,13 @@ def write_lines(out: TextIO, lines: list[str]) -> None:
     if lines:
         out.write("\n".join(lines))
         out.write("\n")
+
+
+def write_ascii(out: TextIO, text: bytes) -> None:
+    """Write ASCII text formatted as bytes (``numtext``): as bytes to a stream that takes them
+    (one with a ``write_bytes`` method, e.g. the export stream), decoded to a ``str`` otherwise."""
+    write_bytes = getattr(out, "write_bytes", None)
+    if write_bytes is not None:
+        write_bytes(text)
+    else:
+        out.write(text.decode("ascii"))

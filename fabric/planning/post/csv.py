@@ -5,7 +5,7 @@ from typing import TextIO
 
 import numpy as np
 
-from fabric.planning.post.common import check_program, row_blocks
+from fabric.planning.post.common import check_program, row_blocks, write_ascii
 from fabric.planning.post.numtext import FixedColumn, format_rows
 from fabric.motion.program import MOVEL, Program
 
@@ -31,7 +31,7 @@ def write_csv(program: Program, out: TextIO, t_end_s: np.ndarray | None = None) 
         idx = np.flatnonzero(program.op[a:b] <= MOVEL) + a
         if len(idx) == 0:
             continue
-        out.write(csv_rows(program, idx, t_end_s).decode("ascii"))
+        write_ascii(out, csv_rows(program, idx, t_end_s))
         n += len(idx)
     return n
 

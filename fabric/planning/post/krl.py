@@ -21,7 +21,8 @@ from typing import TextIO
 import numpy as np
 
 from fabric.errors import ValidationError
-from fabric.planning.post.common import check_program, extrusion_rate, quat_to_zyx_deg, write_lines, R_to_zyx_deg
+from fabric.planning.post.common import (R_to_zyx_deg, check_program, extrusion_rate, quat_to_zyx_deg, write_ascii,
+                                         write_lines)
 from fabric.planning.post.numtext import ChoiceColumn, Column, FixedColumn, format_rows
 from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LinearMove,
                                        LinearRun, Retract, RowWalker, SetTemp, Wait, WaitTemp, heater_index)
@@ -125,7 +126,7 @@ class _Formatter:
             self._linear(LinearMove(run.start + a), lines)
             write_lines(out, lines)
             if b > a + 1:
-                out.write(self._lin_rows(run.start + a + 1, run.start + b).decode("ascii"))
+                write_ascii(out, self._lin_rows(run.start + a + 1, run.start + b))
 
     def _lin_rows(self, start: int, stop: int) -> bytes:
         """``LIN`` lines of rows ``[start, stop)`` as columns (the same text as :meth:`_linear` writes)."""

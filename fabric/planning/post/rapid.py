@@ -35,7 +35,7 @@ from typing import Callable, TextIO
 import numpy as np
 
 from fabric.errors import ValidationError
-from fabric.planning.post.common import check_program, write_lines
+from fabric.planning.post.common import check_program, write_ascii, write_lines
 from fabric.planning.post.numtext import ChoiceColumn, Column, FixedColumn, format_rows, trimmed_text
 from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LayerStart,
                                        LinearMove, LinearRun, Retract, RowWalker, SetTemp, Wait, WaitTemp)
@@ -46,6 +46,7 @@ __all__ = ["RapidOptions", "RapidExport", "write_rapid"]
 
 _IDENT = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,15}$")
 _E9 = "[9E9,9E9,9E9,9E9,9E9,9E9]"
+MOVEL_TEXT_ROWS = 50_000    # rows whose MoveL lines are formatted at once (runs of many modules)
 
 
 @dataclass
@@ -202,6 +203,7 @@ class _Emitter:
     def __init__(self, program: Program, opt: RapidOptions, names: _Names, speeds: np.ndarray) -> None:
         self.p, self.opt, self.names, self.speeds = program, opt, names, speeds
         self.walker = RowWalker(program, runs=True)
+        self.movel = _MoveLText.empty()
         self.tw = f"{opt.tool_name}\\WObj:={opt.wobj_name};"
 
     def rows(self, out: TextIO, start: int, stop: int) -> None:
@@ -213,16 +215,22 @@ class _Emitter:
             if isinstance(ev, Block):
                 self._block(ev)
             elif isinstance(ev, LinearRun):
-                out.write(self._run(ev).decode("ascii"))
+                write_ascii(out, self._run(ev))
             else:
                 self._format(ev, lines)
         write_lines(out, lines)
 
     def _run(self, run: LinearRun) -> bytes:
-        """The ``MoveL`` lines of a run of plain linear moves, formatted as columns (same text as ``_format``)."""
-        p, rows = self.p, slice(run.start, run.stop)
-        k = slice(run.start - self.base, run.stop - self.base)
-        xyz, quat, cf, cfx = p.xyz_mm[rows], p.quat_wxyz[rows], self.cf[k], self.cfx[k]
+        """The ``MoveL`` lines of a run of plain linear moves (the same text as ``_format``)."""
+        if not self.movel.covers(run.start, run.stop):
+            self.movel = _MoveLText.of(self, run.start, max(run.stop, run.start + MOVEL_TEXT_ROWS))
+        return self.movel.lines(run.start, run.stop)
+
+    def movel_columns(self, rows: np.ndarray) -> list[Column]:
+        """The columns of the ``MoveL`` lines of some linear-move rows."""
+        p = self.p
+        xyz, quat, q_deg = p.xyz_mm[rows], p.quat_wxyz[rows], np.degrees(p.q_rad[rows])
+        cf, cfx = _confdata(q_deg)
         columns: list[Column] = [b"    MoveL [["]
         columns += _joined([FixedColumn(xyz[:, j], 3, trim=True) for j in range(3)])
         columns.append(b"],[")
@@ -232,14 +240,13 @@ class _Emitter:
         columns += [f"],{_E9}], ".encode(), _choices(self.speeds[rows], self.names.speed), b", ",
                     _choices(p.zone_mm[rows], self.names.zone), f", {self.tw}  ! ".encode(),
                     FixedColumn(p.gcode_line[rows], 0)]
-        return format_rows(columns, sep=b"")
+        return columns
 
     def _block(self, block: Block) -> None:
         # joints in degrees and the confdata quadrants of the block's rows
         self.base = block.start
         self.q_deg = np.degrees(self.p.q_rad[block.start:block.stop])
-        self.cf = np.floor(self.q_deg[:, [0, 3, 5]] / 90.0).astype(int)
-        self.cfx = (self.q_deg[:, 4] < 0).astype(int)
+        self.cf, self.cfx = _confdata(self.q_deg)
 
     def _format(self, ev: Event, lines: list[str]) -> None:
         p, opt = self.p, self.opt
@@ -285,6 +292,55 @@ def _joined(columns: list[FixedColumn]) -> list[Column]:
 
 
 def _choices(values: np.ndarray, name_of: Callable[[float], str]) -> ChoiceColumn:
-    """A column of names (speeddata / zonedata) of per-row values, each distinct value named once."""
-    distinct, index = np.unique(values, return_inverse=True)
+    """A column of names (speeddata / zonedata) of per-row values, each distinct value named once.
+
+    Speeds and zones change rarely along a path: the values are taken as runs
+    of equal values, and only the runs' values are sorted out.
+    """
+    if len(values) == 0:
+        return ChoiceColumn(np.zeros(0, dtype=np.intp), [])
+    starts = np.concatenate([[0], np.flatnonzero(values[1:] != values[:-1]) + 1])
+    distinct, run_index = np.unique(values[starts], return_inverse=True)
+    index = np.repeat(run_index, np.diff(np.append(starts, len(values))))
     return ChoiceColumn(index, [name_of(v).encode() for v in distinct])
+
+
+def _confdata(q_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The confdata quadrants ``cf1, cf4, cf6`` (M, 3) and ``cfx`` (M,) of joints in degrees."""
+    return np.floor(q_deg[:, [0, 3, 5]] / 90.0).astype(int), (q_deg[:, 4] < 0).astype(int)
+
+
+@dataclass
+class _MoveLText:
+    """The ``MoveL`` lines of the linear moves among some rows, formatted at once; a run is a slice of them.
+
+    RAPID walks the print one module (a few thousand targets) at a time, so
+    formatting each run on its own would pay the set-up of the columns once per
+    module: the lines of ``MOVEL_TEXT_ROWS`` rows are formatted together instead.
+    """
+
+    rows: np.ndarray           # (M,) the linear-move rows, ascending
+    text: bytes                # their lines
+    starts: np.ndarray         # (M + 1,) where each line starts in ``text`` (and the end)
+
+    @classmethod
+    def empty(cls) -> "_MoveLText":
+        return cls(np.zeros(0, dtype=np.intp), b"", np.zeros(1, dtype=np.intp))
+
+    @classmethod
+    def of(cls, emitter: _Emitter, start: int, stop: int) -> "_MoveLText":
+        p = emitter.p
+        stop = min(stop, len(p))
+        rows = np.flatnonzero(p.op[start:stop] == MOVEL) + start
+        text = format_rows(emitter.movel_columns(rows), sep=b"")
+        ends = np.flatnonzero(np.frombuffer(text, dtype=np.uint8) == ord("\n")) + 1
+        return cls(rows, text, np.concatenate([[0], ends]))
+
+    def covers(self, start: int, stop: int) -> bool:
+        """Whether the lines of the linear moves ``[start, stop)`` are all here."""
+        return len(self.rows) > 0 and self.rows[0] <= start and stop - 1 <= self.rows[-1]
+
+    def lines(self, start: int, stop: int) -> bytes:
+        """The lines of rows ``[start, stop)``, all linear moves."""
+        k = int(np.searchsorted(self.rows, start))
+        return self.text[self.starts[k]:self.starts[k + stop - start]]

@@ -35,25 +35,35 @@ class _Done:
 
 
 class _ChunkSink:
-    """A write-only text stream that hands ASCII/Latin-1 pieces of ``piece_bytes`` to a queue."""
+    """A write-only text stream that hands Latin-1 pieces of ``piece_bytes`` to a queue.
+
+    Post-processors write ``str`` with :meth:`write`, and text they formatted
+    as bytes with :meth:`write_bytes` (no decoding and encoding back).
+    """
 
     def __init__(self, out: "queue.Queue[bytes | _Done]", piece_bytes: int, cancelled: threading.Event) -> None:
-        self._out, self._piece_bytes, self._cancelled = out, piece_bytes, cancelled
-        self._parts: list[str] = []
+        self._out = out
+        self._piece_bytes = piece_bytes
+        self._cancelled = cancelled
+        self._parts: list[bytes] = []
         self._size = 0
 
     def write(self, text: str) -> int:
-        self._parts.append(text)
-        self._size += len(text)
+        self.write_bytes(text.encode("latin-1"))
+        return len(text)
+
+    def write_bytes(self, data: bytes) -> None:
+        self._parts.append(data)
+        self._size += len(data)
         if self._size >= self._piece_bytes:
             self.flush()
-        return len(text)
 
     def flush(self) -> None:
         if not self._parts:
             return
-        piece = "".join(self._parts).encode("latin-1")
-        self._parts, self._size = [], 0
+        piece = self._parts[0] if len(self._parts) == 1 else b"".join(self._parts)
+        self._parts = []
+        self._size = 0
         self.put(piece)
 
     def put(self, item: "bytes | _Done") -> None:
@@ -76,7 +86,7 @@ class ExportStream:
         self.offset = 0
         self.done = False
         self._queue: queue.Queue[bytes | _Done] = queue.Queue(maxsize=depth)
-        self._pending = b""
+        self._pending = memoryview(b"")    # the rest of the piece being read (a view: no copy of the tail)
         self._cancelled = threading.Event()
         self._sink = _ChunkSink(self._queue, piece_bytes, self._cancelled)
         self._thread = threading.Thread(target=self._run, args=(write,), name="export-writer", daemon=True)
@@ -120,8 +130,9 @@ class ExportStream:
                     raise item.error
                 self.done = True
                 return b""
-            self._pending = item
-        data, self._pending = self._pending[:limit_bytes], self._pending[limit_bytes:]
+            self._pending = memoryview(item)
+        data = bytes(self._pending[:limit_bytes])
+        self._pending = self._pending[limit_bytes:]
         self.offset += len(data)
         if not self._pending:
             self._peek_end()
@@ -138,7 +149,7 @@ class ExportStream:
         elif isinstance(item, _Done):
             self._queue.put(item)          # the error is raised by the next read
         else:
-            self._pending = item
+            self._pending = memoryview(item)
 
     def cancel(self) -> None:
         """Stop the writer (it ends at its next piece) and drop what it queued."""

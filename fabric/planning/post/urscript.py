@@ -20,7 +20,7 @@ from typing import TextIO
 import numpy as np
 
 from fabric.errors import ValidationError
-from fabric.planning.post.common import check_program, extrusion_rate, quat_to_rotvec, write_lines
+from fabric.planning.post.common import check_program, extrusion_rate, quat_to_rotvec, write_ascii, write_lines
 from fabric.planning.post.numtext import Column, FixedColumn, format_rows
 from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LinearMove,
                                        LinearRun, Retract, RowWalker, SetTemp, Wait, WaitTemp, heater_index)
@@ -59,7 +59,7 @@ def write_urscript(program: Program, out: TextIO, *, name: str = "am_print", too
             write_lines(out, lines)
             lines = []
         if isinstance(ev, LinearRun):
-            out.write(fmt.run(ev).decode("ascii"))
+            write_ascii(out, fmt.run(ev))
         else:
             fmt.event(ev, lines)
     write_lines(out, lines)
