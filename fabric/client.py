@@ -125,16 +125,21 @@ class Client:
         # starts, its declaration may still be on the way: retry for a short, bounded window.
         t0 = time.monotonic()
         while True:
+            t_get = time.monotonic()
             for reply in self.session.get(key, payload=payload, timeout=timeout):
                 if reply.ok is not None:
                     return codec.decode(reply.ok.payload.to_bytes(), reply_type)
                 raise _error_of(reply.err.payload.to_bytes())
             waited = time.monotonic() - t0
-            if waited >= min(timeout, DISCOVERY_WINDOW_S):
+            timed_out = time.monotonic() - t_get >= 0.9 * timeout
+            if timed_out or waited >= min(timeout, DISCOVERY_WINDOW_S):
                 break
             time.sleep(0.05)
-        raise ServiceUnavailable(f"no reply from {what} within {timeout:g} s (is the service running?)",
-                                 key=key, timeout_s=timeout)
+        if timed_out:
+            raise ServiceUnavailable(f"no reply from {what} within {waited:.3g} s (the service is there but did "
+                                     f"not answer: busy, frozen or cut off)", key=key, timeout_s=waited)
+        raise ServiceUnavailable(f"no {what} on the fabric (asked for {waited:.2g} s): is the service running "
+                                 f"and is the cell name right?", key=key, timeout_s=waited)
 
     def subscribe(self, service: str, topic: str) -> Subscription:
         return Subscription(self.session, self.keys.topic(service, topic), TOPICS[(service, topic)])

@@ -110,7 +110,8 @@ class Service:
         if not req.pinned:
             self.artifacts.unpin(req.owner)
             return Ack(ok=True, message=f"released the pins of {req.owner}")
-        if not self.artifacts.has(req.artifact_id):
+        known = self.artifacts.has(req.artifact_id) or self.get_artifact(req.artifact_id) is not None
+        if not known:                                          # (a service may hold some in memory first)
             raise NotFound(f"no artifact {req.artifact_id} at {self.name}", artifact_id=req.artifact_id)
         self.artifacts.pin(req.artifact_id, req.owner)
         return Ack(ok=True, message=f"pinned {req.artifact_id[:12]} for {req.owner}")

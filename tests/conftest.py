@@ -1,7 +1,10 @@
 """Shared fixtures: Zenoh sessions on free loopback ports (scouting off) and the whole cell as processes."""
 from __future__ import annotations
 
+import os
+import shutil
 import socket
+import tempfile
 import uuid
 from pathlib import Path
 
@@ -9,8 +12,20 @@ import pytest
 import zenoh
 
 from fabric.client import wait_connected
-from fabric.config import SessionSettings, zenoh_config
+from fabric.config import DATA_ROOT_ENV, SessionSettings, zenoh_config
 from fabric.cli.up import CellProcesses, hub_settings
+
+
+def pytest_configure(config) -> None:
+    """Services started by tests keep their durable state in a folder of this run, never in the user's
+    data folder (subprocesses inherit the variable)."""
+    root = tempfile.mkdtemp(prefix="am-fabric-tests-")
+    os.environ[DATA_ROOT_ENV] = root
+    config._fabric_data_root = root
+
+
+def pytest_unconfigure(config) -> None:
+    shutil.rmtree(getattr(config, "_fabric_data_root", ""), ignore_errors=True)
 
 
 def free_port() -> int:

@@ -27,6 +27,7 @@ from fabric.sim.twin import Twin
 
 PROFILE = "robot-1.2mm"
 KILL_PHASE = {"slicer": "slicing", "planner": "planning", "station": "printing", "supervisor": None}
+PRINT_RTF = {"station": 100.0}        # slow enough that the kill lands mid-print; the others at max speed
 
 
 @dataclass
@@ -120,10 +121,11 @@ def wait_state(client: Client, job_id: str, states: tuple[str, ...], timeout_s: 
     raise AssertionError(f"job {job_id} not in {states} after {timeout_s:g} s (last: {last})")
 
 
-def run_with_fault(sc: SupervisedCell, service: str, delay_s: float, rtf: float = 0.0) -> FaultRun:
+def run_with_fault(sc: SupervisedCell, service: str, delay_s: float) -> FaultRun:
     """Submit the sample part, kill ``service`` ``delay_s`` after the job enters its phase, recover,
     run to the end; returns what the job ended as."""
     model = sample_model().read_bytes()
+    rtf = PRINT_RTF.get(service, 0.0)
     with Client.connect(sc.settings) as client:
         acc = client.submit(s.JobSubmit(model=model, filename="sample_part.stl", profile=PROFILE,
                                         start=True, rtf=rtf))
@@ -142,9 +144,10 @@ def run_with_fault(sc: SupervisedCell, service: str, delay_s: float, rtf: float 
         rec = wait_state(client, acc.job_id, ("finished", "failed", "stopped", "interrupted"), 300.0)
         if rec.state == "interrupted":
             client.wait_alive(("station", "collision"), deadline_s=60)
-            client.recover(rtf=rtf)
+            client.recover(rtf=0.0)
             recovery = time.monotonic() - t_kill
             notes.append("recovered")
             rec = wait_state(client, acc.job_id, ("finished", "failed", "stopped"), 300.0)
+        client.wait_alive(deadline_s=60)               # a service killed after the print is back
         csv = client.mesh("csv").data
         return FaultRun(service, delay_s, killed_in, rec, csv, rec.program_id, recovery, notes)

@@ -76,8 +76,9 @@ def test_concurrent_submits_queue_and_never_overwrite(tmp_path):
             ids = [j.job_id for j in client.jobs().jobs]          # queue order: the order they arrived in
             assert len(ids) == 3
             first = wait_state(client, ids[0], ("finished",), 180.0)
-            others = [client.wait_print_job(j, lambda r: r.prepared, timeout=180) for j in ids[1:]]
-            assert all(r.state == "queued" and "plate is clear" in r.stage for r in others), others
+            others = [client.wait_print_job(j, lambda r: r.waiting_for != "", timeout=180) for j in ids[1:]]
+            assert [(r.state, r.waiting_for) for r in others] == [("queued", "plate"), ("queued", "queue")]
+            assert "job next" in others[0].stage
             assert client.state().program_id == first.program_id          # the station kept the first job
             nxt = client.job_next()
             assert nxt.job_id == ids[1]

@@ -74,7 +74,7 @@ def test_a_print_job_across_two_hosts(hosts, tmp_path):
     for ns, addr, names in ((a, ADDR_A, ("station", "planner", "collision")), (b, ADDR_B, ("slicer", "supervisor"))):
         for name in names:
             procs.append(subprocess.Popen(fabric(ns, "serve", name, *common, "--listen", f"tcp/{addr}:0",
-                                                 "--log-level", "WARNING"),
+                                                 "--log-level", "WARNING", "--data-dir", str(tmp_path / ns)),
                                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
 
     def cli_b(*args: str) -> subprocess.CompletedProcess:
@@ -88,5 +88,5 @@ def test_a_print_job_across_two_hosts(hosts, tmp_path):
                 "--follow", "--timeout", "180")
     assert job.returncode == 0, job.stdout + job.stderr
     res = json.loads(job.stdout)
-    assert res["job"]["state"] == "finished" and res["end"]["kind"] == "finished"
+    assert res["job"]["state"] == "finished" and res["end"]["kind"] == "finished", json.dumps(res["job"])[:600]
     assert res["time"]["remaining_s"] == pytest.approx(0.0, abs=1e-6)

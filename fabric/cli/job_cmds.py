@@ -84,7 +84,8 @@ def cmd_submit(c: Client, a: argparse.Namespace) -> int:
             result["end"] = follow_print(c, timeout_s=a.timeout)
         except queue.Empty:
             result["end"] = None
-        result["job"] = c.job(acc.job_id)
+        # the supervisor applies the same end event to the record: wait for it to say so
+        result["job"] = c.wait_print_job(acc.job_id, lambda r: False, timeout=60.0)
         result["time"] = c.time()
     emit(result, a.json, lambda r: _record_text(r["job"])
          + (f"\n  print {r['end'].kind} at t={r['end'].t_sim_s:.1f} s" if r.get("end") else ""))

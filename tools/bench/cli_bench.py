@@ -39,6 +39,7 @@ import socket
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -197,7 +198,9 @@ def main() -> int:
     st = SessionSettings(connect=[f"tcp/127.0.0.1:{free_port()}"], cell="clibench")
     client_args = replace(st, mode="client").to_args()
     hub = zenoh.open(zenoh_config(hub_settings(st)))
-    station = subprocess.Popen([*fabric_cli(), "serve", "station", *st.to_args(), "--log-level", "WARNING"])
+    data = tempfile.TemporaryDirectory(prefix="cli-bench-")
+    station = subprocess.Popen([*fabric_cli(), "serve", "station", *st.to_args(), "--log-level", "WARNING",
+                                "--data-dir", data.name])
     try:
         with Client.connect(st) as client:
             client.wait_alive(("station",), deadline_s=60)

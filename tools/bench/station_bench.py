@@ -26,6 +26,7 @@ import queue
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -150,8 +151,9 @@ def main() -> int:
     planner = PlannerService(session, st.cell, cell)
     pid = planner.store_artifact(program_artifact(program))
     planner.start()
+    data = tempfile.TemporaryDirectory(prefix="station-bench-")      # a fresh station: nothing to restore
     proc = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "serve", "station", *st.to_args(),
-                             "--log-level", "WARNING"])
+                             "--log-level", "WARNING", "--data-dir", data.name])
     monitors = [Client(zenoh.open(zenoh_config(st)), st.cell) for _ in range(a.monitors)]
     try:
         client = Client(session, st.cell)
@@ -166,6 +168,7 @@ def main() -> int:
         planner.close()
         session.close()
         hub.close()
+        data.cleanup()
     fast = runs[0]
     result = {"python": platform.python_version(), "rows": len(program), "monitors": a.monitors,
               "round_trips": rtt, "baseline_pure_twin": base, "pure_twin_20ms_steps": stepped, "station": runs,
