@@ -69,8 +69,10 @@ def plan_file(c: Client, data: bytes, filename: str, a: argparse.Namespace) -> s
 
 
 def cmd_plan(c: Client, a: argparse.Namespace) -> int:
+    from fabric.planning.memory import keep_freed_memory    # only this command needs these
+    from fabric.planning.post.atomic import AtomicFiles
+    keep_freed_memory()                     # export chunks reuse the pages of the ones before
     summary = plan_file(c, read_input(a.gcode), Path(a.gcode).name, a)
-    from fabric.planning.post.atomic import AtomicFiles     # only this command needs it
     written = {}
     with AtomicFiles() as files:          # every export file, or none (temporary files renamed at the end)
         for fmt in EXPORT_FLAGS:

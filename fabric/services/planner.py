@@ -36,6 +36,7 @@ from fabric.robot.frames import xyzrpy_to_T
 from fabric.motion.program import Program
 from fabric.motion.timing import StartState, time_program
 from fabric.planning import PlanOptions, plan_gcode
+from fabric.planning.memory import keep_freed_memory
 from fabric.planning.post import write_export
 from fabric.planning.post.stream import ExportStream
 
@@ -60,6 +61,7 @@ class PlannerService(Service):
 
     def __init__(self, session: zenoh.Session, cell_id: str, cell: Cell, data_dir: Path | None = None) -> None:
         super().__init__(session, cell_id, data_dir)
+        keep_freed_memory()                     # the next plan reuses the pages of the last one
         self.cell = cell
         self.client = Client(session, cell_id)
         self.jobs = JobRunner("planner", self.publisher("progress", lossless=True))
