@@ -10,6 +10,7 @@ import threading
 import zenoh
 
 from fabric.config import SessionSettings, zenoh_config
+from fabric.errors import FabricError
 from fabric.services import SERVICE_MODULES
 
 __all__ = ["serve", "setup_logging"]
@@ -28,14 +29,22 @@ def serve(name: str, settings: SessionSettings, options: argparse.Namespace,
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: stop.set())
+    log = logging.getLogger(f"fabric.{name}")
     with zenoh.open(zenoh_config(settings)) as session:
-        svc = module.build(session, settings.cell, options)
+        try:
+            svc = module.build(session, settings.cell, options)
+        except FabricError as err:
+            log.error("%s cannot start: %s", name, err.message)
+            return 2
         try:
             svc.start()
             if ready is not None:
                 ready.set()
             stop.wait()
+        except FabricError as err:
+            log.error("%s cannot start: %s", name, err.message)
+            return 2
         finally:
             svc.close()
-    logging.getLogger(f"fabric.{name}").info("%s stopped", name)
+    log.info("%s stopped", name)
     return 0

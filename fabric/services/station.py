@@ -89,7 +89,8 @@ class StationService(Service):
 
     def close(self) -> None:
         super().close()
-        self._thread.join(timeout=2.0)
+        if hasattr(self, "_thread"):                 # not there when start was refused
+            self._thread.join(timeout=2.0)
         with self.lock:
             self.journal.checkpoint(self.twin, self.meta, force=True)
             self.journal.store.close()
