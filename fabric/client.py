@@ -272,8 +272,10 @@ class Client:
             program_id=program_id, fmt=fmt, offset=offset, limit_bytes=limit_bytes, module_targets=module_targets))
 
     def export_to(self, program_id: str, fmt: str, out: BinaryIO, module_targets: int = 5000,
-                  limit_bytes: int = 4 << 20) -> int:
-        """Stream an export into ``out`` chunk by chunk (memory stays at one chunk); returns the bytes written."""
+                  limit_bytes: int = 16 << 20) -> int:
+        """Stream an export into ``out`` chunk by chunk (memory stays at one chunk); returns the bytes written.
+
+        A chunk is what the planner has formatted by the time it is asked, up to ``limit_bytes``."""
         offset = 0
         while True:
             chunk = self.export_chunk(program_id, fmt, offset, limit_bytes, module_targets)

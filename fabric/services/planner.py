@@ -44,7 +44,7 @@ __all__ = ["PlannerService", "build", "add_arguments"]
 
 MEDIA = {"rapid": "text/x-rapid", "krl": "text/x-krl", "urscript": "text/x-urscript", "csv": "text/csv"}
 SUFFIX = {"rapid": "mod", "krl": "src", "urscript": "script", "csv": "csv"}
-KEEP_PLANS = 2              # plans kept in memory for their exports (a million-row program is ~160 MB)
+KEEP_PLANS = 1              # plans kept in memory for their exports (a million-row program is ~160 MB)
 MAX_EXPORT_STREAMS = 4      # streamed exports open at once (a reader that went away is dropped by the next)
 
 

@@ -97,6 +97,7 @@ class _Names:
 
     def __init__(self, prefix: str, speeds: np.ndarray, zones: np.ndarray) -> None:
         self.prefix = prefix
+        speeds, zones = _run_values(speeds), _run_values(zones)
         self.speeds = {float(v): f"v{prefix}{_num(v, 1).replace('.', '_')}" for v in np.unique(np.round(speeds, 1))}
         self.zones = {float(z): f"z{prefix}{_num(z, 2).replace('.', '_')}"
                       for z in np.unique(np.round(zones, 2)) if z > 0}
@@ -291,6 +292,16 @@ def _joined(columns: list[FixedColumn]) -> list[Column]:
     return out
 
 
+def _run_starts(values: np.ndarray) -> np.ndarray:
+    """Where each run of equal consecutive values starts."""
+    return np.concatenate([[0], np.flatnonzero(values[1:] != values[:-1]) + 1]) if len(values) else np.zeros(0, int)
+
+
+def _run_values(values: np.ndarray) -> np.ndarray:
+    """The value of each run of equal consecutive values (the same distinct values, far fewer to sort)."""
+    return values[_run_starts(values)]
+
+
 def _choices(values: np.ndarray, name_of: Callable[[float], str]) -> ChoiceColumn:
     """A column of names (speeddata / zonedata) of per-row values, each distinct value named once.
 
@@ -299,7 +310,7 @@ def _choices(values: np.ndarray, name_of: Callable[[float], str]) -> ChoiceColum
     """
     if len(values) == 0:
         return ChoiceColumn(np.zeros(0, dtype=np.intp), [])
-    starts = np.concatenate([[0], np.flatnonzero(values[1:] != values[:-1]) + 1])
+    starts = _run_starts(values)
     distinct, run_index = np.unique(values[starts], return_inverse=True)
     index = np.repeat(run_index, np.diff(np.append(starts, len(values))))
     return ChoiceColumn(index, [name_of(v).encode() for v in distinct])

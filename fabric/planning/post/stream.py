@@ -111,6 +111,7 @@ class ExportStream:
     def read(self, offset: int, limit_bytes: int, timeout_s: float = 60.0) -> bytes:
         """The next at most ``limit_bytes`` bytes from ``offset`` (which must be where the last read ended).
 
+        Waits for the first piece only; the pieces already formatted after it are added up to the limit.
         ``self.done`` is set once the last bytes have been returned.
         """
         if offset != self.offset:
@@ -131,12 +132,22 @@ class ExportStream:
                 self.done = True
                 return b""
             self._pending = memoryview(item)
-        data = bytes(self._pending[:limit_bytes])
+        parts = [self._take(limit_bytes)]
+        size = len(parts[0])
+        while True:
+            if not self._pending:
+                self._peek_end()            # the next piece if it is ready already (or the end)
+            if not self._pending or size >= limit_bytes:
+                break
+            parts.append(self._take(limit_bytes - size))
+            size += len(parts[-1])
+        self.offset += size
+        return b"".join(parts)
+
+    def _take(self, limit_bytes: int) -> memoryview:
+        part = self._pending[:limit_bytes]
         self._pending = self._pending[limit_bytes:]
-        self.offset += len(data)
-        if not self._pending:
-            self._peek_end()
-        return data
+        return part
 
     def _peek_end(self) -> None:
         # mark the stream done with its last bytes when the writer has already finished
