@@ -237,10 +237,13 @@ class Client:
     def home(self) -> s.Ack: return self.call("station", "home")
     def load(self, program_id: str, job_id: str = "") -> s.TimeInfo:
         return self.call("station", "load", s.LoadRequest(program_id=program_id, job_id=job_id))
-    def start(self, rtf: float = 1.0) -> s.Ack: return self.call("station", "start", s.StartRequest(rtf=rtf))
+    def start(self, rtf: float | None = None, from_layer: int = -1) -> s.Ack:
+        return self.call("station", "start", s.StartRequest(rtf=rtf, from_layer=from_layer))
     def pause(self) -> s.Ack: return self.call("station", "pause")
-    def resume(self, rtf: float = 1.0) -> s.Ack: return self.call("station", "resume", s.StartRequest(rtf=rtf))
-    def recover(self, rtf: float = 1.0) -> s.Ack: return self.call("station", "recover", s.StartRequest(rtf=rtf))
+    def resume(self, rtf: float | None = None) -> s.Ack:
+        return self.call("station", "resume", s.StartRequest(rtf=rtf))
+    def recover(self, rtf: float | None = None, from_layer: int = -1) -> s.Ack:
+        return self.call("station", "recover", s.StartRequest(rtf=rtf, from_layer=from_layer))
     def stop(self) -> s.Ack: return self.call("station", "stop")
     def collisions(self) -> s.CollisionReport: return self.call("station", "collisions")
     def calibrate(self) -> s.CalibrationReport: return self.call("station", "calibrate")

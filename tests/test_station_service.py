@@ -210,3 +210,26 @@ def test_a_simulation_failure_faults_the_job_and_the_station_keeps_serving(fabri
     assert ev.kind == "fault" and "planted" in client.state().reason
     assert station.degraded and "planted" in station.degraded
     assert len(client.position().q_deg) == 6                  # still serving
+
+
+def test_stop_then_start_again_at_a_layer(fabric):
+    client, station, pid, _ = fabric
+    client.load(pid)
+    events = client.subscribe("station", "events")
+    try:
+        client.start(rtf=30.0)
+        while wait_event(events, ("layer",)).layer < 1:
+            pass
+        client.stop()
+        wait_event(events, ("stopped",))
+        with pytest.raises(ValidationError, match="no layer 7"):
+            client.start(from_layer=6)
+        assert client.state().state == "stopped"
+        ack = client.start(rtf=0, from_layer=2)
+        assert "from layer 3" in ack.message
+        assert wait_event(events, ("at_layer", "fault")).kind == "at_layer"
+        assert wait_event(events, ("finished", "fault")).kind == "finished"
+    finally:
+        events.close()
+    csv = client.mesh("csv").data.decode().splitlines()
+    assert len(csv) > 4 + 1                          # the first layers, a partial one, then layer 3

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fabric.codec import pack, unpack
-from fabric.errors import CollisionError, StateError
+from fabric.errors import CollisionError, StateError, ValidationError
 from fabric.motion.program import Program
 from fabric.motion.testprog import square_program
 from fabric.robot.cell import Cell
@@ -127,3 +127,44 @@ def test_interrupt_of_an_idle_twin_changes_nothing(cell: Cell) -> None:
     twin.interrupt("station restarted")
     assert twin.state == "idle"
     np.testing.assert_array_equal(twin.pose().q_rad, before)
+
+
+def test_restart_at_a_layer_after_a_stop_heats_and_prints_the_rest(cell: Cell, prog: Program,
+                                                                   reference: Twin) -> None:
+    twin = Twin(cell)
+    twin.load(prog)
+    twin.start()
+    while twin.extrusion().layer < 1:
+        twin.advance(0.25)
+    twin.stop()
+    finish(twin)
+    assert twin.state == "stopped" and twin.temps().nozzle_target_c == 0.0
+    stopped_beads = len(twin.beads)
+    with pytest.raises(ValidationError, match="no layer 9"):
+        twin.start(from_layer=8)
+    assert twin.state == "stopped"                                     # refused: nothing changed
+    twin.start(from_layer=2)
+    events = finish(twin)
+    kinds = [e.kind for e in events]
+    assert kinds[:2] == ["started", "temp_reached"] and "at_layer" in kinds and kinds[-1] == "finished"
+    layer2 = reference.beads.to_arrays()
+    want = layer2["end_mm"][layer2["layer"] == 2]
+    got = twin.beads.to_arrays()
+    np.testing.assert_allclose(got["end_mm"][stopped_beads:], want, atol=1e-9)   # layer 3 printed as planned
+
+
+def test_recover_at_a_layer_records_the_cut_row_and_goes_on_from_there(cell: Cell, prog: Program,
+                                                                       reference: Twin) -> None:
+    twin = Twin(cell)
+    twin.load(prog)
+    twin.start()
+    twin.advance(94.5)                                                  # inside layer 2
+    twin.interrupt("station restarted")
+    at = twin.recovery_move(from_layer=1)
+    assert at is not None and not np.allclose(at[0], at[1])
+    twin.recover(from_layer=1)                                         # redo layer 2 from its start
+    finish(twin)
+    layers = twin.beads.to_arrays()["layer"]
+    reference_layers = reference.beads.to_arrays()["layer"]
+    assert list(np.unique(layers)) == [0, 1, 2]
+    assert (layers == 1).sum() > (reference_layers == 1).sum()          # layer 2 printed again

@@ -8,7 +8,7 @@ from pathlib import Path
 from fabric import schemas as s
 from fabric.cli.output import emit
 from fabric.client import Client
-from fabric.errors import FabricError
+from fabric.errors import BadRequest, FabricError
 
 __all__ = ["register"]
 
@@ -118,6 +118,15 @@ def cmd_mesh(c: Client, a: argparse.Namespace) -> int:
     return 0
 
 
+def _layer_index(number: int | None) -> int:
+    """The wire's 0-based layer index of a layer number as people count (1 = the first); -1 for none."""
+    if number is None:
+        return -1
+    if number < 1:
+        raise BadRequest(f"--layer counts from 1, got {number}", field="layer", value=number)
+    return number - 1
+
+
 def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     def simple(name: str, fn, text, help_: str, **kw):
         p = sub.add_parser(name, parents=[common], help=help_)
@@ -131,10 +140,16 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.set_defaults(run=cmd_status)
     simple("position", lambda c, a: c.position(), _pose_text, "TCP pose and joints of the twin now")
     simple("home", lambda c, a: c.home(), _ack_text, "collision-checked joint move to home")
-    for name, help_ in (("start", "start printing the loaded program"), ("resume", "resume a paused print"),
-                        ("recover", "after a crash: collision-checked move back to the interrupted spot, go on")):
-        p = simple(name, (lambda c, a, n=name: getattr(c, n)(rtf=a.rtf)), _ack_text, help_)
-        p.add_argument("--rtf", type=float, default=1.0, help="real-time factor (0 = as fast as possible)")
+    p = simple("start", lambda c, a: c.start(rtf=a.rtf, from_layer=_layer_index(a.layer)), _ack_text,
+               "start printing the loaded program (again, or from a layer of the part on the plate)")
+    p.add_argument("--layer", type=int, default=None, metavar="N", help="start at layer N (1 = the first)")
+    p.add_argument("--rtf", type=float, default=None, help="real-time factor (0 = max; default: keep the current)")
+    p = simple("resume", lambda c, a: c.resume(rtf=a.rtf), _ack_text, "resume a paused print")
+    p.add_argument("--rtf", type=float, default=None, help="real-time factor (0 = max; default: keep the current)")
+    p = simple("recover", lambda c, a: c.recover(rtf=a.rtf, from_layer=_layer_index(a.layer)), _ack_text,
+               "after a crash: collision-checked move back to the interrupted spot (or a layer's start), go on")
+    p.add_argument("--layer", type=int, default=None, metavar="N", help="go on from the start of layer N instead")
+    p.add_argument("--rtf", type=float, default=None, help="real-time factor (0 = max; default: keep the current)")
     simple("pause", lambda c, a: c.pause(), _ack_text, "pause: extruder off, retract, lift")
     simple("stop", lambda c, a: c.stop(), _ack_text, "abort the print safely")
     simple("collisions", lambda c, a: c.collisions(), _collision_text, "sweep the loaded program for collisions")

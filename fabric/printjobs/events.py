@@ -25,15 +25,17 @@ def apply_event(rec: s.JobRecord, event: s.Event, wall_s: float) -> bool:
 
     Lifecycle events move the job's state (started/resumed/recovered -> printing, paused, finished,
     stopped, fault -> failed, interrupted) and carry its simulated time so far; the end of a print
-    also records what it deposited. Layer events track the layer. A job already final ignores
-    everything but a late end event of its own print (never reopened)."""
+    also records what it deposited. Layer events track the layer. A job already final changes only
+    when its program is started again on the station (e.g. restarted at a layer after a stop)."""
     kind = event.kind
     data = event.data if isinstance(event.data, dict) else {}
     if kind == "layer" and rec.state == "printing":
         rec.layer = int(event.layer)
         rec.stage = f"printing layer {event.layer + 1}"
         return True
-    if kind not in _STATE_OF or rec.state in s.FINAL_JOB_STATES:
+    if kind not in _STATE_OF:
+        return False
+    if rec.state in s.FINAL_JOB_STATES and kind != "started":    # a stopped print restarted at a layer
         return False
     new = _STATE_OF[kind]
     rec.state = new

@@ -110,10 +110,12 @@ class LoadRequest:
     job_id: str = ""
 
 
-@schema("station.StartRequest")
+@schema("station.StartRequest", version=2)
 class StartRequest:
-    """``rtf`` 1 = real time, larger = faster, 0 = as fast as possible."""
-    rtf: float = f(1.0, ge=0.0, le=1e6)
+    """``rtf`` 1 = real time, larger = faster, 0 = as fast as possible; nil keeps the current one.
+    ``from_layer`` (0-based, as in events; -1 = not given): start or recover at that layer."""
+    rtf: float | None = f(None, ge=0.0, le=1e6)
+    from_layer: int = f(-1, ge=-1, le=1_000_000)
 
 
 @schema("station.Overrides")

@@ -5,16 +5,18 @@ is the sha256 of its encoded bytes, served at ``planner/artifact/<id>`` so
 that the station and the collision checker fetch it over the fabric (no
 shared filesystem between hosts).
 
-The last few plans stay in memory (program and CSV times), so an export starts
+The last plan stays in memory (program and CSV times), so its export starts
 formatting at once, without reading the artifact back and decoding it. The
 artifact is written to the durable store by a background thread once its id
 is known (the job ends with that id); until it is on disk it is served from
-memory, and closing the service waits for the writes still under way.
+memory, and closing the service waits for the writes still under way. That thread runs at a
+lower OS priority, so the writes give way to an export being formatted.
 """
 from __future__ import annotations
 
 import argparse
 import io
+import os
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
@@ -46,6 +48,7 @@ MEDIA = {"rapid": "text/x-rapid", "krl": "text/x-krl", "urscript": "text/x-urscr
 SUFFIX = {"rapid": "mod", "krl": "src", "urscript": "script", "csv": "csv"}
 KEEP_PLANS = 1              # plans kept in memory for their exports (a million-row program is ~160 MB)
 MAX_EXPORT_STREAMS = 4      # streamed exports open at once (a reader that went away is dropped by the next)
+BACKGROUND_NICE = 10        # nice value of the thread writing artifacts to disk
 
 
 @dataclass
@@ -75,7 +78,8 @@ class PlannerService(Service):
         self.recent: dict[str, PlannedProgram] = {}                   # program id -> the last plans
         self._unstored: dict[str, s.Artifact] = {}                    # artifacts not yet on disk
         self._unstored_lock = threading.Lock()
-        self._storer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner-store")
+        self._storer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner-store",
+                                          initializer=_background_priority)
         self._encoder = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner-encode")
 
     def close(self) -> None:
@@ -222,6 +226,15 @@ class PlannerService(Service):
             write_export(program, fmt, out, self.cell, module_targets=module_targets, t_end_s=t_end, name=name)
 
         return write, f"{program.meta.get('name', 'program')}.{SUFFIX[fmt]}"
+
+
+def _background_priority() -> None:
+    """Run this thread at a lower OS priority (Linux threads have their own nice value): the artifact
+    writes (hashing, encoding, fsync) give way to the export being formatted and sent."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), BACKGROUND_NICE)
+    except (OSError, AttributeError):       # not Linux, or not allowed: same priority as the rest
+        pass
 
 
 def _first_slowed(result, program) -> s.SlowedMove | None:

@@ -235,11 +235,7 @@ class StationService(Service):
                 raise StateError(f"cannot go home while {self.twin.state}; stop first",
                                  state=self.twin.state, command="home")
             q_now = self.twin.pose().q_rad
-        report = self.client.check(s.CollisionRequest(q_from_deg=np.degrees(q_now).tolist(),
-                                                      q_to_deg=np.degrees(self.cell.home_q_rad).tolist()))
-        hit = report.first_hit
-        if hit is not None:
-            raise CollisionError(f"the move home would collide: {hit.body_a} <-> {hit.body_b}", **s.to_plain(hit))
+        self._check_move(q_now, self.cell.home_q_rad, "the move home")
         with self.lock:
             self.twin.go_home()
             self._checkpoint()
@@ -260,11 +256,33 @@ class StationService(Service):
             return self._time_msg()
 
     def on_start(self, req: s.StartRequest) -> s.Ack:
+        layer = req.from_layer if req.from_layer >= 0 else None
+        if layer is not None:
+            with self.lock:
+                q_from, q_to = self.twin.layer_move(layer)
+            self._check_move(q_from, q_to, f"the move to layer {layer + 1}")
         with self.lock:
-            self.twin.start()
-            self.meta.rtf = req.rtf
+            self.twin.start(from_layer=layer)
+            self._set_rtf(req.rtf)
             self._checkpoint()
-            return self._ack(f"printing at {'max speed' if req.rtf == 0 else f'{req.rtf:g}x real time'}")
+            where = "" if layer is None else f" from layer {layer + 1} (heating, then the move above it)"
+            return self._ack(f"printing{where} at {self._rtf_text()}")
+
+    def _set_rtf(self, rtf: float | None) -> None:
+        """Take the request's real-time factor, if it gives one (nil keeps the current one)."""
+        if rtf is not None:
+            self.meta.rtf = rtf
+
+    def _rtf_text(self) -> str:
+        return "max speed" if self.meta.rtf == 0 else f"{self.meta.rtf:g}x real time"
+
+    def _check_move(self, q_from: np.ndarray, q_to: np.ndarray, what: str) -> None:
+        """A joint move the station is about to make, swept by the collision service (raises on a hit)."""
+        report = self.client.check(s.CollisionRequest(q_from_deg=np.degrees(q_from).tolist(),
+                                                      q_to_deg=np.degrees(q_to).tolist()))
+        hit = report.first_hit
+        if hit is not None:
+            raise CollisionError(f"{what} would collide: {hit.body_a} <-> {hit.body_b}", **s.to_plain(hit))
 
     def on_pause(self, _: s.Empty) -> s.Ack:
         with self.lock:
@@ -275,28 +293,25 @@ class StationService(Service):
     def on_resume(self, req: s.StartRequest) -> s.Ack:
         with self.lock:
             self.twin.resume()
-            self.meta.rtf = req.rtf
+            self._set_rtf(req.rtf)
             self._checkpoint()
-            return self._ack("resuming at the paused spot")
+            return self._ack(f"resuming at the paused spot at {self._rtf_text()}")
 
     def on_recover(self, req: s.StartRequest) -> s.Ack:
+        layer = req.from_layer if req.from_layer >= 0 else None
         with self.lock:
-            move = self.twin.recovery_move()
+            move = self.twin.recovery_move(layer)
             if move is None:
                 raise StateError(f"nothing to recover while {self.twin.state}", state=self.twin.state,
                                  command="recover")
-        q_from, q_to = move
-        report = self.client.check(s.CollisionRequest(q_from_deg=np.degrees(q_from).tolist(),
-                                                      q_to_deg=np.degrees(q_to).tolist()))
-        hit = report.first_hit
-        if hit is not None:
-            raise CollisionError(f"the move back to the interrupted spot would collide: {hit.body_a} <-> "
-                                 f"{hit.body_b}", **s.to_plain(hit))
+        where = "the interrupted spot" if layer is None else f"layer {layer + 1}"
+        self._check_move(move[0], move[1], f"the move back to {where}")
         with self.lock:
-            self.twin.recover()
-            self.meta.rtf = req.rtf
+            self.twin.recover(from_layer=layer)
+            self._set_rtf(req.rtf)
             self._checkpoint()
-            return self._ack("recovering: back to the interrupted spot (collision-checked), then going on")
+            return self._ack(f"recovering: back to {where} (collision-checked), then going on at "
+                             f"{self._rtf_text()}")
 
     def on_stop(self, _: s.Empty) -> s.Ack:
         with self.lock:
@@ -374,7 +389,7 @@ class StationService(Service):
     def on_rtf(self, req: s.StartRequest) -> s.StationState:
         """Change how fast simulated time runs; the simulation itself is unchanged (time is exact)."""
         with self.lock:
-            self.meta.rtf = req.rtf
+            self._set_rtf(req.rtf)
             self._checkpoint()
             return self._state_msg()
 

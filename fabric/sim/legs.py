@@ -107,20 +107,26 @@ class StopLegSpec:
 
 @dataclass
 class AuxLegSpec:
-    """The twin's own moves: program rows (column name -> value) from ``start`` in plate frame ``wobj``."""
+    """The twin's own moves: program rows (column name -> value) from ``start`` in plate frame ``wobj``;
+    ``thermal`` (the heaters at ``t0_s``) times heat-up waits among them."""
 
     rows: list[dict[str, Any]]
     start: PoseSpec
     wobj: np.ndarray
+    thermal: Thermal | None = None
+    t0_s: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         rows = [{k: (np.asarray(v) if isinstance(v, (np.ndarray, list, tuple)) else v) for k, v in r.items()}
                 for r in self.rows]
-        return {"kind": "aux", "rows": rows, "start": self.start.to_dict(), "wobj": np.asarray(self.wobj, float)}
+        return {"kind": "aux", "rows": rows, "start": self.start.to_dict(), "wobj": np.asarray(self.wobj, float),
+                "thermal": thermal_to_dict(self.thermal) if self.thermal is not None else None, "t0_s": self.t0_s}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "AuxLegSpec":
-        return cls([dict(r) for r in d["rows"]], PoseSpec.from_dict(d["start"]), np.asarray(d["wobj"], float))
+        thermal = thermal_from_dict(d["thermal"]) if d.get("thermal") is not None else None
+        return cls([dict(r) for r in d["rows"]], PoseSpec.from_dict(d["start"]), np.asarray(d["wobj"], float),
+                   thermal, float(d.get("t0_s", 0.0)))
 
 
 LegSpec = Union[ProgramLegSpec, StopLegSpec, AuxLegSpec]

@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from fabric.errors import UnreachableError
-from fabric.motion.program import MOVEJ, MOVEL, RETRACT, WAIT, WAIT_TEMP
+from fabric.errors import UnreachableError, ValidationError
+from fabric.motion.program import BED, MOVEJ, MOVEL, NOZZLE, RETRACT, SET_TEMP, WAIT, WAIT_TEMP
 from fabric.motion.timing import stop_timeline
 from fabric.robot.kinematics import ik_reason
 from fabric.robot.frames import R_from_quat, inv_T, make_T, quat_from_R
@@ -53,9 +53,12 @@ class MotionPlanner:
 
     # Legs of the twin's own moves -------------------------------------------------------
 
-    def aux_leg(self, rows: list[dict[str, Any]], start: PoseSpec, wobj: np.ndarray, end_kinds: list[str]) -> Leg:
-        """A timed leg of the twin's own rows from ``start`` (plate frame ``wobj``)."""
-        spec = AuxLegSpec(rows, start, np.asarray(wobj, dtype=float))
+    def aux_leg(self, rows: list[dict[str, Any]], start: PoseSpec, wobj: np.ndarray, end_kinds: list[str],
+                heaters: bool = False) -> Leg:
+        """A timed leg of the twin's own rows from ``start`` (plate frame ``wobj``); ``heaters``: it waits
+        for set points, timed from the heaters now (the leg must start now)."""
+        thermal = self.state.thermal.copy() if heaters else None
+        spec = AuxLegSpec(rows, start, np.asarray(wobj, dtype=float), thermal, self.state.t_sim_s)
         return Leg(spec, False, end_kinds, tl=self.builder.aux(spec))
 
     def home_leg(self) -> Leg:
@@ -227,6 +230,54 @@ class MotionPlanner:
             self.runner.enqueue(leg)
         self.state.job.pause_retract_mm = 0.0
         self.pause_preview_s = None
+
+    # Starting at a layer -------------------------------------------------------------------
+
+    def layer_start_row(self, layer: int) -> int:
+        """The first program row of ``layer`` (0-based, as in events)."""
+        p = self.state.program
+        rows = np.flatnonzero(p.layer == layer)
+        if layer < 0 or not len(rows):
+            top = int(p.layer.max())
+            raise ValidationError(f"the program has no layer {layer + 1} (layers 1 to {top + 1})", field="from_layer",
+                                  layers=top + 1)
+        return int(rows[0])
+
+    def restart_at(self, row: int, end_kind: str) -> None:
+        """Go on with the program from ``row`` as a print restarted at a layer does: the heaters to the set
+        points the program has there (waiting for them), a joint move to ``lift_mm`` above where ``row``
+        starts, straight down, then the program from ``row``. ``end_kind`` fires once down."""
+        st, cfg = self.state, self.config
+        p = st.program
+        start, wobj = self.queue_end()
+        target = PoseSpec(p.q_rad[row - 1], p.xyz_mm[row - 1], p.quat_wxyz[row - 1])
+        rows: list[dict[str, Any]] = []
+        here = {"q_rad": start.q_rad, "xyz_mm": start.xyz_mm, "quat_wxyz": start.quat_wxyz}
+        for heater in (NOZZLE, BED):
+            sets = np.flatnonzero((p.op[:row] == SET_TEMP) & (p.aux[:row] == heater))
+            if len(sets):
+                value = float(p.value[sets[-1]])
+                rows.append({"op": SET_TEMP, "aux": heater, "value": value, **here})
+                if value > 0:
+                    rows.append({"op": WAIT_TEMP, "aux": heater, "value": value, **here})
+        above = np.asarray(target.xyz_mm, dtype=float) + [0.0, 0.0, max(cfg.lift_mm, 1.0)]
+        q_above = self._ik_one(wobj, above, target.quat_wxyz, target.q_rad)
+        rows.append({"op": MOVEJ, "q_rad": q_above, "xyz_mm": above, "quat_wxyz": target.quat_wxyz,
+                     "vel_r": cfg.home_vel_r})
+        rows.append({"op": MOVEL, "q_rad": target.q_rad, "xyz_mm": target.xyz_mm, "quat_wxyz": target.quat_wxyz,
+                     "speed_mm_s": cfg.resume_speed_mm_s})
+        self.runner.enqueue(self.aux_leg(rows, start, wobj, [end_kind], heaters=True))
+        self.runner.enqueue(Leg(ProgramLegSpec(row, target, 0.0, 0.0), True, ["finished"]))
+        self.pause_preview_s = None
+
+    def restart_move(self, row: int) -> tuple[np.ndarray, np.ndarray]:
+        """Joints where the robot rests and joints above where ``row`` starts (the restart's joint move)."""
+        st = self.state
+        p = st.program
+        target = PoseSpec(p.q_rad[row - 1], p.xyz_mm[row - 1], p.quat_wxyz[row - 1])
+        above = np.asarray(target.xyz_mm, dtype=float) + [0.0, 0.0, max(self.config.lift_mm, 1.0)]
+        start, wobj = self.queue_end()
+        return start.q_rad.copy(), self._ik_one(wobj, above, target.quat_wxyz, target.q_rad)
 
     # Overrides --------------------------------------------------------------------------
 

@@ -151,7 +151,7 @@ class LegRunner:
             self.record_partial()
             st.t_ended_s = t
             self.emit(events, t, kind, self._totals(t))
-        elif kind in ("resumed", "recovered"):
+        elif kind in ("resumed", "recovered", "at_layer"):
             job.resume_at = None
             self.emit(events, t, kind)
         elif kind == "paused" and job.resume_at is not None:

@@ -243,19 +243,41 @@ class Twin:
         st.state, st.reason = "ready", f"loaded {len(program)} rows"
         return TimeInfo(0.0, estimate, estimate, estimate)
 
-    def start(self) -> None:
-        """Run the loaded program from its start."""
+    def start(self, from_layer: int | None = None, collision_ok: bool = True) -> None:
+        """Run the loaded program from its start (again, after a stop or a finished print); or, with
+        ``from_layer`` (0-based), restart it at that
+        layer on the part already on the plate (after a stop, or a finished print to add to): heat,
+        joint move above the layer's first point, down, go on. The deposit record is kept then.
+        ``collision_ok``: the collision service's verdict on that joint move."""
         st = self.s
-        self._refuse("start", ("ready",))
+        self._refuse("start", ("ready", "stopped", "idle", "fault"))
+        if st.program is None:
+            raise StateError(f"cannot start while {st.state}: no program loaded", state=st.state, command="start")
         self._busy("start")
-        assert st.program is not None
-        self._new_job(st.program)
-        leg = Leg(ProgramLegSpec(0), True, ["finished"])
-        self.runner.enqueue(leg)
-        st.estimate_s = leg.tl.total_s
+        row = self.moves.layer_start_row(from_layer) if from_layer is not None else 0
+        if not collision_ok:
+            raise CollisionError("the move to the layer was refused by the collision check", command="start")
+        if row == 0:
+            self._new_job(st.program)
+            leg = Leg(ProgramLegSpec(0), True, ["finished"])
+            self.runner.enqueue(leg)
+            st.estimate_s = leg.tl.total_s
+        else:
+            st.job.resume_at = None
+            st.job.carry_mm3.clear()
+            self.moves.restart_at(row, "at_layer")
+            st.estimate_s = self.moves.remaining_s()
         st.t_started_s, st.t_ended_s = st.t_sim_s, None
-        st.state, st.reason = "printing", "started"
-        self.runner.emit(st.pending, st.t_sim_s, "started", {"rows": len(st.program), "estimate_s": st.estimate_s})
+        st.state, st.reason = "printing", "started" if row == 0 else f"restarted at layer {from_layer + 1}"
+        data = {"rows": len(st.program), "estimate_s": st.estimate_s, "from_row": row}
+        self.runner.emit(st.pending, st.t_sim_s, "started", data)
+
+    def layer_move(self, from_layer: int) -> tuple[np.ndarray, np.ndarray]:
+        """Joints where the robot rests and joints above the first point of ``from_layer`` (for a
+        collision check of a restart there)."""
+        if self.s.program is None:
+            raise StateError("no program loaded", state=self.s.state, command="start")
+        return self.moves.restart_move(self.moves.layer_start_row(from_layer))
 
     def pause(self) -> None:
         """Controlled stop, extruder off, retract, lift; ``paused`` event once the robot is clear."""
@@ -322,22 +344,31 @@ class Twin:
         elif was == "stopped" and st.t_ended_s is None:
             self.runner.on_end("stopped", t, events)
 
-    def recover(self, collision_ok: bool = True) -> None:
-        """Go on with an interrupted print: back to the interrupted spot, unretract, continue
-        (``collision_ok``: the collision service's verdict on the move back)."""
+    def recover(self, collision_ok: bool = True, from_layer: int | None = None) -> None:
+        """Go on with an interrupted print: back to the interrupted spot, unretract, continue; or, with
+        ``from_layer``, restart at that layer's first point instead (the row cut short becomes a partial
+        bead). ``collision_ok``: the collision service's verdict on the move back."""
+        st = self.s
         self._refuse("recover", ("interrupted",))
+        row = self.moves.layer_start_row(from_layer) if from_layer is not None else None
         if not collision_ok:
             raise CollisionError("the move back to the interrupted spot was refused by the collision check",
                                  command="recover")
-        self.s.state, self.s.reason = "printing", "recovering"
-        self._command(lambda: self.moves.resume("recovered"))
+        st.state, st.reason = "printing", "recovering"
+        if row is None:
+            self._command(lambda: self.moves.resume("recovered"))
+            return
+        self.runner.record_partial()
+        self._command(lambda: self.moves.restart_at(row, "recovered"))
 
-    def recovery_move(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """Joints where the robot rests and joints of the interrupted spot (for a collision check of the
-        move back), or None when nothing is interrupted."""
+    def recovery_move(self, from_layer: int | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+        """Joints where the robot rests and joints it goes to first to recover (the interrupted spot, or
+        above ``from_layer``'s first point), for a collision check; None when nothing is interrupted."""
         at = self.s.job.resume_at
         if self.s.state != "interrupted" or at is None:
             return None
+        if from_layer is not None:
+            return self.layer_move(from_layer)
         return self.s.rest_q_rad.copy(), np.asarray(at.pose.q_rad, dtype=float).copy()
 
     def note(self, kind: str, data: dict[str, Any] | None = None) -> None:

@@ -12,7 +12,7 @@ __all__ = ["EVENT_KINDS", "IK_ACCEPT", "STATES", "Event", "ExtrusionState", "Pos
 
 STATES = ("idle", "ready", "printing", "paused", "stopped", "fault", "interrupted")
 EVENT_KINDS = ("started", "layer", "extruder_on", "extruder_off", "paused", "resumed", "stopped", "finished",
-               "fault", "temp_reached", "home", "interrupted", "recovered", "stall")
+               "fault", "temp_reached", "home", "interrupted", "recovered", "stall", "at_layer")
 IK_ACCEPT = (IK_OK, IK_SINGULAR)   # a solution is returned
 
 

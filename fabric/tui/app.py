@@ -22,9 +22,9 @@ TOPICS = ("pose", "extrusion", "temps", "state", "events")
 UI_PERIOD_S = 0.1       # pose/extrusion/temps redraw at most this often
 
 COMMANDS: dict[str, tuple[str, Callable[[Client], Any]]] = {
-    "start": ("Start", lambda c: c.start(rtf=1.0)),
+    "start": ("Start", lambda c: c.start()),
     "pause": ("Pause", lambda c: c.pause()),
-    "resume": ("Resume", lambda c: c.resume(rtf=1.0)),
+    "resume": ("Resume", lambda c: c.resume()),
     "stop": ("Stop", lambda c: c.stop()),
     "home": ("Home", lambda c: c.home()),
     "ready": ("Ready?", lambda c: c.ready()),
