@@ -299,7 +299,7 @@ class Client:
         return self.call("supervisor", "job_remove", s.JobQuery(job_id=job_id))
     def job_move(self, job_id: str, position: int) -> s.JobList:
         return self.call("supervisor", "job_move", s.JobMove(job_id=job_id, position=position))
-    def job_next(self) -> s.JobRecord: return self.call("supervisor", "job_next")
+    def job_next(self) -> s.Ack: return self.call("supervisor", "job_next")
 
     def wait_print_job(self, job_id: str, done: Callable[[s.JobRecord], bool], timeout: float = 600.0,
                        on_change: Callable[[s.JobRecord], None] | None = None) -> s.JobRecord:

@@ -95,7 +95,7 @@ _TABLE = [
     _ep("supervisor", "jobs", s.Empty, s.JobList, doc="every print job: the queue and the history"),
     _ep("supervisor", "job_remove", s.JobQuery, s.Ack, doc="remove a job that is not on the station"),
     _ep("supervisor", "job_move", s.JobMove, s.JobList, doc="reorder the waiting queue"),
-    _ep("supervisor", "job_next", s.Empty, s.JobRecord, 60.0,
+    _ep("supervisor", "job_next", s.Empty, s.Ack, 60.0,
         "the plate is clear: load the next prepared job and start it"),
 ]
 ENDPOINTS: dict[tuple[str, str], Endpoint] = {(e.service, e.command): e for e in _TABLE}

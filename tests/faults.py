@@ -136,8 +136,7 @@ def run_with_fault(sc: SupervisedCell, service: str, delay_s: float) -> FaultRun
             killed_in = rec.state
         time.sleep(delay_s)
         t_kill = time.monotonic()
-        if service != "supervisor":
-            killed_in = client.job(acc.job_id).state
+        killed_in = client.job(acc.job_id).state
         sc.kill(service)
         recovery = None
         notes: list[str] = []

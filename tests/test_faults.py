@@ -81,7 +81,7 @@ def test_concurrent_submits_queue_and_never_overwrite(tmp_path):
             assert "job next" in others[0].stage
             assert client.state().program_id == first.program_id          # the station kept the first job
             nxt = client.job_next()
-            assert nxt.job_id == ids[1]
+            assert ids[1] in nxt.message and nxt.state in ("loaded", "printing", "finished")
             wait_state(client, ids[1], ("finished",), 180.0)
             states = {j.job_id: j.state for j in client.jobs().jobs}
             assert states == {ids[0]: "finished", ids[1]: "finished", ids[2]: "queued"}

@@ -120,4 +120,4 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("position", type=int)
     p.set_defaults(run=lambda c, a: (emit(c.job_move(a.job_id, a.position), a.json, _list_text), 0)[1])
     p = jsub.add_parser("next", parents=[common], help="the plate is clear: load and start the next job")
-    p.set_defaults(run=lambda c, a: (emit(c.job_next(), a.json, _record_text), 0)[1])
+    p.set_defaults(run=lambda c, a: (emit(c.job_next(), a.json, lambda r: r.message), 0)[1])

@@ -172,25 +172,30 @@ class SupervisorService(Service):
         self.wake.set()
         return s.JobList(jobs=self.store.all())
 
-    def on_job_next(self, _: s.Empty) -> s.JobRecord:
-        """The operator confirms the plate is clear: load the next prepared job and start it."""
+    def on_job_next(self, _: s.Empty) -> s.Ack:
+        """The operator confirms the plate is clear: load the next prepared job and start it (or the
+        next one submitted, if none waits)."""
         with self.lock:
             busy = self._on_station()
             if busy is not None and busy.state != "loaded":
                 raise StateError(f"job {busy.job_id} is {busy.state} on the station", state=busy.state,
                                  command="job next")
+            self.store.set_plate_clear(True)
             waiting = self._waiting()
             if not waiting:
-                raise StateError("no job is waiting in the queue", state="empty", command="job next")
-            self.store.set_plate_clear(True)
+                return s.Ack(ok=True, message="plate marked clear; no job is waiting: the next one submitted "
+                                              "with --start starts at once", state="")
             head = waiting[0]
-            if not head.prepared:
-                self.wake.set()
-                return head                                       # loaded and started once prepared
             head.start = True
             self.store.save(head)
+        if not head.prepared:
+            self.wake.set()
+            return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} starts once prepared "
+                                          f"({head.state})", state=head.state)
         self._load_next()
-        return self.store.get(head.job_id)
+        head = self.store.get(head.job_id)
+        return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} ({head.filename}) {head.state}",
+                     state=head.state)
 
     # --- preparing and loading ------------------------------------------------------
 
