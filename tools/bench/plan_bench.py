@@ -362,7 +362,8 @@ the one compared: at that rate 20x means a whole command of at most {r['cli_wall
 | `fabric-cli --help` (the CLI's start-up alone) | {cli['cli_help_s']:.2f} s | | | |
 
 Peak resident memory of the planner process over all the commands: {cli['planner_peak_rss_mb']:.0f} MB (it keeps
-the last two plans for their exports; an export holds a few chunks at a time, never the whole text).
+the last plan for its exports and, once freed, its heap for the next plan; an export holds a few pieces
+at a time, never the whole text).
 
 **Status**: the 20x target is {status} for text -> verified joint program against the consecutive
 per-point baseline; the first run of the process ({first:.1f}x) {first_status} it. Of the
