@@ -27,10 +27,9 @@ import numpy as np
 from fabric.errors import CollisionError, FabricError, StateError, UnreachableError, ValidationError
 from fabric.motion.program import Program
 from fabric.motion.thermal import Thermal
-from fabric.motion.timeline import Sample
 from fabric.motion.validate import validate_program
 from fabric.robot.kinematics import ik_reason
-from fabric.robot.frames import R_from_quat, inv_T, make_T, quat_from_R, rot_x
+from fabric.robot.frames import make_T, rot_x
 from fabric.sim.builder import LegBuilder
 from fabric.sim.calibration import CalibrationResult, calibrate_plate
 from fabric.sim.config import TwinConfig
@@ -38,6 +37,7 @@ from fabric.sim.deposition import Deposition
 from fabric.sim.legs import Leg, ProgramLegSpec
 from fabric.sim.moves import MotionPlanner
 from fabric.sim.runner import LegRunner
+from fabric.sim.readout import Readout
 from fabric.sim.state import JobState, TwinState
 from fabric.sim.types import EVENT_KINDS, IK_ACCEPT, STATES, Event, ExtrusionState, Pose, Temps, TimeInfo
 
@@ -65,7 +65,7 @@ class Twin:
         self.builder = LegBuilder(self.robot, self.config, state)
         self.runner = LegRunner(state, self.builder)
         self.moves = MotionPlanner(self.robot, cell.home_q_rad, self.config, state, self.builder, self.runner)
-        self._sample_cache: tuple[tuple[float, int, float], Sample] | None = None
+        self.readout = Readout(self.config, state, self.moves)
 
     # ------------------------------------------------------------------ saving
 
@@ -137,70 +137,21 @@ class Twin:
         """True while any motion (program, pause/stop moves, homing) is still to run."""
         return bool(self.s.legs)
 
-    def _now_sample(self) -> tuple[Sample | None, Leg | None]:
-        """The running leg's sample now (cached per simulated instant: telemetry reads it often)."""
-        legs = self.s.legs
-        leg = legs[0] if legs and legs[0].placed else None
-        if leg is None:
-            return None, None
-        key = (self.s.t_sim_s, id(leg), leg.t_cut)
-        if self._sample_cache is None or self._sample_cache[0] != key:
-            smp = leg.tl.sample(min(max(self.s.t_sim_s - leg.t0, 0.0), leg.t_cut))
-            self._sample_cache = (key, smp)
-        return self._sample_cache[1], leg
-
     def pose(self) -> Pose:
         """Where the robot is now (commanded pose of the twin)."""
-        smp, leg = self._now_sample()
-        work_T = self.s.work_T
-        if smp is not None and np.array_equal(leg.tl.program.wobj, work_T):
-            return Pose(np.array(smp.q_rad, dtype=float), np.array(smp.xyz_mm, dtype=float),
-                        np.array(smp.quat_wxyz, dtype=float), np.array(smp.base_xyz_mm, dtype=float))
-        if smp is None:
-            q, T = self.s.rest_q_rad, self.s.rest_T
-        else:
-            q = smp.q_rad
-            T = leg.tl.program.wobj @ make_T(R_from_quat(smp.quat_wxyz), smp.xyz_mm)
-        Tp = inv_T(work_T) @ T
-        return Pose(np.array(q, dtype=float), Tp[:3, 3].copy(), quat_from_R(Tp[:3, :3]), T[:3, 3].copy())
+        return self.readout.pose()
 
     def extrusion(self) -> ExtrusionState:
         """Extruder on/off and flow now; volume and filament pushed since start (retractions included)."""
-        smp, leg = self._now_sample()
-        job = self.s.job
-        flow, extra = 0.0, 0.0
-        if smp is not None and leg.main and smp.extruding:
-            flow = smp.flow_mm3_s
-            j = smp.row - leg.tl.start_row
-            if j >= leg.done:   # the row in progress: the part covered so far
-                s0 = leg.tl.s0_mm if j == 0 else 0.0
-                extra = float(leg.tl.program.flow_mm3_mm[smp.row]) * leg.tl.flow_r * (smp.s_mm - s0)
-        vol = job.extruded_mm3 + extra
-        program = self.s.program
-        g = int(program.gcode_line[job.row]) if program is not None else -1
-        filament_mm = vol / self.config.filament_area_mm2 + job.retract_total_mm
-        return ExtrusionState(job.extruder_on, float(flow), vol, filament_mm, job.layer, job.row, g)
+        return self.readout.extrusion()
 
     def temps(self) -> Temps:
         """Nozzle and bed temperatures now (closed form: exact at any step)."""
-        th, t = self.s.thermal, self.s.t_sim_s
-        return Temps(th.temp_at(0, t), th.target(0), th.temp_at(1, t), th.target(1))
+        return self.readout.temps()
 
     def time_info(self) -> TimeInfo:
         """Elapsed, expected total and remaining simulated time of the job (paused: if resumed now)."""
-        st = self.s
-        if st.state == "ready":
-            return TimeInfo(0.0, st.estimate_s, st.estimate_s, st.estimate_s)
-        if st.t_started_s is None:
-            return TimeInfo(0.0, 0.0, 0.0, st.estimate_s)
-        end = st.t_ended_s if st.t_ended_s is not None else st.t_sim_s
-        elapsed = end - st.t_started_s
-        remaining = 0.0
-        if st.state == "printing":
-            remaining = self.moves.remaining_s()
-        elif st.state in ("paused", "interrupted"):
-            remaining = self.moves.remaining_s() + self.moves.resume_preview_s()
-        return TimeInfo(elapsed, elapsed + remaining, remaining, st.estimate_s)
+        return self.readout.time_info()
 
     # ------------------------------------------------------------------ commands
 
@@ -312,7 +263,7 @@ class Twin:
         if not collision_ok:
             raise CollisionError("the home move was refused by the collision check", command="go_home")
         self.runner.enqueue(self.moves.home_leg())
-        self._sample_cache = None
+        self.readout.forget()
         self.s.reason = "homing"
 
     def interrupt(self, reason: str) -> None:
@@ -328,7 +279,7 @@ class Twin:
         was = st.state
         t = st.t_sim_s
         point = self.moves.stop_dead(t, events)
-        self._sample_cache = None
+        self.readout.forget()
         if point is not None:
             st.job.resume_at = point
         if st.job.extruder_on:
@@ -452,7 +403,7 @@ class Twin:
         except FabricError as err:
             self._fault(f"{err.code}: {err.message}", events, t_here)
         st.t_sim_s = t_target
-        self._sample_cache = None
+        self.readout.forget()
         return events
 
     # ------------------------------------------------------------------ faults
@@ -460,7 +411,7 @@ class Twin:
     def _fault(self, reason: str, events: list[Event], t: float | None = None) -> None:
         """Instant stop at ``t`` (default now), extruder and heaters off, state ``fault``."""
         st = self.s
-        self._sample_cache = None
+        self.readout.forget()
         t = st.t_sim_s if t is None else t
         if st.legs and st.legs[0].placed:
             leg = st.legs[0]
@@ -491,7 +442,7 @@ class Twin:
             fn()
         except FabricError as err:
             self._fault(f"{err.code}: {err.message}", self.s.pending)
-        self._sample_cache = None
+        self.readout.forget()
 
     def _plate_box(self) -> tuple[np.ndarray, np.ndarray]:
         """The plate as a box in the work-object frame (top-face corner at x min, y min; z up)."""
