@@ -27,7 +27,7 @@ from fabric.sim.twin import Twin
 
 PROFILE = "robot-1.2mm"
 KILL_PHASE = {"slicer": "slicing", "planner": "planning", "station": "printing", "supervisor": None}
-PRINT_RTF = {"station": 100.0}        # slow enough that the kill lands mid-print; the others at max speed
+PRINT_RTF = {"station": 300.0}        # slow enough that the kill lands mid-print; the others at max speed
 
 
 @dataclass
@@ -130,10 +130,11 @@ def run_with_fault(sc: SupervisedCell, service: str, delay_s: float) -> FaultRun
         acc = client.submit(s.JobSubmit(model=model, filename="sample_part.stl", profile=PROFILE,
                                         start=True, rtf=rtf))
         phase = KILL_PHASE[service]
-        killed_in = "submitted"
-        if phase is not None:
-            rec = wait_state(client, acc.job_id, (phase,), 120.0)
-            killed_in = rec.state
+        if phase == "printing":                   # after the heat-up: while beads are being deposited
+            wait_state(client, acc.job_id, (phase,), 120.0)
+            client.wait_print_job(acc.job_id, lambda r: r.layer >= 0, timeout=300.0)
+        elif phase is not None:
+            wait_state(client, acc.job_id, (phase,), 120.0)
         time.sleep(delay_s)
         t_kill = time.monotonic()
         killed_in = client.job(acc.job_id).state
