@@ -65,7 +65,12 @@ def test_kill_9_mid_print_then_recover(session, settings, cell, tmp_path) -> Non
                 client.start(rtf=50.0)                 # heat-up at 50x ...
                 wait_event(events, ("layer",))
                 client.set_rtf(2.0)                    # ... then mid-layer, slowly enough to be cut mid-bead
-                wait_event(events, ("extruder_on",))
+                flow = client.subscribe("station", "extrusion")
+                try:
+                    while not flow.get(timeout=60).on:     # the extruder's state is on the extrusion stream
+                        pass
+                finally:
+                    flow.close()
             finally:
                 events.close()
             before = client.state()
@@ -99,7 +104,11 @@ def test_kill_9_mid_print_then_recover(session, settings, cell, tmp_path) -> Non
             out.write_bytes(client.mesh("csv").data)
     finally:
         station.send_signal(signal.SIGTERM)
-        station.wait(timeout=20)
+        try:
+            station.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            station.kill()
+            station.wait()
         for svc in (collision, planner):
             svc.close()
     # the bead list as a user exports it: every bead once, as in an uninterrupted run

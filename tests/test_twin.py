@@ -73,8 +73,8 @@ def test_pause_resume_mid_layer_gives_identical_beads(cell: Cell, prog: Program)
     twin.pause()
     assert twin.state == "paused"
     events = twin.advance(1.0)
-    assert kinds(events) == ["extruder_off", "paused"]
-    stopped_at = events[1].data["xyz_mm"]
+    assert kinds(events) == ["paused"] and not twin.extrusion().on
+    stopped_at = events[0].data["xyz_mm"]
     lifted = twin.pose()
     assert lifted.xyz_mm[2] == pytest.approx(stopped_at[2] + twin.config.lift_mm, abs=1e-6)
     assert not twin.extrusion().on
@@ -87,7 +87,7 @@ def test_pause_resume_mid_layer_gives_identical_beads(cell: Cell, prog: Program)
     np.testing.assert_allclose(twin.pose().base_xyz_mm, lifted.base_xyz_mm)
     twin.resume()
     events = run(twin, 0.01)
-    assert kinds(events)[:2] == ["resumed", "extruder_on"]
+    assert kinds(events)[0] == "resumed"
     assert len(twin.beads) == len(ref.beads)
     np.testing.assert_allclose(twin.beads.start_mm, ref.beads.start_mm, atol=1e-9, rtol=0)
     np.testing.assert_allclose(twin.beads.end_mm, ref.beads.end_mm, atol=1e-9, rtol=0)
@@ -124,15 +124,14 @@ def test_stop_keeps_partial_bead_and_goes_safe(cell: Cell) -> None:
     twin = Twin(cell)
     twin.load(prog)
     twin.start()
-    first_on = None
-    while first_on is None:                                    # heat up, approach, start printing
-        first_on = next((e.t_sim_s for e in twin.advance(0.05) if e.kind == "extruder_on"), None)
+    while not twin.extrusion().on:                              # heat up, approach, start printing
+        twin.advance(0.05)
     twin.advance(2.5)
     n_done = len(twin.beads)
     twin.stop()
     assert twin.state == "stopped" and twin.temps().nozzle_target_c == 0.0
     events = twin.advance(2.0)
-    assert kinds(events) == ["extruder_off", "stopped"]
+    assert kinds(events) == ["stopped"] and not twin.extrusion().on
     assert len(twin.beads) == n_done + 1                       # the row in progress, partially
     part = twin.beads
     assert np.linalg.norm(part.end_mm[-1] - part.start_mm[-1]) < 20.0
@@ -218,7 +217,7 @@ def test_load_validation_and_faults(cell: Cell, prog: Program) -> None:
     twin.advance(4.0)
     twin.trip("monitor: nozzle thermal runaway")
     events = twin.advance(0.1)
-    assert kinds(events) == ["extruder_off", "fault"] and twin.state == "fault"
+    assert kinds(events) == ["fault"] and twin.state == "fault" and not twin.extrusion().on
     assert "runaway" in twin.reason and twin.temps().nozzle_target_c == 0.0
     here = twin.pose().base_xyz_mm
     twin.advance(5.0)

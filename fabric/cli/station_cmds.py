@@ -104,9 +104,10 @@ def _watch_text(topic: str):
                           f"q [{' '.join(f'{v:7.2f}' for v in p.q_deg)}]")
     if topic == "extrusion":
         return lambda e: (f"{e.t_sim_s:9.2f}s  {'ON ' if e.on else 'off'} flow {e.flow_mm3_s:7.2f} mm3/s  "
-                          f"total {e.extruded_mm3:10.1f} mm3  layer {e.layer}  line {e.gcode_line}")
+                          f"total {e.extruded_mm3:10.1f} mm3  layer {e.layer + 1}  line {e.gcode_line}")
     if topic == "events":
-        return lambda e: f"#{e.seq:<6} {e.t_sim_s:9.2f}s  {e.kind:<13} layer {e.layer} line {e.gcode_line} {e.data or ''}"
+        return lambda e: (f"#{e.seq:<6} {e.t_sim_s:9.2f}s  {e.kind:<13} layer {e.layer + 1} line {e.gcode_line} "
+                          f"{e.data or ''}")
     return None
 
 

@@ -48,16 +48,26 @@ class Temps:
     t_sim_s: float = 0.0
 
 
-@schema("station.State")
+@schema("station.State", version=2)
 class StationState:
-    """The station's whole state: a snapshot reply and a publication on change."""
+    """The station's whole state: a snapshot reply and a publication on change.
+
+    ``t_sim_s`` is the station's simulated clock (the same clock as pose, extrusion and events);
+    ``elapsed_s`` the job's simulated time since it started. ``layer`` is the 0-based index of the
+    layer being printed, as in events (people read ``layer + 1`` of ``layers_total``).
+    ``progress_r`` is the deposited volume over the program's (0 while heating, frozen while paused,
+    where it stopped for a stopped print, 1 when finished)."""
     state: str = f(choices=STATES)
     reason: str = ""
     program_id: str = ""
     job_id: str = ""
     t_sim_s: float = 0.0
+    elapsed_s: float = 0.0
     total_s: float = 0.0
-    progress_r: float = 0.0
+    remaining_s: float = 0.0
+    progress_r: float = f(0.0, ge=0.0, le=1.0)
+    deposited_mm3: float = 0.0
+    planned_mm3: float = 0.0
     layer: int = -1
     layers_total: int = 0
     rtf: float = 1.0

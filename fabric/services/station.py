@@ -158,7 +158,7 @@ class StationService(Service):
                 temps = self._temps_msg() if pose else None
                 self.journal.record_tick(msgs, self.twin.t_sim_s)       # written before it is published
                 key = (state.state, state.reason, state.program_id, state.layer, state.rtf, state.speed_r,
-                       state.flow_r)
+                       state.flow_r, round(state.progress_r, 3))
                 self.journal.checkpoint(self.twin, self.meta, force=key[:3] != self._last_state[:3])
             for m in msgs:
                 self.pub_events.send(m)
@@ -211,14 +211,19 @@ class StationService(Service):
 
     def _state_msg(self) -> s.StationState:
         ti = self.twin.time_info()
-        layer = int(self.twin.extrusion().layer)
+        ext = self.twin.extrusion()
+        planned = self.meta.planned_mm3
+        progress = min(ext.extruded_mm3 / planned, 1.0) if planned > 0 else 0.0
+        if self.twin.state == "idle" and self.twin.reason == "finished":
+            progress = 1.0
         wobj_xyz, wobj_rpy = T_to_xyzrpy(self.twin.work_object_T)
         return s.StationState(state=self.twin.state, reason=self.twin.reason, program_id=self.program_id,
-                              job_id=self.job_id, t_sim_s=round(float(ti.elapsed_s), 1), total_s=float(ti.total_s),
-                              progress_r=round(float(ti.elapsed_s / ti.total_s), 3) if ti.total_s > 0 else 0.0,
-                              layer=layer, layers_total=self.layers_total, rtf=self.rtf,
-                              speed_r=float(self.twin.speed_r), flow_r=float(self.twin.flow_r),
-                              wobj_xyz_mm=np.asarray(wobj_xyz).tolist(), wobj_rpy_deg=np.asarray(wobj_rpy).tolist())
+                              job_id=self.job_id, t_sim_s=float(self.twin.t_sim_s), elapsed_s=float(ti.elapsed_s),
+                              total_s=float(ti.total_s), remaining_s=float(ti.remaining_s), progress_r=progress,
+                              deposited_mm3=float(ext.extruded_mm3), planned_mm3=planned, layer=int(ext.layer),
+                              layers_total=self.layers_total, rtf=self.rtf, speed_r=float(self.twin.speed_r),
+                              flow_r=float(self.twin.flow_r), wobj_xyz_mm=np.asarray(wobj_xyz).tolist(),
+                              wobj_rpy_deg=np.asarray(wobj_rpy).tolist())
 
     def _ack(self, message: str) -> s.Ack:
         return s.Ack(ok=True, message=message, state=self.twin.state)
@@ -251,6 +256,7 @@ class StationService(Service):
             self.journal.keep_program(art)
             self.meta.program_id, self.meta.job_id = req.program_id, req.job_id
             self.meta.layers_total = int(program.layer.max() + 1) if len(program) else 0
+            self.meta.planned_mm3 = program.deposited_volume_mm3()
             self.collision_report = None
             self._checkpoint()
             return self._time_msg()

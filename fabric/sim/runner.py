@@ -1,9 +1,10 @@
 """Runs the twin's motion legs in simulated time: row events, heaters, retractions and beads.
 
 Walking a leg to a local time processes, in order, the rows that start or
-complete by then: a row's start may change the layer, turn the extruder on or
-off and change a heater set point; its end reports a temperature reached or a
-retraction. Rows of the program that complete are deposited as beads, from the
+complete by then: a row's start may change the layer (an event), turn the
+extruder on or off (state only: it is published on the extrusion stream, not
+as one event per bead) and change a heater set point; its end reports a
+temperature reached or counts a retraction. Rows of the program that complete are deposited as beads, from the
 row's own start and end points with the flow per mm times the distance the row
 covered; a row cut short (pause, stop, override, fault) keeps its volume so far
 in ``carry_mm3`` and adds it to the bead when the row completes on resume, so a
@@ -76,10 +77,8 @@ class LegRunner:
         if leg.main and p.layer[r] >= 0 and p.layer[r] != job.layer:
             job.layer = int(p.layer[r])
             self.emit(events, t, "layer", {"z_mm": float(p.xyz_mm[r, 2])})
-        if leg.ext[j] >= 0 and bool(leg.ext[j]) != job.extruder_on:
+        if leg.ext[j] >= 0:             # the extruder's state travels on the extrusion stream, not as events
             job.extruder_on = bool(leg.ext[j])
-            data = {"flow_mm3_mm": float(p.flow_mm3_mm[r]) * tl.flow_r} if job.extruder_on else {}
-            self.emit(events, t, "extruder_on" if job.extruder_on else "extruder_off", data)
         if p.op[r] == SET_TEMP:
             self.state.thermal.set_target(int(p.aux[r]), float(p.value[r]), t)
 

@@ -282,9 +282,7 @@ class Twin:
         self.readout.forget()
         if point is not None:
             st.job.resume_at = point
-        if st.job.extruder_on:
-            st.job.extruder_on = False
-            self.runner.emit(events, t, "extruder_off")
+        st.job.extruder_on = False
         if was in ("printing", "paused") and st.job.resume_at is not None:
             if not st.job.retracted:
                 st.job.pause_retract_mm = 0.0        # the pause's retraction had not happened yet
@@ -425,9 +423,7 @@ class Twin:
             except FabricError as err:          # the twin stops anyway; say why the pose may be stale
                 reason = f"{reason} (stopping at the fault point failed: {err.message})"
         st.legs = []
-        if st.job.extruder_on:
-            st.job.extruder_on = False
-            self.runner.emit(events, t, "extruder_off")
+        st.job.extruder_on = False
         for h in (0, 1):
             st.thermal.set_target(h, 0.0, t)
         self.runner.record_partial()

@@ -11,7 +11,7 @@ from fabric.robot.kinematics import IK_OK, IK_SINGULAR
 __all__ = ["EVENT_KINDS", "IK_ACCEPT", "STATES", "Event", "ExtrusionState", "Pose", "Temps", "TimeInfo"]
 
 STATES = ("idle", "ready", "printing", "paused", "stopped", "fault", "interrupted")
-EVENT_KINDS = ("started", "layer", "extruder_on", "extruder_off", "paused", "resumed", "stopped", "finished",
+EVENT_KINDS = ("started", "layer", "paused", "resumed", "stopped", "finished",
                "fault", "temp_reached", "home", "interrupted", "recovered", "stall", "at_layer")
 IK_ACCEPT = (IK_OK, IK_SINGULAR)   # a solution is returned
 

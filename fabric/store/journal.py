@@ -37,6 +37,7 @@ class StationMeta:
     job_id: str = ""
     rtf: float = 1.0
     layers_total: int = 0
+    planned_mm3: float = 0.0          # what the loaded program deposits in all
 
 
 @dataclass

@@ -138,7 +138,7 @@ class FabricConsole(App):
             self.query_one(StatePanel).state = msg.payload
         elif msg.topic == "events":
             e = msg.payload
-            self.log_line(f"#{e.seq} t={e.t_sim_s:.1f}s [b]{escape(e.kind)}[/b] layer {e.layer} line {e.gcode_line}")
+            self.log_line(f"#{e.seq} t={e.t_sim_s:.1f}s [b]{escape(e.kind)}[/b] layer {e.layer + 1} line {e.gcode_line}")
 
     def log_line(self, text: str) -> None:
         self.query_one(RichLog).write(text)

@@ -31,7 +31,7 @@ class ExtrusionPanel(Static):
         if e is not None:
             state = "[green]ON[/green] " if e.on else "off"
             lines.append(f"{state} flow {e.flow_mm3_s:7.2f} mm3/s  x{e.flow_r:.2f}  "
-                         f"extruded {e.extruded_mm3:9.1f} mm3  layer {e.layer}")
+                         f"extruded {e.extruded_mm3:9.1f} mm3  layer {e.layer + 1}")
         if t is not None:
             lines.append(f"nozzle {t.nozzle_c:6.1f} / {t.nozzle_target_c:5.1f} C   "
                          f"bed {t.bed_c:5.1f} / {t.bed_target_c:5.1f} C")
@@ -46,8 +46,8 @@ class StatePanel(Static):
         if st is None:
             return "[b]station[/b]\nno state yet"
         colour = {"printing": "green", "paused": "yellow", "fault": "red", "stopped": "red"}.get(st.state, "white")
-        remaining = max(0.0, st.total_s - st.t_sim_s)
+        remaining = st.remaining_s
         return (f"[b]station[/b]  [{colour}]{st.state.upper()}[/{colour}] {st.reason}\n"
                 f"layer {max(st.layer, 0) + (1 if st.layer >= 0 else 0)}/{st.layers_total}   "
-                f"{100 * st.progress_r:5.1f} %   elapsed {st.t_sim_s:8.1f} s  remaining {remaining:8.1f} s\n"
+                f"{100 * st.progress_r:5.1f} %   elapsed {st.elapsed_s:8.1f} s  remaining {remaining:8.1f} s\n"
                 f"speed x{st.speed_r:.2f}  flow x{st.flow_r:.2f}  rtf {'max' if st.rtf == 0 else f'{st.rtf:g}'}")
