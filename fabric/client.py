@@ -13,6 +13,7 @@ timeout (or the one given). An error reply raises the matching
 from __future__ import annotations
 
 import queue
+import threading
 import time
 from contextlib import contextmanager
 from typing import Any, BinaryIO, Callable, Iterator
@@ -250,8 +251,8 @@ class Client:
     def ready(self) -> s.ReadyReport: return self.call("station", "ready")
     def time(self) -> s.TimeInfo: return self.call("station", "time")
     def state(self) -> s.StationState: return self.call("station", "state")
-    def events(self, since_seq: int = 0, limit: int = 10000) -> s.EventList:
-        return self.call("station", "events", s.EventsQuery(since_seq=since_seq, limit=limit))
+    def events(self, since_seq: int = 0, limit: int = 10000, kinds: list[str] | None = None) -> s.EventList:
+        return self.call("station", "events", s.EventsQuery(since_seq=since_seq, limit=limit, kinds=kinds or []))
     def overrides(self, **values: float | None) -> s.StationState:
         return self.call("station", "overrides", s.Overrides(**values))
     def set_rtf(self, rtf: float) -> s.StationState: return self.call("station", "rtf", s.StartRequest(rtf=rtf))
@@ -276,16 +277,18 @@ class Client:
 
     def export_to(self, program_id: str, fmt: str, out: BinaryIO, module_targets: int = 5000,
                   limit_bytes: int = 16 << 20) -> int:
-        """Stream an export into ``out`` chunk by chunk (memory stays at one chunk); returns the bytes written.
+        """Stream an export into ``out`` chunk by chunk; returns the bytes written.
 
-        A chunk is what the planner has formatted by the time it is asked, up to ``limit_bytes``."""
+        A chunk is what the planner has formatted by the time it is asked, up to ``limit_bytes``. Chunks
+        are written to ``out`` by a helper thread while the next one is fetched (memory: a few chunks)."""
         offset = 0
-        while True:
-            chunk = self.export_chunk(program_id, fmt, offset, limit_bytes, module_targets)
-            out.write(chunk.data)
-            offset += len(chunk.data)
-            if chunk.done:
-                return offset
+        with _ChunkWriter(out) as writer:
+            while True:
+                chunk = self.export_chunk(program_id, fmt, offset, limit_bytes, module_targets)
+                writer.write(chunk.data)
+                offset += len(chunk.data)
+                if chunk.done:
+                    return offset
     def check(self, request: s.CollisionRequest) -> s.CollisionReport: return self.call("collision", "check", request)
     def status(self) -> s.FabricStatus: return self.call("supervisor", "status")
     def submit(self, request: s.JobSubmit) -> s.JobAccepted: return self.call("supervisor", "submit", request)
@@ -328,6 +331,46 @@ class Client:
             return rec
         finally:
             sub.close()
+
+
+class _ChunkWriter:
+    """Writes chunks to a binary stream on a helper thread, at most ``depth`` chunks behind the fetching.
+
+    Writing a large export to disk costs about as much as formatting it (page-cache pages are fresh
+    memory), so the two overlap. A write error is raised by the next :meth:`write` or on exit.
+    """
+
+    def __init__(self, out: BinaryIO, depth: int = 2) -> None:
+        self._out = out
+        self._queue: queue.Queue[bytes | None] = queue.Queue(maxsize=depth)
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="export-file-writer", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while True:
+            data = self._queue.get()
+            if data is None:
+                return
+            if self._error is None:
+                try:
+                    self._out.write(data)
+                except BaseException as exc:    # noqa: BLE001 - handed to the fetching thread
+                    self._error = exc
+
+    def write(self, data: bytes) -> None:
+        if self._error is not None:
+            raise self._error
+        self._queue.put(data)
+
+    def __enter__(self) -> "_ChunkWriter":
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, *_: object) -> None:
+        self._queue.put(None)
+        self._thread.join()
+        if exc_type is None and self._error is not None:
+            raise self._error
 
 
 def _open(settings: SessionSettings) -> zenoh.Session:

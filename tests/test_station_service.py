@@ -265,3 +265,21 @@ def test_one_clock_and_honest_progress(fabric):
         assert c.state == "stopped" and c.progress_r == pytest.approx(a.progress_r, abs=0.02) and c.progress_r < 1
     finally:
         events.close()
+
+
+def test_events_by_kind_and_overrides_on_record(fabric):
+    client, station, pid, _ = fabric
+    client.load(pid)
+    client.overrides(speed_r=1.2)
+    events = client.subscribe("station", "events")
+    try:
+        client.start(rtf=0)
+        wait_event(events, ("finished",))
+    finally:
+        events.close()
+    layers = client.events(0, kinds=["layer"]).events
+    assert [e.layer for e in layers] == [0, 1, 2] and all(e.kind == "layer" for e in layers)
+    override = client.events(0, kinds=["override"]).events
+    assert override and override[-1].data == {"speed_r": 1.2}
+    with pytest.raises(ValidationError, match="unknown event kinds"):
+        client.events(0, kinds=["extruder_on"])

@@ -119,6 +119,17 @@ def cmd_mesh(c: Client, a: argparse.Namespace) -> int:
     return 0
 
 
+def _events_text(evs: s.EventList) -> str:
+    if not evs.events:
+        return "no events"
+    return "\n".join(f"#{e.seq:<6} {e.t_sim_s:9.2f}s  {e.kind:<12} layer {e.layer + 1:<4} line {e.gcode_line:<7} "
+                     f"{_data_text(e.data)}".rstrip() for e in evs.events)
+
+
+def _data_text(data: dict) -> str:
+    return "  ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in data.items())
+
+
 def _layer_index(number: int | None) -> int:
     """The wire's 0-based layer index of a layer number as people count (1 = the first); -1 for none."""
     if number is None:
@@ -159,8 +170,10 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     simple("ready", lambda c, a: c.ready(), _ready_text, "station-ready checklist")
     simple("time", lambda c, a: c.time(), _time_text, "simulation time: elapsed, total, remaining")
     simple("state", lambda c, a: c.state(), None, "the station's state snapshot")
-    p = simple("events", lambda c, a: c.events(a.since), None, "event history")
+    p = simple("events", lambda c, a: c.events(a.since, kinds=a.kind), _events_text, "event history")
     p.add_argument("--since", type=int, default=0)
+    p.add_argument("--kind", action="append", metavar="KIND",
+                   help="only these kinds (repeat): started, layer, paused, finished, fault, override, ...")
     p = simple("override", lambda c, a: c.overrides(speed_r=a.speed, flow_r=a.flow, nozzle_c=a.nozzle, bed_c=a.bed),
                None, "live overrides: speed, flow, temperatures")
     for flag in ("speed", "flow", "nozzle", "bed"):

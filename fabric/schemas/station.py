@@ -89,10 +89,12 @@ class Event:
     data: dict[str, Any] = f(factory=dict)
 
 
-@schema("station.EventsQuery")
+@schema("station.EventsQuery", version=2)
 class EventsQuery:
+    """Events from ``since_seq`` on; ``kinds`` non-empty: only those kinds."""
     since_seq: int = f(0, ge=0)
     limit: int = f(10000, ge=1, le=100000)
+    kinds: list[str] = f(factory=list)
 
 
 @schema("station.EventList", version=2)

@@ -31,14 +31,14 @@ import zenoh
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.errors import CollisionError, FabricError, NotFound, StateError
+from fabric.errors import CollisionError, FabricError, NotFound, StateError, ValidationError
 from fabric.programs import content_id, program_from_artifact
 from fabric.readiness import ReadyFacts, print_temp_c, ready_report
 from fabric.config import add_cell_argument, service_data_dir
 from fabric.runtime import Service
 from fabric.robot.cell import Cell
 from fabric.robot.frames import T_to_xyzrpy
-from fabric.sim.twin import Twin
+from fabric.sim.twin import EVENT_KINDS, Twin
 from fabric.store.journal import DEFAULT_CHECKPOINT_PERIOD_S, StationJournal, StationMeta
 from fabric.store.station import StationStore
 
@@ -337,6 +337,8 @@ class StationService(Service):
             if self.twin.state in ("printing", "paused"):
                 raise StateError("cannot calibrate during a print", state=self.twin.state, command="calibrate")
             r = self.twin.calibrate()
+            self.twin.note("calibrated", {"residual_rms_mm": float(r.residual_rms_mm),
+                                          "correction_xyz_mm": [float(v) for v in r.correction_xyz_mm]})
             self._checkpoint()
             wobj_xyz, wobj_rpy = T_to_xyzrpy(self.twin.work_object_T)
         return s.CalibrationReport(correction_xyz_mm=list(map(float, r.correction_xyz_mm)),
@@ -382,13 +384,19 @@ class StationService(Service):
 
     def on_events(self, req: s.EventsQuery) -> s.EventList:
         last = self.journal.last_seq()
-        evs = self.journal.store.events(since_seq=req.since_seq - 1, limit=req.limit)
+        unknown = sorted(set(req.kinds) - set(EVENT_KINDS))
+        if unknown:
+            raise ValidationError(f"unknown event kinds {unknown}; kinds: {', '.join(EVENT_KINDS)}", field="kinds")
+        evs = self.journal.store.events(since_seq=req.since_seq - 1, limit=req.limit, kinds=list(req.kinds))
         nxt = evs[-1].seq + 1 if evs else max(req.since_seq, last + 1)
         return s.EventList(events=evs, next_seq=nxt, last_seq=last)
 
     def on_overrides(self, req: s.Overrides) -> s.StationState:
         with self.lock:
             self.twin.set_overrides(speed_r=req.speed_r, flow_r=req.flow_r, nozzle_c=req.nozzle_c, bed_c=req.bed_c)
+            given = {k: v for k, v in (("speed_r", req.speed_r), ("flow_r", req.flow_r), ("nozzle_c", req.nozzle_c),
+                                       ("bed_c", req.bed_c)) if v is not None}
+            self.twin.note("override", given)
             self._checkpoint()
             return self._state_msg()
 

@@ -35,8 +35,10 @@ __all__ = ["Checkpoint", "StationStore"]
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS events (
     seq INTEGER PRIMARY KEY,
+    kind TEXT NOT NULL,
     payload BLOB NOT NULL
 );
+CREATE INDEX IF NOT EXISTS events_kind ON events (kind, seq);
 CREATE TABLE IF NOT EXISTS clock (
     id INTEGER PRIMARY KEY CHECK (id = 1),
     t_sim_s REAL NOT NULL
@@ -81,8 +83,8 @@ class StationStore:
         """Append this tick's events and move the clock mark, in one transaction."""
         with self._lock, self._db:
             if events:
-                self._db.executemany("INSERT OR REPLACE INTO events VALUES (?, ?)",
-                                     [(e.seq, codec.encode(e)) for e in events])
+                self._db.executemany("INSERT OR REPLACE INTO events VALUES (?, ?, ?)",
+                                     [(e.seq, e.kind, codec.encode(e)) for e in events])
                 self._since_prune += len(events)
             self._db.execute("INSERT OR REPLACE INTO clock VALUES (1, ?)", (float(t_sim_s),))
             if self._since_prune > 1000:
@@ -95,10 +97,15 @@ class StationStore:
         row = self._db.execute("SELECT COALESCE(MAX(seq), 0) FROM events").fetchone()
         return int(row[0])
 
-    def events(self, since_seq: int = 0, limit: int = 10_000) -> list[s.Event]:
-        """Recorded events with ``seq > since_seq``, oldest first."""
-        rows = self._db.execute("SELECT payload FROM events WHERE seq > ? ORDER BY seq LIMIT ?",
-                                (int(since_seq), int(limit))).fetchall()
+    def events(self, since_seq: int = 0, limit: int = 10_000, kinds: list[str] | None = None) -> list[s.Event]:
+        """Recorded events with ``seq > since_seq`` (of ``kinds`` only, when given), oldest first."""
+        if kinds:
+            marks = ",".join("?" * len(kinds))
+            rows = self._db.execute(f"SELECT payload FROM events WHERE seq > ? AND kind IN ({marks}) ORDER BY seq "
+                                    f"LIMIT ?", (int(since_seq), *kinds, int(limit))).fetchall()
+        else:
+            rows = self._db.execute("SELECT payload FROM events WHERE seq > ? ORDER BY seq LIMIT ?",
+                                    (int(since_seq), int(limit))).fetchall()
         return [codec.decode(r[0], s.Event) for r in rows]
 
     def clock_mark(self) -> float | None:
