@@ -90,13 +90,17 @@ class Thermal:
         self._check(heater)
         return self.states[heater].target_c
 
-    def set_target(self, heater: int, target_c: float, t_s: float) -> None:
-        """Change the set point at ``t_s`` (re-anchors the closed form there)."""
+    def check_target(self, heater: int, target_c: float) -> None:
+        """Raise ValidationError unless ``target_c`` is a set point ``heater`` accepts ([0, max_c])."""
         self._check(heater)
         p = self.params[heater]
         if not math.isfinite(target_c) or target_c < 0.0 or target_c > p.max_c:
-            raise ValidationError(f"{HEATER_NAMES[heater]} set point {target_c} C outside [0, {p.max_c}]",
+            raise ValidationError(f"{HEATER_NAMES[heater]} set point {target_c} C outside [0, {p.max_c:g}]",
                                   field="value", heater=HEATER_NAMES[heater], limit=p.max_c)
+
+    def set_target(self, heater: int, target_c: float, t_s: float) -> None:
+        """Change the set point at ``t_s`` (re-anchors the closed form there)."""
+        self.check_target(heater, target_c)
         self.states[heater] = HeaterState(t_s, self.temp_at(heater, t_s), float(target_c))
 
     def wait_s(self, heater: int, t_s: float) -> float:

@@ -226,6 +226,10 @@ class Leg:
         self.n_rows, self.t_cut = j + 1, float(tau_s)
         self.partial_end = tau_s < self.tl.t_end_s[j]
 
+    def cut_before(self, j: int) -> None:
+        """End the leg when local row ``j`` would start (it owns rows ``0 .. j-1``)."""
+        self.n_rows, self.t_cut, self.partial_end = j, float(self.tl.t_start_s[j]), False
+
     def cut_after(self, j: int) -> None:
         """End the leg when local row ``j`` completes."""
         self.n_rows, self.t_cut, self.partial_end = j + 1, float(self.tl.t_end_s[j]), False
@@ -242,7 +246,7 @@ class Leg:
     def end_pose(self) -> PoseSpec:
         """Joints and TCP (plate frame of the leg's program) where the leg ends."""
         tl = self.tl
-        smp = tl.sample(self.t_cut if self.n_rows else tl.total_s)
+        smp = tl.sample(self.t_cut if (self.n_rows or self.placed) else tl.total_s)
         return PoseSpec(np.asarray(smp.q_rad, float), np.asarray(smp.xyz_mm, float),
                         np.asarray(smp.quat_wxyz, float))
 

@@ -167,6 +167,25 @@ class MotionPlanner:
         st.legs.append(self._lift_leg(pose, wobj, end_kind))
         self.pause_preview_s = None
 
+    # Interlock ----------------------------------------------------------------------------
+
+    def interlock_pause(self, j: int, reason: str) -> None:
+        """Pause before local row ``j`` of the running program leg (which would extrude cold): the leg
+        ends where the row would start, the print is paused there (retract, lift) and goes on from
+        that row on resume."""
+        st = self.state
+        head = st.legs[0]
+        head.cut_before(j)
+        head.end_kinds = []
+        tl = head.tl
+        smp = tl.sample(head.t_cut)
+        pose = PoseSpec(np.asarray(smp.q_rad, float), np.asarray(smp.xyz_mm, float),
+                        np.asarray(smp.quat_wxyz, float))
+        st.job.resume_at = ResumePoint(tl.start_row + j, 0.0, pose)
+        st.state, st.reason = "paused", reason
+        st.legs = [head, self._lift_leg(pose, tl.program.wobj, "paused")]
+        self.pause_preview_s = None
+
     # Instant stop -------------------------------------------------------------------------
 
     def stop_dead(self, t: float, events: list) -> ResumePoint | None:

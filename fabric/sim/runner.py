@@ -13,11 +13,12 @@ with a row cut short, that row is recorded as a partial bead.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from fabric.motion.program import MOVEL, RETRACT, SET_TEMP, WAIT_TEMP
+from fabric.motion.program import MOVEL, NOZZLE, RETRACT, SET_TEMP, WAIT_TEMP
 from fabric.motion.thermal import HEATER_NAMES
 from fabric.robot.frames import R_from_quat, inv_T, make_T
 from fabric.sim.builder import LegBuilder
@@ -25,15 +26,38 @@ from fabric.sim.legs import Leg
 from fabric.sim.state import TwinState
 from fabric.sim.types import Event
 
-__all__ = ["LegRunner"]
+__all__ = ["DEFAULT_MIN_EXTRUDE_C", "Interlock", "LegRunner"]
+
+DEFAULT_MIN_EXTRUDE_C = 170.0
+
+
+@dataclass
+class Interlock:
+    """A cold-extrusion interlock: row ``row`` would start extruding at ``t_s`` with the nozzle at
+    ``nozzle_c``, below the material's minimum ``min_c``; local row ``j`` of the running leg."""
+
+    t_s: float
+    row: int
+    j: int
+    nozzle_c: float
+    min_c: float
+
+    @property
+    def reason(self) -> str:
+        return (f"cold extrusion prevented: the nozzle is at {self.nozzle_c:.0f} C, below the material's "
+                f"minimum extrusion temperature {self.min_c:.0f} C")
 
 
 class LegRunner:
-    """Owns no state: walks the legs of ``state`` and records what happens in it."""
+    """Owns no state: walks the legs of ``state`` and records what happens in it. A program row that
+    would start extruding with the nozzle below the material's minimum temperature is not started:
+    the walk stops before it and ``tripped`` says why (the twin pauses the print there)."""
 
     def __init__(self, state: TwinState, builder: LegBuilder) -> None:
         self.state = state
         self.builder = builder
+        self.tripped: Interlock | None = None
+        self._min_c: tuple[int, float | None] | None = None
 
     # Queue ---------------------------------------------------------------------------
 
@@ -58,6 +82,9 @@ class LegRunner:
         it = leg.interesting
         for j in it[np.searchsorted(it, leg.done):np.searchsorted(it, ns)].tolist():
             if j >= leg.started:
+                if leg.main and leg.ext[j] == 1 and not job.extruder_on and self._too_cold(leg, j):
+                    ns, nd = j, min(nd, j)               # row j is not started: the twin pauses here
+                    break
                 self._row_start(leg, j, events)
             if j < nd:
                 self._row_done(leg, j, events)
@@ -68,6 +95,33 @@ class LegRunner:
             if ns > 0:
                 job.row = leg.tl.start_row + ns - 1
         leg.started, leg.done = ns, nd
+
+    def min_extrude_c(self) -> float | None:
+        """The loaded material's minimum extrusion temperature: the program's ``min_extrude_temp_c``;
+        else 170 C (as printer firmware) when the program heats the nozzle; else none (a material
+        extruded cold: clay, concrete)."""
+        p = self.state.program
+        if p is None:
+            return None
+        if self._min_c is None or self._min_c[0] != id(p):
+            if "min_extrude_temp_c" in p.meta:
+                value: float | None = float(p.meta["min_extrude_temp_c"])
+            else:
+                heats = bool(np.any((p.op == SET_TEMP) & (p.aux == NOZZLE) & (p.value > 0)))
+                value = DEFAULT_MIN_EXTRUDE_C if heats else None
+            self._min_c = (id(p), value)
+        return self._min_c[1]
+
+    def _too_cold(self, leg: Leg, j: int) -> bool:
+        min_c = self.min_extrude_c()
+        if min_c is None:
+            return False
+        t = leg.t0 + float(leg.tl.t_start_s[j])
+        nozzle_c = self.state.thermal.temp_at(NOZZLE, t)
+        if nozzle_c >= min_c:
+            return False
+        self.tripped = Interlock(t, leg.tl.start_row + j, j, nozzle_c, min_c)
+        return True
 
     def _row_start(self, leg: Leg, j: int, events: list[Event]) -> None:
         tl, job = leg.tl, self.state.job

@@ -41,6 +41,8 @@ from fabric.sim.readout import Readout
 from fabric.sim.state import JobState, TwinState
 from fabric.sim.types import EVENT_KINDS, IK_ACCEPT, STATES, Event, ExtrusionState, Pose, Temps, TimeInfo
 
+SPEED_R_MIN, SPEED_R_MAX = 0.0, 10.0         # speed and flow overrides: (0, 10]
+
 __all__ = ["EVENT_KINDS", "STATES", "Event", "ExtrusionState", "Pose", "Temps", "TimeInfo", "Twin", "TwinConfig"]
 
 
@@ -165,6 +167,16 @@ class Twin:
             raise StateError(f"cannot {command} while the robot is moving", state=self.s.state, command=command,
                              reason="moving")
 
+    def _check_hot(self, command: str) -> None:
+        """Refuse to go on printing with the nozzle below the material's minimum extrusion temperature."""
+        min_c = self.runner.min_extrude_c()
+        nozzle_c = self.s.thermal.temp_at(0, self.s.t_sim_s)
+        if min_c is not None and nozzle_c < min_c and self.s.thermal.target(0) < min_c:
+            raise StateError(f"cannot {command}: the nozzle is at {nozzle_c:.0f} C and set to "
+                             f"{self.s.thermal.target(0):.0f} C, below the material's minimum extrusion temperature "
+                             f"{min_c:.0f} C: raise its set point first", state=self.s.state, command=command,
+                             nozzle_c=nozzle_c, min_c=min_c)
+
     def _new_job(self, program: Program) -> None:
         st = self.s
         st.job = JobState()
@@ -237,8 +249,10 @@ class Twin:
         self._command(lambda: self.moves.halt("paused"))
 
     def resume(self) -> None:
-        """Back down to the stop point, unretract, continue the program from there."""
+        """Back down to the stop point, unretract, continue the program from there (refused while the
+        nozzle is below the material's minimum extrusion temperature)."""
         self._refuse("resume", ("paused",))
+        self._check_hot("resume")
         self.s.state, self.s.reason = "printing", "resumed"
         self._command(self.moves.resume)
 
@@ -339,12 +353,21 @@ class Twin:
         set points at once (a heat-up in progress is re-timed)."""
         st = self.s
         for name, val in (("speed_r", speed_r), ("flow_r", flow_r)):
-            if val is not None and (not math.isfinite(val) or not 0.0 < val <= 10.0):
-                raise ValidationError(f"{name} must be in (0, 10], got {val}", field=name)
-        temp = False
-        for h, val in ((0, nozzle_c), (1, bed_c)):
+            if val is not None and (not math.isfinite(val) or not SPEED_R_MIN < val <= SPEED_R_MAX):
+                raise ValidationError(f"{name} must be in ({SPEED_R_MIN:g}, {SPEED_R_MAX:g}], got {val}", field=name)
+        for heater, val in ((0, nozzle_c), (1, bed_c)):
             if val is not None:
-                st.thermal.set_target(h, float(val), st.t_sim_s)
+                st.thermal.check_target(heater, float(val))
+        min_c = self.runner.min_extrude_c()
+        if (nozzle_c is not None and min_c is not None and 0.0 < nozzle_c < min_c
+                and st.state in ("printing", "paused", "interrupted")):
+            raise ValidationError(f"nozzle set point {nozzle_c:g} C is below the material's minimum extrusion "
+                                  f"temperature {min_c:g} C (0 switches the heater off)", field="nozzle_c",
+                                  min_c=min_c)
+        temp = False                                   # everything checked: nothing is changed by a refusal
+        for heater, val in ((0, nozzle_c), (1, bed_c)):
+            if val is not None:
+                st.thermal.set_target(heater, float(val), st.t_sim_s)
                 temp = True
         if speed_r is not None:
             st.speed_r = float(speed_r)
@@ -395,6 +418,9 @@ class Twin:
                 final = t_target >= end
                 t_here = end if final else t_target
                 self.runner.run_leg(leg, leg.t_cut if final else t_target - leg.t0, final, events)
+                if self.runner.tripped is not None:
+                    self._interlocked(events)
+                    continue                       # the leg now ends where the cold row would start
                 if not final:
                     break
                 self.runner.finish_leg(leg, events)
@@ -405,6 +431,14 @@ class Twin:
         return events
 
     # ------------------------------------------------------------------ faults
+
+    def _interlocked(self, events: list[Event]) -> None:
+        """The runner refused to start extruding cold: pause there (a clear reason, an event)."""
+        trip, self.runner.tripped = self.runner.tripped, None
+        self.moves.interlock_pause(trip.j, trip.reason)
+        self.runner.emit(events, trip.t_s, "interlock", {"reason": trip.reason, "nozzle_c": trip.nozzle_c,
+                                                         "min_c": trip.min_c, "row": trip.row})
+        self.readout.forget()
 
     def _fault(self, reason: str, events: list[Event], t: float | None = None) -> None:
         """Instant stop at ``t`` (default now), extruder and heaters off, state ``fault``."""
