@@ -24,7 +24,7 @@ from fabric import codec
 from fabric import schemas as s
 from fabric.config import SessionSettings, zenoh_config
 from fabric.errors import DecodeError, FabricError, ServiceUnavailable, error_from_code
-from fabric.keys import ENDPOINTS, SERVICES, TOPICS, Keys, parse_alive
+from fabric.keys import ALIVE_EVERY_CELL, ENDPOINTS, SERVICES, TOPICS, Keys, parse_alive
 
 __all__ = ["Client", "Subscription", "AliveSubscription", "wait_connected"]
 
@@ -130,7 +130,7 @@ class Client:
             for reply in self.session.get(key, payload=payload, timeout=timeout):
                 if reply.ok is not None:
                     return codec.decode(reply.ok.payload.to_bytes(), reply_type)
-                raise _error_of(reply.err.payload.to_bytes())
+                raise _error_of(reply.err.payload.to_bytes(), what, time.monotonic() - t0)
             waited = time.monotonic() - t0
             timed_out = time.monotonic() - t_get >= 0.9 * timeout
             if timed_out or waited >= min(timeout, DISCOVERY_WINDOW_S):
@@ -175,6 +175,15 @@ class Client:
                 break
             time.sleep(ALIVE_BACKOFF_S)
         return {name: name in found for name in SERVICES}
+
+    def cells(self, timeout: float = 2.0) -> dict[str, list[str]]:
+        """Every cell present on the fabric: cell name -> the services that hold a liveliness token."""
+        found: dict[str, set[str]] = {}
+        for reply in self.session.liveliness().get(ALIVE_EVERY_CELL, timeout=timeout):
+            if reply.ok is not None:
+                cell, service = parse_alive(str(reply.ok.key_expr))
+                found.setdefault(cell, set()).add(service)
+        return {cell: sorted(services) for cell, services in sorted(found.items())}
 
     def wait_alive(self, services: tuple[str, ...] = SERVICES, deadline_s: float = 30.0) -> None:
         """Block until every service is alive, or raise ServiceUnavailable naming the missing ones.
@@ -398,10 +407,15 @@ def wait_connected(session: zenoh.Session, deadline_s: float) -> bool:
     return False
 
 
-def _error_of(payload: bytes) -> FabricError:
+def _error_of(payload: bytes, what: str, waited_s: float) -> FabricError:
+    """The typed error of an error reply. Zenoh itself answers ``Timeout`` for a queryable that did not
+    reply in time (a frozen or overloaded service): that is ``unavailable``, not a payload to decode."""
+    if payload.strip().lower() == b"timeout":
+        return ServiceUnavailable(f"no reply from {what} within {waited_s:.3g} s (the service is there but did "
+                                  f"not answer: busy, frozen or cut off)", timeout_s=waited_s)
     try:
         err = codec.decode(payload, s.ErrorReply)
     except DecodeError:
-        return DecodeError(f"undecodable error reply: {payload[:80]!r}")
+        return DecodeError(f"undecodable error reply from {what}: {payload[:80]!r}")
     return error_from_code(err.code, err.message, err.details)
 

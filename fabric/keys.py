@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 from fabric import schemas as s
 
-__all__ = ["ROOT", "SERVICES", "TOPICS", "Endpoint", "ENDPOINTS", "Keys", "valid_cell", "parse_alive"]
+__all__ = ["ROOT", "SERVICES", "TOPICS", "Endpoint", "ENDPOINTS", "Keys", "valid_cell", "parse_alive",
+           "ALIVE_EVERY_CELL"]
 
 ROOT = "am"
 SERVICES = ("station", "slicer", "planner", "collision", "supervisor")
@@ -144,6 +145,10 @@ class Keys:
         if not sep or "/" in tail:
             raise ValueError(f"not an artifact key: {key}")
         return tail
+
+
+ALIVE_EVERY_CELL = f"{ROOT}/*/alive/*"
+"""Every liveliness token of every cell on the fabric (to list the cells present)."""
 
 
 def parse_alive(key: str) -> tuple[str, str]:

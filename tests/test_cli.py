@@ -153,3 +153,13 @@ def test_cell_show_and_export_urdf(tmp_path):
     bad.write_text(ur5.read_text() + "\n[bogus]\nx = 1\n")
     r = local("cell", "show", "--cell-config", str(bad))
     assert r.returncode == 1 and "error [config]" in r.stderr and "bogus" in r.stderr
+
+
+def test_cells_lists_the_cell_and_an_unknown_cell_is_named(settings):
+    r = cli(settings, "cells", "--json")
+    assert r.returncode == 0, r.stderr
+    cells = {c["cell"]: c for c in json.loads(r.stdout)}
+    assert cells[settings.cell]["complete"] and len(cells[settings.cell]["services"]) == 5
+    r = cli(replace(settings, cell="nosuchcell"), "status")
+    assert r.returncode == 3
+    assert "no service of cell 'nosuchcell' is on the fabric" in r.stdout and settings.cell in r.stdout

@@ -85,8 +85,29 @@ def test_unknown_job_is_not_found(supervisor, client):
 
 
 def test_no_service_is_unavailable_within_the_timeout(client):
-    with pytest.raises(ServiceUnavailable, match="station/position"):
+    t0 = time.monotonic()
+    with pytest.raises(ServiceUnavailable, match="no station/position on the fabric") as e:
         client.call("station", "position", timeout=0.3)
+    assert e.value.details["timeout_s"] <= time.monotonic() - t0 + 0.01        # says what it really waited
+
+
+def test_a_service_that_does_not_answer_is_unavailable_not_undecodable(session, client):
+    held: list = []
+    q = session.declare_queryable(client.keys.cmd("station", "position"), handler=zenoh.handlers.FifoChannel(8))
+
+    def hold() -> None:                     # takes the query and answers nothing (a frozen service)
+        held.append(q.recv())
+    threading.Thread(target=hold, daemon=True).start()
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(ServiceUnavailable, match="did not answer") as e:
+            client.call("station", "position", timeout=0.5)
+        waited = time.monotonic() - t0
+        assert 0.4 <= e.value.details["timeout_s"] <= waited + 0.01
+    finally:
+        for query in held:
+            query.drop()
+        q.undeclare()
 
 
 def test_liveliness_reports_alive_and_gone(session, settings, client):

@@ -59,3 +59,13 @@ def test_console_follows_services_coming_and_going(hub, session, settings):
                 token.undeclare()
                 await until(pilot, lambda: panel.alive.get("planner") is False)
     asyncio.run(scenario())
+
+
+def test_console_without_a_hub_says_so_in_one_line():
+    import subprocess
+    import sys
+    r = subprocess.run([sys.executable, "-m", "fabric.tui", "--connect", "tcp/127.0.0.1:1"], capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 2
+    assert r.stderr.strip().splitlines() == [r.stderr.strip()] and "cannot reach the fabric hub" in r.stderr
+    assert "Traceback" not in r.stderr

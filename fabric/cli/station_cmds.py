@@ -9,6 +9,7 @@ from fabric import schemas as s
 from fabric.cli.output import emit
 from fabric.client import Client
 from fabric.errors import BadRequest, FabricError
+from fabric.keys import SERVICES
 
 __all__ = ["register"]
 
@@ -39,7 +40,7 @@ def _status_text(st) -> str:
     if job is not None:
         lines.append(f"job {job.job_id} {job.filename}: {job.state} {job.stage}".rstrip())
     if st.job_error:
-        lines.append(f"job unknown: {st.job_error}")
+        lines.append(st.job_error if not any(i.alive for i in st.services) else f"job unknown: {st.job_error}")
     return "\n".join(lines)
 
 
@@ -67,8 +68,28 @@ def cmd_status(c: Client, a: argparse.Namespace) -> int:
             st.job = c.status().job
         except FabricError as exc:  # the supervisor may be mid-shutdown: liveliness already answered
             st.job_error = str(exc)
+    if not any(alive.values()):
+        cells = c.cells(timeout=a.timeout)
+        others = ", ".join(cells) if cells else "none"
+        st.job_error = (f"no service of cell {c.keys.cell!r} is on the fabric (cells present: {others}); "
+                        "is the cell name right (--cell, $FABRIC_CELL)?")
     emit(st, a.json, _status_text)
     return 0 if all(alive.values()) else 3
+
+
+def cmd_cells(c: Client, a: argparse.Namespace) -> int:
+    """Cells with at least one service alive, from the liveliness tokens (no service is asked)."""
+    cells = c.cells(timeout=a.timeout)
+    listing = [{"cell": cell, "services": services, "complete": set(services) >= set(SERVICES)}
+               for cell, services in cells.items()]
+
+    def text(rows: list[dict]) -> str:
+        if not rows:
+            return "no cell on the fabric"
+        return "\n".join(f"{r['cell']:<16} {len(r['services'])}/{len(SERVICES)} services  {' '.join(r['services'])}"
+                         for r in rows)
+    emit(listing, a.json, text)
+    return 0 if listing else 3
 
 
 def cmd_calibrate(c: Client, a: argparse.Namespace) -> int:
@@ -150,6 +171,9 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--wait", type=float, default=0.0, metavar="SECONDS",
                    help="first wait (up to SECONDS) until every service is alive")
     p.set_defaults(run=cmd_status)
+    p = sub.add_parser("cells", parents=[common], help="the cells present on the fabric and their services")
+    p.add_argument("--timeout", type=float, default=2.0, help="how long to wait for the hub's answer")
+    p.set_defaults(run=cmd_cells)
     simple("position", lambda c, a: c.position(), _pose_text, "TCP pose and joints of the twin now")
     simple("home", lambda c, a: c.home(), _ack_text, "collision-checked joint move to home")
     p = simple("start", lambda c, a: c.start(rtf=a.rtf, from_layer=_layer_index(a.layer)), _ack_text,

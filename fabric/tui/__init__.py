@@ -5,6 +5,7 @@ import argparse
 import sys
 
 from fabric.config import add_session_args, settings_from_args
+from fabric.errors import FabricError
 
 __all__ = ["main"]
 
@@ -15,8 +16,12 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="fabric-tui", description="operator console for an am-fabric cell")
     add_session_args(p)
     a = p.parse_args(argv)
-    with Client.connect(settings_from_args(a, default_mode="client")) as client:
-        FabricConsole(client).run()
+    try:
+        with Client.connect(settings_from_args(a, default_mode="client")) as client:
+            FabricConsole(client).run()
+    except FabricError as err:
+        print(f"fabric-tui: error [{err.code}]: {err.message}", file=sys.stderr)
+        return 2
     return 0
 
 
