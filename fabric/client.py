@@ -277,7 +277,8 @@ class Client:
     def plan_summary(self, program_id: str) -> s.PlanSummary:
         return self.call("planner", "summary", s.ArtifactQuery(artifact_id=program_id))
     def export(self, program_id: str, fmt: str, module_targets: int = 5000) -> s.Artifact:
-        return self.call("planner", "export", s.ExportRequest(program_id=program_id, fmt=fmt, module_targets=module_targets))
+        request = s.ExportRequest(program_id=program_id, fmt=fmt, module_targets=module_targets)
+        return self.call("planner", "export", request)
     def export_chunk(self, program_id: str, fmt: str, offset: int = 0, limit_bytes: int = 4 << 20,
                      module_targets: int = 5000) -> s.ExportChunk:
         """One chunk of a streamed export (offset 0 starts it; then each offset where the last chunk ended)."""

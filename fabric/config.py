@@ -60,10 +60,12 @@ def add_session_args(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--config", dest="zconfig", metavar="FILE", help="Zenoh JSON5 config file (flags override it)")
     g.add_argument("--mode", choices=MODES, default=None,
                    help="Zenoh mode (default: peer for services, client for the CLI and console)")
-    g.add_argument("--connect", action="append", metavar="ENDPOINT", help=f"endpoint to connect to (default {DEFAULT_HUB})")
+    g.add_argument("--connect", action="append", metavar="ENDPOINT",
+                   help=f"endpoint to connect to (default {DEFAULT_HUB})")
     g.add_argument("--listen", action="append", metavar="ENDPOINT", help="endpoint to listen on")
     g.add_argument("--multicast", action="store_true", help="enable multicast scouting (off by default)")
-    g.add_argument("--cell", default=os.environ.get("FABRIC_CELL", "cell1"), help="cell name: the key prefix am/<cell>/")
+    g.add_argument("--cell", default=os.environ.get("FABRIC_CELL", "cell1"),
+                   help="cell name: the key prefix am/<cell>/")
     g.add_argument("--lease-ms", type=int, default=DEFAULT_LEASE_MS,
                    help="link lease: a peer silent this long (frozen, cut off) is dropped and its services "
                         "reported gone (default %(default)s, $FABRIC_LEASE_MS)")

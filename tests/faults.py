@@ -117,7 +117,7 @@ def wait_state(client: Client, job_id: str, states: tuple[str, ...], timeout_s: 
                 return last
         except FabricError as exc:               # the supervisor is away (restarting): ask again
             last = exc
-        time.sleep(0.05)
+        time.sleep(0.05)           # a poll, bounded by the deadline: the supervisor may be restarting
     raise AssertionError(f"job {job_id} not in {states} after {timeout_s:g} s (last: {last})")
 
 
@@ -135,7 +135,7 @@ def run_with_fault(sc: SupervisedCell, service: str, delay_s: float) -> FaultRun
             client.wait_print_job(acc.job_id, lambda r: r.layer >= 0, timeout=300.0)
         elif phase is not None:
             wait_state(client, acc.job_id, (phase,), 120.0)
-        time.sleep(delay_s)
+        time.sleep(delay_s)        # the injected fault's seeded instant, not a synchronisation
         t_kill = time.monotonic()
         killed_in = client.job(acc.job_id).state
         sc.kill(service)

@@ -344,7 +344,8 @@ class StationService(Service):
         return s.CalibrationReport(correction_xyz_mm=list(map(float, r.correction_xyz_mm)),
                                    correction_rpy_deg=list(map(float, r.correction_rpy_deg)),
                                    residual_rms_mm=float(r.residual_rms_mm), points=int(r.n_points),
-                                   wobj_xyz_mm=np.asarray(wobj_xyz).tolist(), wobj_rpy_deg=np.asarray(wobj_rpy).tolist())
+                                   wobj_xyz_mm=np.asarray(wobj_xyz).tolist(),
+                                   wobj_rpy_deg=np.asarray(wobj_rpy).tolist())
 
     def on_ready(self, _: s.Empty) -> s.ReadyReport:
         return ready_report(self._ready_facts())
