@@ -55,9 +55,10 @@ def run_demo(client: Client, model: Path, out: Path, profile: str, backend: str,
         stages: list[str] = []
 
         def progress(rec: s.JobRecord) -> None:
-            if rec.state and (not stages or stages[-1] != rec.state):
-                stages.append(rec.state)
-                say(f"  {rec.state} ...")
+            label = "prepared" if rec.prepared and rec.state == "queued" else rec.state
+            if label and (not stages or stages[-1] != label):
+                stages.append(label)
+                say(f"  {label} ...")
         client.wait_print_job(acc.job_id, lambda r: r.state in ("printing", "loaded"), on_change=progress)
         end = follow_print(client, timeout_s=3600)
         rec = client.wait_print_job(acc.job_id, lambda r: False, timeout=60)     # its final record
