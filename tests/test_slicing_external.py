@@ -32,7 +32,8 @@ def test_prusaslicer_ini_matches_the_builtin_conventions() -> None:
     assert ini["fill_density"] == "30%" and ini["infill_overlap"] == "25%"
     assert ini["gap_fill_enabled"] == ini["thin_walls"] == ini["infill_anchor_max"] == "0"
     assert {ini[k] for k in ini if k.endswith("extrusion_width")} == {"0.42"}
-    assert "G28" not in ini["start_gcode"] and ini["start_gcode"].startswith("M140 S60\\nM104 S205")
+    assert "G28" not in ini["start_gcode"] and "\\nM140 S60\\nM104 S205" in ini["start_gcode"]
+    assert ini["start_gcode"].startswith("; filament_diameter = 2.85\\n; filament_type = PLA\\n")
     assert "M83" in ini["start_gcode"] and "G28" not in ini["end_gcode"]
 
 

@@ -60,7 +60,7 @@ def cmd_slice(c: Client, a: argparse.Namespace) -> int:
 
 def plan_file(c: Client, data: bytes, filename: str, a: argparse.Namespace) -> s.PlanSummary:
     req = s.PlanRequest(gcode=data, filename=filename, offset_mm=list(a.offset), speed_r=a.speed,
-                        tilt_deg=list(a.tilt), rot_step_deg=a.rot_step)
+                        tilt_deg=list(a.tilt), rot_step_deg=a.rot_step, filament_diameter_mm=a.filament_diameter)
     acc = c.plan(req)
     st = c.wait_job("planner", acc.job_id, on_progress=_progress(a.json))
     if not a.json:
@@ -86,6 +86,10 @@ def cmd_plan(c: Client, a: argparse.Namespace) -> int:
         r = summary
         lines = [f"program {r.program_id[:12]}: {r.targets} targets, {r.moves} moves, {r.layers} layers, "
                  f"cycle time {r.estimate_s:.1f} s, {r.extruded_mm3:.0f} mm3, feasible {100 * r.feasible_r:.2f} %"]
+        stated = {"option": "as asked", "gcode": "as the G-code states", "assumed": "ASSUMED"}[r.material_source]
+        lines.append(f"material {r.material or 'unnamed'}, filament {r.filament_diameter_mm:g} mm ({stated})"
+                     + (f", {r.mass_g:.1f} g" if r.mass_g is not None else ""))
+        lines += [f"warning: {w}" for w in r.warnings]
         fs = r.first_slowed
         if fs is not None:
             lines.append(f"{r.slowed_targets} moves slowed to respect joint speed limits, first at G-code line "
@@ -118,4 +122,6 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--speed", type=float, default=1.0, help="feed-rate factor")
     p.add_argument("--rot-step", type=float, default=15.0, help="free-rotation search step (deg)")
     p.add_argument("--module-targets", type=int, default=5000, help="targets per RAPID/KRL module")
+    p.add_argument("--filament-diameter", type=float, default=None, metavar="MM",
+                   help="filament diameter (default: as the G-code states it, else 1.75 mm with a warning)")
     p.set_defaults(run=cmd_plan)

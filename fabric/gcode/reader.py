@@ -8,6 +8,7 @@ from typing import BinaryIO
 from fabric.errors import NotFound, ValidationError
 from fabric.gcode.dialects import detect_slicer
 from fabric.gcode.interp import Interpreter
+from fabric.gcode.material import HEAD_BYTES, read_material
 from fabric.gcode.toolpath import Toolpath
 
 __all__ = ["parse_gcode", "parse_gcode_file", "iter_blocks", "BLOCK_BYTES"]
@@ -68,6 +69,8 @@ def parse_gcode(source: str | bytes | bytearray | memoryview, *, chord_tol_mm: f
             progress(pos / n)
     tp = interp.finish()
     tp.slicer = detect_slicer(bytes(view[:8192]))
+    tail = bytes(view[max(n - HEAD_BYTES, HEAD_BYTES):])
+    tp.material = read_material(bytes(view[:HEAD_BYTES]), tail, tp.n_lines)
     return tp
 
 
@@ -84,13 +87,16 @@ def parse_gcode_file(path: str | os.PathLike[str], *, chord_tol_mm: float = 0.01
     interp = Interpreter(chord_tol_mm, rows_hint=size // 12)      # moves take >= ~12 bytes of text
     done = 0
     with stream:
-        head = stream.read(8192)
-        stream.seek(0)
         for block in iter_blocks(stream, block_bytes):
             interp.feed(block)
             done += len(block)
             if progress is not None:
                 progress(done / max(size, 1))
+        stream.seek(0)
+        head = stream.read(HEAD_BYTES)
+        stream.seek(max(size - HEAD_BYTES, len(head)))
+        tail = stream.read(HEAD_BYTES)
     tp = interp.finish()
-    tp.slicer = detect_slicer(head)
+    tp.slicer = detect_slicer(head[:8192])
+    tp.material = read_material(head, tail, tp.n_lines)
     return tp

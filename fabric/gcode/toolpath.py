@@ -23,6 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fabric.gcode.material import Material
+
 __all__ = [
     "Toolpath", "EV_NOZZLE_TEMP", "EV_BED_TEMP", "EV_FAN", "EV_DWELL", "EV_FW_RETRACT",
     "EV_FW_UNRETRACT", "EV_EXTRUDE", "EVENT_NAMES", "WAIT_NONE", "WAIT_HEAT", "WAIT_ANY", "RowColumns",
@@ -67,6 +69,7 @@ class Toolpath:
     unknown_commands: dict[str, int] = field(default_factory=dict)
     n_lines: int = 0
     slicer: str = "unknown"
+    material: Material = field(default_factory=Material)     # what the file's comments state
 
     def __len__(self) -> int:
         return len(self.line)

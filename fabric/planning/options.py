@@ -7,6 +7,8 @@ from typing import Any
 import numpy as np
 
 from fabric.errors import ValidationError
+from fabric.gcode.material import FILAMENT_DIAMETER_RANGE_MM
+from fabric.planning.material import ASSUMED_FILAMENT_DIAMETER_MM
 
 __all__ = ["PlanOptions"]
 
@@ -40,7 +42,7 @@ class PlanOptions:
     max_tcp_speed_mm_s: float = 500.0    # cap on any programmed linear speed
     travel_lift_mm: float = 1.0
     lift_min_travel_mm: float = 2.0
-    filament_diameter_mm: float = 1.75
+    filament_diameter_mm: float | None = None   # None: as the G-code states (fabric.planning.material)
     approach_height_mm: float | None = None   # None: the cell's
     approach_speed_mm_s: float | None = None  # None: the cell's
     zone_mm: float = 0.5                 # blend zone of print and travel moves
@@ -61,7 +63,7 @@ class PlanOptions:
             raise ValidationError("tilt_deg must stay below 90 deg", field="tilt_deg", value=list(self.tilt_deg))
         checks = (("rot_step_deg", 0.0, 360.0, False), ("speed_r", 0.0, 10.0, False),
                   ("max_tcp_speed_mm_s", 0.0, 10_000.0, False), ("travel_lift_mm", 0.0, 100.0, True),
-                  ("lift_min_travel_mm", 0.0, 1e6, True), ("filament_diameter_mm", 0.0, 10.0, False),
+                  ("lift_min_travel_mm", 0.0, 1e6, True),
                   ("zone_mm", 0.0, 50.0, True), ("fw_retract_mm", 0.0, 50.0, True),
                   ("chord_tol_mm", 0.0, 10.0, False))
         for name, lo_v, hi_v, zero_ok in checks:
@@ -71,6 +73,13 @@ class PlanOptions:
                 raise ValidationError(f"{name} must be in {'[' if zero_ok else '('}{lo_v:g}, {hi_v:g}], got {v!r}",
                                       field=name, value=v)
             setattr(self, name, float(v))
+        d = self.filament_diameter_mm
+        lo_d, hi_d = FILAMENT_DIAMETER_RANGE_MM
+        if d is not None:
+            if not (isinstance(d, (int, float)) and not isinstance(d, bool) and lo_d <= d <= hi_d):
+                raise ValidationError(f"filament_diameter_mm must be in [{lo_d:g}, {hi_d:g}] or None, got {d!r}",
+                                      field="filament_diameter_mm", value=d)
+            self.filament_diameter_mm = float(d)
         for name in ("approach_height_mm", "approach_speed_mm_s"):
             v = getattr(self, name)
             if v is not None and not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
@@ -86,7 +95,9 @@ class PlanOptions:
 
     @property
     def filament_area_mm2(self) -> float:
-        return float(np.pi * self.filament_diameter_mm ** 2 / 4.0)
+        """Filament cross-section (mm^2); the assumed diameter when none is set (the planner sets it)."""
+        d = ASSUMED_FILAMENT_DIAMETER_MM if self.filament_diameter_mm is None else self.filament_diameter_mm
+        return float(np.pi * d ** 2 / 4.0)
 
     def nozzle_axis(self) -> np.ndarray:
         """(3,) nozzle axis (TCP z) in the plate frame: -z tilted about x then y."""

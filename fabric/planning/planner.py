@@ -20,6 +20,7 @@ vlim_j) * v / distance`` (clipped to [0.01, 1]), the paper's "joint moves at
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from pathlib import Path
@@ -30,6 +31,7 @@ import numpy as np
 
 from fabric.gcode import Toolpath, parse_gcode, parse_gcode_file
 from fabric.planning.mapping import map_toolpath
+from fabric.planning.material import resolve_material
 from fabric.planning.options import PlanOptions
 from fabric.planning.report import PlanResult, PlanStats, Reachability
 from fabric.robot.frames import inv_T, quat_from_R
@@ -265,6 +267,8 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
     """
     opt = options or PlanOptions()
     t0 = time.perf_counter()
+    material = resolve_material(tp.material, opt.filament_diameter_mm)    # the E -> volume factor, said aloud
+    opt = dataclasses.replace(opt, filament_diameter_mm=material.filament_diameter_mm)
     prog, n_print = _assemble(tp, cell, opt)
     if progress is not None:
         progress(0.05)
@@ -275,7 +279,7 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
     motion = prog.op <= MOVEL
     motion[-1] = False                       # the home move is not an IK target
     report = Reachability.from_status(status, rot, motion, prog.gcode_line)
-    prog.meta.update(print_rows=n_print, options=opt.to_dict(), **(meta or {}))
+    prog.meta.update(print_rows=n_print, options=opt.to_dict(), **material.meta(), **(meta or {}))
     if on_program is not None:               # the program is final: the estimate below only reads it
         on_program(prog)
     t2 = time.perf_counter()
@@ -302,7 +306,8 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
         extruded_volume_mm3=float(np.dot(prog.flow_mm3_mm[lin], d[lin])), path_length_mm=float(d[pm].sum()),
         print_length_mm=float(d[pm & (prog.flow_mm3_mm > 0)].sum()),
         travel_lifts=int(prog.meta["travel_lifts"]), fan_events_dropped=int(prog.meta["fan_events_dropped"]),
-        gcode_lines=tp.n_lines, unknown_commands=dict(tp.unknown_commands), slicer=tp.slicer,
+        gcode_lines=tp.n_lines, unknown_commands=dict(tp.unknown_commands), slicer=tp.slicer, material=material,
+        warnings=list(material.warnings),
         parse_s=parse_s, ik_s=ik_s, timing_s=timing_s, total_s=parse_s + time.perf_counter() - t0)
     return PlanResult(program=prog, report=report, estimate_s=estimate, stats=stats, toolpath=tp,
                       slowed_rows=slowed_rows, slowed_joint=slowed_joint, t_end_s=t_end)

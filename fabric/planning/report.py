@@ -7,7 +7,9 @@ from typing import Any
 import numpy as np
 
 from fabric.errors import UnreachableError
+from fabric.gcode.material import Material
 from fabric.gcode.toolpath import Toolpath
+from fabric.planning.material import ResolvedMaterial, resolve_material
 from fabric.robot.kinematics import (IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR,
                                      ik_reason)
 from fabric.motion.program import Program
@@ -74,6 +76,8 @@ class PlanStats:
     gcode_lines: int = 0
     unknown_commands: dict[str, int] = field(default_factory=dict)
     slicer: str = "unknown"
+    material: ResolvedMaterial = field(default_factory=lambda: resolve_material(Material(), None))
+    warnings: list[str] = field(default_factory=list)     # what the user should know (an assumed material...)
     parse_s: float = 0.0
     ik_s: float = 0.0
     timing_s: float = 0.0

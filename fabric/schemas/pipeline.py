@@ -18,6 +18,7 @@ FINAL_JOB_STATES = ("finished", "stopped", "failed")
 ON_STATION_JOB_STATES = ("loaded", "printing", "paused", "interrupted")
 WAITING_FOR = ("", "plate", "station", "queue")    # the operator's `job next`, a busy station, jobs ahead
 MAX_MODEL_BYTES = 256 << 20
+MATERIAL_SOURCES = ("option", "gcode", "assumed")  # where a plan's filament diameter came from
 
 
 # --- slicer ------------------------------------------------------------------
@@ -54,9 +55,11 @@ class Backends:
 
 # --- planner -----------------------------------------------------------------
 
-@schema("planner.PlanRequest")
+@schema("planner.PlanRequest", version=2)
 class PlanRequest:
-    """Plan G-code given inline (``gcode``) or by the slicer's artifact id (``gcode_id``)."""
+    """Plan G-code given inline (``gcode``) or by the slicer's artifact id (``gcode_id``).
+
+    ``filament_diameter_mm`` overrides what the G-code states (None: as stated, else assumed and said so)."""
     gcode: bytes = b""
     gcode_id: str = ""
     filename: str = "part.gcode"
@@ -66,6 +69,7 @@ class PlanRequest:
     rot_step_deg: float = f(15.0, ge=0.5, le=90.0)
     wobj_xyz_mm: list[float] | None = f(None, shape=(3,))     # work object override (e.g. after calibration)
     wobj_rpy_deg: list[float] | None = f(None, shape=(3,))
+    filament_diameter_mm: float | None = f(None, ge=0.5, le=5.0)
 
 
 @schema("planner.UnreachableTarget")
@@ -84,8 +88,11 @@ class SlowedMove:
     joint: int = f(ge=1)        # the limiting axis, 1-based (A1 = 1)
 
 
-@schema("planner.PlanSummary", version=2)
+@schema("planner.PlanSummary", version=3)
 class PlanSummary:
+    """What a plan produced. The material: ``filament_diameter_mm`` turned E into ``extruded_mm3``; it came
+    from ``material_source`` (the request's option, the G-code's comments, or assumed: then ``warnings``
+    says so); name, density and minimum extrusion temperature as the G-code states them (else empty)."""
     program_id: str
     targets: int
     moves: int
@@ -100,6 +107,13 @@ class PlanSummary:
     elapsed_s: float = 0.0
     slowed_targets: int = 0                    # linear moves slowed to respect a joint velocity limit
     first_slowed: SlowedMove | None = None
+    filament_diameter_mm: float = f(1.75, ge=0.5, le=5.0)
+    material_source: str = f("assumed", choices=MATERIAL_SOURCES)
+    material: str = ""
+    density_g_cm3: float | None = None
+    min_extrude_temp_c: float | None = None
+    mass_g: float | None = None                # extruded_mm3 times the density, when the density is known
+    warnings: list[str] = f(factory=list)
 
 
 @schema("planner.ProgramMsg")

@@ -118,7 +118,8 @@ class PlannerService(Service):
             wobj = xyzrpy_to_T(np.asarray(req.wobj_xyz_mm or [0.0, 0.0, 0.0]),
                                np.asarray(req.wobj_rpy_deg or [0.0, 0.0, 0.0]))
         options = PlanOptions(offset_mm=tuple(req.offset_mm), tilt_deg=tuple(req.tilt_deg), speed_r=req.speed_r,
-                              rot_step_deg=req.rot_step_deg, wobj_T=wobj)
+                              rot_step_deg=req.rot_step_deg, wobj_T=wobj,
+                              filament_diameter_mm=req.filament_diameter_mm)
         st = self.jobs.submit("plan", lambda job: self._run(job, req, options))
         return s.JobAccepted(job_id=st.job_id, kind="plan")
 
@@ -157,7 +158,7 @@ class PlannerService(Service):
             extruded_mm3=float(st.extruded_volume_mm3), path_mm=float(st.path_length_mm), first_unreachable=first,
             unreachable_by_reason={str(k): int(v) for k, v in rep.counts.items() if k != "ok"},
             elapsed_s=float(st.total_s), slowed_targets=0 if result.slowed_rows is None else len(result.slowed_rows),
-            first_slowed=_first_slowed(result, program))
+            first_slowed=_first_slowed(result, program), **_material_fields(st))
         self.records.put("summary", pid, summary)
         return pid
 
@@ -235,6 +236,15 @@ def _background_priority() -> None:
         os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), BACKGROUND_NICE)
     except (OSError, AttributeError):       # not Linux, or not allowed: same priority as the rest
         pass
+
+
+def _material_fields(stats) -> dict:
+    """The PlanSummary fields saying which material the plan used and where it came from."""
+    m = stats.material
+    mass = stats.extruded_volume_mm3 * m.density_g_cm3 / 1000.0 if m.density_g_cm3 is not None else None
+    return {"filament_diameter_mm": m.filament_diameter_mm, "material_source": m.source, "material": m.material or "",
+            "density_g_cm3": m.density_g_cm3, "min_extrude_temp_c": m.min_extrude_temp_c, "mass_g": mass,
+            "warnings": list(stats.warnings)}
 
 
 def _first_slowed(result, program) -> s.SlowedMove | None:

@@ -52,6 +52,11 @@ class TwinConfig:
         """Cross-section of the filament: extruded volume per mm of filament pushed."""
         return math.pi * self.filament_diameter_mm ** 2 / 4.0
 
+    def filament_area_for_mm2(self, program: Any) -> float:
+        """Cross-section of the loaded program's filament (its ``filament_diameter_mm``), else of this config's."""
+        d = program.meta.get("filament_diameter_mm") if program is not None else None
+        return self.filament_area_mm2 if d is None else math.pi * float(d) ** 2 / 4.0
+
     def to_dict(self) -> dict[str, Any]:
         """Plain values, for a snapshot."""
         return asdict(self)

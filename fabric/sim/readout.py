@@ -68,7 +68,7 @@ class Readout:
         vol = job.extruded_mm3 + extra
         program = self.state.program
         g = int(program.gcode_line[job.row]) if program is not None else -1
-        filament_mm = vol / self.config.filament_area_mm2 + job.retract_total_mm
+        filament_mm = vol / self.config.filament_area_for_mm2(program) + job.retract_total_mm
         return ExtrusionState(job.extruder_on, float(flow), vol, filament_mm, job.layer, job.row, g)
 
     def temps(self) -> Temps:

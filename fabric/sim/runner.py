@@ -218,7 +218,7 @@ class LegRunner:
         """What a finished or stopped job did: simulated duration, volume, filament, beads."""
         st = self.state
         job = st.job
-        filament_mm = job.extruded_mm3 / self.builder.config.filament_area_mm2 + job.retract_total_mm
+        filament_mm = job.extruded_mm3 / self.builder.config.filament_area_for_mm2(st.program) + job.retract_total_mm
         return {"elapsed_s": t - (st.t_started_s or 0.0), "extruded_mm3": job.extruded_mm3,
                 "filament_mm": filament_mm, "beads": len(st.beads)}
 

@@ -42,8 +42,9 @@ def _gcode_block(lines: list[str]) -> str:
 
 
 def _start_end(p: Profile) -> tuple[str, str]:
-    start = [f"M140 S{p.bed_temp_c:g}", f"M104 S{p.nozzle_temp_c:g}", f"M190 S{p.bed_temp_c:g}",
-             f"M109 S{p.nozzle_temp_c:g}", "M83", "G92 E0"]
+    material = [f"; {line}" for line in p.material_header()]       # the planner and the twin read these
+    start = material + [f"M140 S{p.bed_temp_c:g}", f"M104 S{p.nozzle_temp_c:g}", f"M190 S{p.bed_temp_c:g}",
+                        f"M109 S{p.nozzle_temp_c:g}", "M83", "G92 E0"]
     return _gcode_block(start), _gcode_block(["M104 S0", "M140 S0"])
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,7 +37,10 @@ class Profile:
     Widths and heights describe the bead: ``extrusion_width_mm`` is the bead's
     width, every layer but the first is ``layer_height_mm`` thick. Speeds are
     TCP speeds along the path. ``infill_density_r`` is the sparse infill's
-    volume fraction (0..1); solid layers are always 100 %.
+    volume fraction (0..1); solid layers are always 100 %. The material
+    (``filament_diameter_mm``, ``material``, ``density_g_cm3``,
+    ``min_extrude_temp_c``) is written into the G-code's header, from where the
+    planner and the twin read it.
     """
 
     name: str = "custom"
@@ -44,6 +48,9 @@ class Profile:
     first_layer_height_mm: float = 0.3
     nozzle_diameter_mm: float = 0.35
     filament_diameter_mm: float = 2.85
+    material: str = "PLA"
+    density_g_cm3: float = 1.24
+    min_extrude_temp_c: float = 170.0
     extrusion_width_mm: float = 0.42
     extrusion_multiplier_r: float = 1.0
     perimeters: int = 2
@@ -76,6 +83,11 @@ class Profile:
         """Cross-section of the raw filament: E (mm) times this is extruded mm^3."""
         return math.pi * (self.filament_diameter_mm / 2.0) ** 2
 
+    def material_header(self) -> list[str]:
+        """The G-code comments (without ``; ``) stating this profile's material."""
+        from fabric.gcode.material import header_lines
+        return header_lines(self.filament_diameter_mm, self.material, self.density_g_cm3, self.min_extrude_temp_c)
+
     def replace(self, **changes: Any) -> Profile:
         """A copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
@@ -86,6 +98,7 @@ _FIELDS = {f.name: f for f in dataclasses.fields(Profile)}
 _RANGES: dict[str, tuple[float | None, float | None]] = {
     "layer_height_mm": (0.01, 5.0), "first_layer_height_mm": (0.01, 5.0),
     "nozzle_diameter_mm": (0.05, 5.0), "filament_diameter_mm": (0.5, 5.0),
+    "density_g_cm3": (0.1, 25.0), "min_extrude_temp_c": (0.0, 500.0),
     "extrusion_width_mm": (0.05, 10.0), "extrusion_multiplier_r": (0.1, 3.0),
     "perimeters": (0, 50), "top_solid_layers": (0, 100), "bottom_solid_layers": (0, 100),
     "infill_density_r": (0.0, 1.0), "infill_angle_deg": (-360.0, 360.0),
@@ -98,6 +111,7 @@ _RANGES: dict[str, tuple[float | None, float | None]] = {
     "retract_lift_mm": (0.0, 20.0), "retract_min_travel_mm": (0.0, 1000.0),
     "skirt_loops": (0, 50), "skirt_distance_mm": (0.0, 100.0),
 }
+_MATERIAL_NAME = re.compile(r"[A-Za-z0-9_+-]{1,32}")     # one word: it goes into G-code comments
 _CHOICES = {"infill_pattern": INFILL_PATTERNS, "seam": SEAMS}
 
 
@@ -117,6 +131,9 @@ def _validate(p: Profile, source: str) -> None:
         if (lo is not None and value < lo) or (hi is not None and value > hi):
             raise ProfileError(f"{source}: {key} = {value} is out of range [{lo}, {hi}]",
                                key=key, value=value, min=lo, max=hi)
+        if key == "material" and not _MATERIAL_NAME.fullmatch(value):
+            raise ProfileError(f"{source}: material = {value!r} must be 1-32 letters, digits, '-', '_' or '+'",
+                               key=key, value=value)
         if key in _CHOICES and value not in _CHOICES[key]:
             raise ProfileError(f"{source}: {key} = {value!r} is not one of {', '.join(_CHOICES[key])}",
                                key=key, value=value, choices=list(_CHOICES[key]))
