@@ -1,51 +1,145 @@
-"""Pictures of programs: a PNG of the toolpath (extruding moves coloured by layer, travel faint)."""
+"""Pictures: a PNG of a toolpath (a program's or a G-code file's; extruding moves coloured by layer, travel
+faint) and a PNG of recorded telemetry (temperatures, speed, flow, extrusion against simulated time)."""
 from __future__ import annotations
 
 import io
+from typing import Any, Mapping
 
 import numpy as np
 
 from fabric.motion.program import MOVEL, PRINT, Program
 
-__all__ = ["toolpath_png"]
+__all__ = ["toolpath_png", "gcode_png", "segments_png", "telemetry_png"]
 
 
-def toolpath_png(program: Program, title: str = "toolpath", max_segments: int = 200_000) -> bytes:
-    """Render the print section in the plate frame (3D view plus top view) as PNG bytes."""
+def _pyplot():
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from mpl_toolkits.mplot3d.art3d import Line3DCollection
-    from matplotlib.collections import LineCollection
+    return matplotlib, plt
 
+
+def toolpath_png(program: Program, title: str = "toolpath", max_segments: int = 200_000,
+                 layer: int | None = None) -> bytes:
+    """Render a program's print section in the plate frame (3D view plus top view) as PNG bytes."""
     rows = np.flatnonzero((program.section == PRINT) & (program.op == MOVEL))
     rows = rows[rows > 0]
     seg = np.stack([program.xyz_mm[rows - 1], program.xyz_mm[rows]], axis=1)
-    ext = program.flow_mm3_mm[rows] > 0
+    return segments_png(seg, program.flow_mm3_mm[rows] > 0, program.layer[rows], title, max_segments, layer)
+
+
+def gcode_png(toolpath: Any, title: str = "toolpath", max_segments: int = 200_000, layer: int | None = None) -> bytes:
+    """Render an interpreted G-code file (``fabric.gcode.Toolpath``, machine coordinates) as PNG bytes."""
+    ends = toolpath.xyz_mm
+    starts = np.concatenate([toolpath.start_xyz_mm[None, :], ends[:-1]]) if len(ends) else ends
+    seg = np.stack([starts, ends], axis=1)
+    return segments_png(seg, toolpath.e_mm > 0, toolpath.layer, title, max_segments, layer)
+
+
+def segments_png(seg: np.ndarray, extruding: np.ndarray, layer: np.ndarray, title: str = "toolpath",
+                 max_segments: int = 200_000, only_layer: int | None = None) -> bytes:
+    """3D view and top view of segments ``seg`` (n, 2, 3) mm. With ``only_layer`` (0-based) the 3D view
+    shows the part up to that layer and the top view that layer alone."""
+    matplotlib, plt = _pyplot()
+    from matplotlib.collections import LineCollection
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+    ext = np.asarray(extruding, dtype=bool)
+    layer = np.asarray(layer)
+    if only_layer is not None:
+        keep = layer <= only_layer
+        seg, ext, layer = seg[keep], ext[keep], layer[keep]
     if len(seg) > max_segments:   # keep the picture cheap on million-move programs
         keep = np.linspace(0, len(seg) - 1, max_segments).astype(int)
-        seg, ext, rows = seg[keep], ext[keep], rows[keep]
-    layer = program.layer[rows]
+        seg, ext, layer = seg[keep], ext[keep], layer[keep]
     colors = matplotlib.colormaps["viridis"]((layer - layer.min()) / max(1, np.ptp(layer)) if len(layer) else [])
 
     fig = plt.figure(figsize=(11, 5), dpi=110)
     ax = fig.add_subplot(1, 2, 1, projection="3d")
     ax.add_collection3d(Line3DCollection(seg[ext], colors=colors[ext], linewidths=0.6), autolim=False)
     ax.add_collection3d(Line3DCollection(seg[~ext], colors=(0.8, 0.2, 0.2, 0.25), linewidths=0.3), autolim=False)
-    if len(seg):
-        lo, hi = seg.reshape(-1, 3).min(axis=0), seg.reshape(-1, 3).max(axis=0)
+    if ext.any():
+        pts = seg[ext].reshape(-1, 3)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
         span = max(np.max(hi - lo), 1.0)
         mid = (lo + hi) / 2
         ax.auto_scale_xyz([mid[0] - span / 2, mid[0] + span / 2], [mid[1] - span / 2, mid[1] + span / 2],
                           [lo[2], lo[2] + span], had_data=False)
     ax.set_xlabel("x mm"), ax.set_ylabel("y mm"), ax.set_zlabel("z mm")
-    ax.set_title(f"{title}: {int(ext.sum())} extruding moves, {len(np.unique(layer))} layers")
+    n_layers = len(np.unique(layer[layer >= 0]))
+    ax.set_title(f"{title}: {int(ext.sum())} extruding moves, {n_layers} layers")
     ax2 = fig.add_subplot(1, 2, 2)
-    ax2.add_collection(LineCollection(seg[ext][:, :, :2], colors=colors[ext], linewidths=0.5))
+    top = ext if only_layer is None else ext & (layer == only_layer)
+    ax2.add_collection(LineCollection(seg[top][:, :, :2], colors=colors[top], linewidths=0.5))
+    if only_layer is not None:
+        travel = ~ext & (layer == only_layer)
+        ax2.add_collection(LineCollection(seg[travel][:, :, :2], colors=(0.8, 0.2, 0.2, 0.3), linewidths=0.3))
     ax2.autoscale()
     ax2.set_aspect("equal")
-    ax2.set_xlabel("x mm (plate frame)"), ax2.set_ylabel("y mm")
-    ax2.set_title("top view")
+    ax2.set_xlabel("x mm"), ax2.set_ylabel("y mm")
+    ax2.set_title("top view" if only_layer is None else f"layer {only_layer + 1}")
+    return _png(fig, plt)
+
+
+def telemetry_png(columns: Mapping[str, np.ndarray], title: str = "telemetry") -> bytes:
+    """Four panels against simulated time from a recording's columns (see ``fabric-cli record``):
+    temperatures and set points, TCP speed and the speed override, extruder flow and the flow
+    override, extruded volume (with the extruder's on/off)."""
+    _, plt = _pyplot()
+    topic = np.asarray(columns["topic"]).astype(str)
+    t = np.asarray(columns["t_sim_s"], dtype=float)
+
+    def col(name: str, which: str) -> tuple[np.ndarray, np.ndarray]:
+        rows = (topic == which)
+        if name not in columns:
+            return np.zeros(0), np.zeros(0)
+        v = np.asarray(columns[name], dtype=float)[rows]
+        order = np.argsort(t[rows], kind="stable")
+        return t[rows][order], v[order]
+
+    fig, axes = plt.subplots(4, 1, figsize=(10, 10), dpi=100, sharex=True)
+    ax = axes[0]
+    for name, colour in (("nozzle_c", "tab:red"), ("bed_c", "tab:blue")):
+        ts, v = col(name, "temps")
+        ax.plot(ts, v, color=colour, label=name.replace("_c", " C"))
+        ts, v = col(name.replace("_c", "_target_c"), "temps")
+        ax.plot(ts, v, color=colour, linestyle=":", label=name.replace("_c", " set point"))
+    ax.set_ylabel("deg C"), ax.legend(loc="upper right", fontsize=8)
+    ax = axes[1]
+    ts, x = col("x_mm", "pose")
+    _, y = col("y_mm", "pose")
+    _, z = col("z_mm", "pose")
+    if len(ts) > 1:
+        dt = np.diff(ts)
+        ok = dt > 0
+        speed = np.linalg.norm(np.diff(np.stack([x, y, z], axis=1), axis=0), axis=1)[ok] / dt[ok]
+        ax.plot(ts[1:][ok], speed, color="tab:green", linewidth=0.7, label="TCP speed mm/s")
+    ax.set_ylabel("mm/s"), ax.legend(loc="upper left", fontsize=8)
+    twin = ax.twinx()
+    ts, v = col("speed_r", "state")
+    twin.step(ts, v, where="post", color="tab:gray", label="speed override")
+    twin.set_ylabel("override x"), twin.legend(loc="upper right", fontsize=8)
+    ax = axes[2]
+    ts, v = col("flow_mm3_s", "extrusion")
+    ax.step(ts, v, where="post", color="tab:purple", label="flow mm3/s")
+    ax.set_ylabel("mm3/s"), ax.legend(loc="upper left", fontsize=8)
+    twin = ax.twinx()
+    ts, v = col("flow_r", "extrusion")
+    twin.step(ts, v, where="post", color="tab:gray", label="flow override")
+    twin.set_ylabel("override x"), twin.legend(loc="upper right", fontsize=8)
+    ax = axes[3]
+    ts, v = col("extruded_mm3", "extrusion")
+    ax.plot(ts, v, color="tab:orange", label="extruded mm3")
+    ts, on = col("on", "extrusion")
+    if len(ts):
+        ax.fill_between(ts, 0, np.nanmax(v) if len(v) else 1, where=on > 0, step="post", color="tab:orange",
+                        alpha=0.15, label="extruder on")
+    ax.set_ylabel("mm3"), ax.set_xlabel("simulated time s"), ax.legend(loc="upper left", fontsize=8)
+    axes[0].set_title(title)
+    return _png(fig, plt)
+
+
+def _png(fig: Any, plt: Any) -> bytes:
     buf = io.BytesIO()
     fig.tight_layout()
     fig.savefig(buf, format="png")

@@ -55,6 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
     station_cmds.register(sub, common)
     pipeline_cmds.register(sub, common)
     job_cmds.register(sub, common)
+    importlib.import_module("fabric.cli.record_cmds").register(sub, common)     # record, plot, preview
 
     cell = sub.add_parser("cell", help="the cell configuration")
     csub = cell.add_subparsers(dest="cell_cmd", required=True)

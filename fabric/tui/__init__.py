@@ -15,10 +15,12 @@ def main(argv: list[str] | None = None) -> int:
     from fabric.tui.app import FabricConsole
     p = argparse.ArgumentParser(prog="fabric-tui", description="operator console for an am-fabric cell")
     add_session_args(p)
+    p.add_argument("--cell-config", default=None, metavar="TOML",
+                   help="the cell model for joint limits (default: the built-in cell, as the services use)")
     a = p.parse_args(argv)
     try:
         with Client.connect(settings_from_args(a, default_mode="client")) as client:
-            FabricConsole(client).run()
+            FabricConsole(client, cell_config=a.cell_config).run()
     except FabricError as err:
         print(f"fabric-tui: error [{err.code}]: {err.message}", file=sys.stderr)
         return 2

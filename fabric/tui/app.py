@@ -1,164 +1,301 @@
-"""The operator console: live state of the cell and the paper's commands, over the same client as the CLI."""
+"""The operator console: the Cell, Jobs and Events screens over one cell link, dialogs for every command."""
 from __future__ import annotations
 
-import queue
 import time
+from pathlib import Path
 from typing import Any, Callable
 
-from rich.markup import escape
 from textual import work
-from textual.app import App, ComposeResult
+from textual.app import App
 from textual.binding import Binding
-from textual.containers import Horizontal, Vertical
-from textual.widgets import Button, Footer, Header, RichLog
+from textual.reactive import reactive
 
-from fabric.client import AliveSubscription, Client
+from fabric import schemas as s
+from fabric.client import Client
 from fabric.errors import FabricError
-from fabric.tui.messages import Liveliness, Telemetry
-from fabric.tui.widgets.services import ServicesPanel
-from fabric.tui.widgets.telemetry import ExtrusionPanel, PosePanel, StatePanel
+from fabric.tui.commands import COMMANDS, describe
+from fabric.tui.link import CellLink
+from fabric.tui.messages import CellsListed, JobsListed, LimitsReady, Liveliness, ProgramReady, Reply, Telemetry
+from fabric.tui.screens.cell import CellScreen
+from fabric.tui.screens.cells import CellsDialog
+from fabric.tui.screens.confirm import ConfirmDialog
+from fabric.tui.screens.events import EventsScreen
+from fabric.tui.screens.help import HelpDialog
+from fabric.tui.screens.jobs import JobsScreen
+from fabric.tui.screens.report import ReportDialog
+from fabric.tui.screens.submit import SubmitChoice, SubmitDialog
+from fabric.tui.screens.values import ValuesDialog
 
-TOPICS = ("pose", "extrusion", "temps", "state", "events")
-UI_PERIOD_S = 0.1       # pose/extrusion/temps redraw at most this often
+__all__ = ["FabricConsole"]
 
-COMMANDS: dict[str, tuple[str, Callable[[Client], Any]]] = {
-    "start": ("Start", lambda c: c.start()),
-    "pause": ("Pause", lambda c: c.pause()),
-    "resume": ("Resume", lambda c: c.resume()),
-    "stop": ("Stop", lambda c: c.stop()),
-    "home": ("Home", lambda c: c.home()),
-    "ready": ("Ready?", lambda c: c.ready()),
-    "collisions": ("Collisions", lambda c: c.collisions()),
-    "calibrate": ("Calibrate", lambda c: c.calibrate()),
-}
-
-
-def describe(command: str, result: Any) -> str:
-    """One or a few lines for the log: what the command answered."""
-    if command == "ready":
-        marks = "  ".join(f"{'✔' if ch.ok else '✘'} {ch.name}" for ch in result.checks)
-        return f"{'READY' if result.ready else 'NOT READY'}: {marks}"
-    if command == "collisions":
-        if result.collision_free:
-            return f"collision-free ({result.checked_configs} configs, clearance {result.min_distance_mm:.1f} mm)"
-        h = result.first_hit
-        return f"COLLISION line {h.gcode_line}: {h.body_a} <-> {h.body_b}"
-    if command == "calibrate":
-        return (f"plate corrected by {[round(v, 3) for v in result.correction_xyz_mm]} mm, "
-                f"residual {result.residual_rms_mm:.4f} mm")
-    return getattr(result, "message", "") or "ok"
+GCODE_SUFFIXES = (".gcode", ".gco", ".g", ".nc")
+EVENT_TOASTS = {"fault": "error", "interlock": "error", "stall": "error", "interrupted": "error",
+                "stopped": "warning", "finished": "information", "paused": "warning"}
 
 
 class FabricConsole(App):
-    """``fabric-tui``: services, pose, extruder, state and events; keys or buttons for the commands."""
+    """``fabric-tui``. The console's state lives in the reactive attributes below; the screens watch them
+    and hand them down to their widgets. ``client`` None: no link (the tests set the attributes)."""
 
     CSS_PATH = "console.tcss"
+    ENABLE_COMMAND_PALETTE = False
     TITLE = "am-fabric"
-    BINDINGS = [Binding("s", "command('start')", "start"), Binding("p", "command('pause')", "pause"),
-                Binding("r", "command('resume')", "resume"), Binding("x", "command('stop')", "stop"),
-                Binding("h", "command('home')", "home"), Binding("y", "command('ready')", "ready?"),
-                Binding("c", "command('collisions')", "collisions"), Binding("k", "command('calibrate')", "calibrate"),
-                Binding("q", "quit", "quit")]
+    MODES = {"cell": CellScreen, "jobs": JobsScreen, "events": EventsScreen}
+    BINDINGS = [
+        Binding("1", "switch_mode('cell')", "cell"), Binding("2", "switch_mode('jobs')", "jobs"),
+        Binding("3", "switch_mode('events')", "events"),
+        Binding("s", "command('start')", "start"), Binding("p", "command('pause')", "pause"),
+        Binding("r", "command('resume')", "resume"), Binding("x", "command('stop')", "stop"),
+        Binding("o", "command('overrides')", "override"), Binding("question_mark", "help", "keys"),
+        Binding("q", "quit", "quit"), Binding("f", "command('rtf')", "sim speed", show=False),
+        Binding("v", "command('recover')", "recover", show=False),
+        Binding("h", "command('home')", "home", show=False),
+        Binding("k", "command('calibrate')", "calibrate", show=False),
+        Binding("y", "command('ready')", "ready?", show=False),
+        Binding("c", "command('collisions')", "collisions", show=False),
+        Binding("w", "command('position')", "position", show=False),
+        Binding("t", "command('time')", "time", show=False),
+        Binding("g", "cells", "cells", show=False),
+    ]
 
-    def __init__(self, client: Client) -> None:
+    cell: reactive[str] = reactive("")
+    station_state: reactive[Any] = reactive(None, always_update=True)
+    pose: reactive[Any] = reactive(None, always_update=True)
+    extrusion: reactive[Any] = reactive(None, always_update=True)
+    temps: reactive[Any] = reactive(None, always_update=True)
+    alive: reactive[dict] = reactive(dict, always_update=True)
+    toolpath: reactive[Any] = reactive(None, always_update=True)
+    limits: reactive[Any] = reactive(None, always_update=True)
+    jobs: reactive[list] = reactive(list, always_update=True)
+    reply: reactive[Any] = reactive(None, always_update=True)
+    last_event: reactive[Any] = reactive(None, always_update=True)
+
+    def __init__(self, client: Client | None, cell_config: str | None = None, files_root: Path | None = None,
+                 wall_clock: Callable[[], float] = time.time,
+                 monotonic_clock: Callable[[], float] = time.monotonic) -> None:
         super().__init__()
         self.client = client
-        self.sub_title = f"cell {client.keys.cell}"
-        self.alive: dict[str, bool] = {}
-        self._last_ui: dict[str, float] = {}
-        self._subs: list[Any] = []
-        self._alive_sub: AliveSubscription | None = None
+        self.cell_config = cell_config
+        self.files_root = files_root or Path.cwd()
+        self.wall_clock, self.monotonic_clock = wall_clock, monotonic_clock
+        self.link: CellLink | None = None
+        self._toolpath_id = ""
 
-    def compose(self) -> ComposeResult:
-        yield Header()
-        with Horizontal(id="top"):
-            yield ServicesPanel(id="services")
-            with Vertical(id="live"):
-                yield StatePanel(id="state")
-                yield PosePanel(id="pose")
-                yield ExtrusionPanel(id="extrusion")
-        with Horizontal(id="buttons"):
-            for name, (label, _) in COMMANDS.items():
-                yield Button(label, id=f"cmd-{name}", variant="error" if name == "stop" else "default")
-        yield RichLog(id="log", markup=True, wrap=True, max_lines=2000)
-        yield Footer()
+    # --- life ---------------------------------------------------------------------------
 
     def on_mount(self) -> None:
-        for topic in TOPICS:
-            self._subs.append(self.client.subscribe("station", topic))
-            self.feed(topic, self._subs[-1])
-        # liveliness changes are posted straight from the Zenoh callback (non-blocking): no worker thread
-        # is held for them (thread workers share a small pool with the feeds and the commands)
-        self._alive_sub = self.client.subscribe_alive(lambda name, alive: self.post_message(Liveliness({name: alive})))
-        self.refresh_alive()
+        self.switch_mode("cell")
+        if self.client is not None:
+            self._follow(self.client)
+            self.load_limits()
 
     def on_unmount(self) -> None:
-        for sub in self._subs:
-            sub.close()
-        if self._alive_sub is not None:
-            self._alive_sub.close()
+        if self.link is not None:
+            self.link.close()
 
-    # --- feeds (threads) -----------------------------------------------------------
+    def _follow(self, client: Client) -> None:
+        """Follow ``client``'s cell from now on (and forget what the last one showed)."""
+        if self.link is not None:
+            self.link.close()
+        self.client = client
+        self.cell = client.keys.cell
+        self.sub_title = f"cell {self.cell}"
+        self.station_state = self.pose = self.extrusion = self.temps = self.toolpath = None
+        self.alive, self.jobs, self._toolpath_id = {}, [], ""
+        self.link = CellLink(client, self.post_message)
+        self.link.open()
 
-    @work(thread=True, group="feeds")
-    def feed(self, topic: str, sub: Any) -> None:
-        while self.is_running:
-            try:
-                msg = sub.get(timeout=0.5)
-            except queue.Empty:
-                continue
-            except FabricError as err:
-                self.call_from_thread(self.log_line, f"[red]bad {topic} message: {escape(str(err))}[/red]")
-                continue
-            if topic in ("pose", "extrusion", "temps"):
-                now = time.monotonic()
-                if now - self._last_ui.get(topic, 0.0) < UI_PERIOD_S:
-                    continue
-                self._last_ui[topic] = now
-            self.post_message(Telemetry(topic, msg))
+    def switch_cell(self, name: str) -> None:
+        if self.client is not None and name and name != self.cell:
+            self._follow(Client(self.client.session, name))
+            self.show_reply("cell", True, f"now following cell {name}")
 
-    @work(thread=True, group="alive")
-    def refresh_alive(self) -> None:
-        self.post_message(Liveliness(self.client.alive(timeout=2.0)))
+    @work(thread=True, group="limits")
+    def load_limits(self) -> None:
+        """Joint limits from the cell model (no service serves it): ``--cell-config`` or the built-in cell."""
+        from fabric.robot.cell import Cell
+        try:
+            model = Cell.load_or_builtin(self.cell_config).to_dict()["robot"]
+        except FabricError as err:
+            self.call_from_thread(self.show_reply, "cell model", False, f"joint limits unknown: {err.message}")
+            return
+        self.post_message(LimitsReady(model["joint_names"], model["lower_deg"], model["upper_deg"]))
 
-    # --- messages up -------------------------------------------------------------
-
-    def on_liveliness(self, msg: Liveliness) -> None:
-        self.alive.update(msg.alive)
-        self.query_one(ServicesPanel).alive = dict(self.alive)
+    # --- messages up ----------------------------------------------------------------------
 
     def on_telemetry(self, msg: Telemetry) -> None:
-        if msg.topic == "pose":
-            self.query_one(PosePanel).pose = msg.payload
+        if msg.cell != self.cell:
+            return          # from a link closed since
+        p = msg.payload
+        if msg.topic == "state":
+            self.station_state = p
+        elif msg.topic == "pose":
+            self.pose = p
         elif msg.topic == "extrusion":
-            self.query_one(ExtrusionPanel).extrusion = msg.payload
+            self.extrusion = p
         elif msg.topic == "temps":
-            self.query_one(ExtrusionPanel).temps = msg.payload
-        elif msg.topic == "state":
-            self.query_one(StatePanel).state = msg.payload
+            self.temps = p
         elif msg.topic == "events":
-            e = msg.payload
-            self.log_line(f"#{e.seq} t={e.t_sim_s:.1f}s [b]{escape(e.kind)}[/b] layer {e.layer + 1} line {e.gcode_line}")
+            self.last_event = p
+            severity = EVENT_TOASTS.get(p.kind)
+            if severity:
+                why = p.data.get("reason", "") if isinstance(p.data, dict) else ""
+                self.notify(f"{p.kind} at layer {p.layer + 1}" + (f": {why}" if why else ""),
+                            title=f"print {p.kind}", severity=severity, timeout=8)
+        elif msg.topic == "jobs":
+            self._job_changed(p)
 
-    def log_line(self, text: str) -> None:
-        self.query_one(RichLog).write(text)
+    def _job_changed(self, rec: s.JobRecord) -> None:
+        jobs = list(self.jobs)
+        for i, old in enumerate(jobs):
+            if old.job_id == rec.job_id:
+                if rec.state == "failed" and old.state != "failed":
+                    self.notify(f"{rec.filename}: {rec.reason or rec.stage}", title=f"job {rec.job_id} failed",
+                                severity="error", timeout=10)
+                jobs[i] = rec
+                self.jobs = jobs
+                return
+        self.jobs = jobs + [rec]
+        self.refresh_jobs()        # a new job: the supervisor knows its place in the queue
 
-    # --- commands ------------------------------------------------------------------
+    def on_liveliness(self, msg: Liveliness) -> None:
+        if msg.cell == self.cell:
+            self.alive = {**self.alive, **msg.alive}
 
-    def on_button_pressed(self, event: Button.Pressed) -> None:
-        if event.button.id and event.button.id.startswith("cmd-"):
-            self.action_command(event.button.id[4:])
+    def on_jobs_listed(self, msg: JobsListed) -> None:
+        if msg.cell == self.cell:
+            self.jobs = list(msg.jobs)
+
+    def on_program_ready(self, msg: ProgramReady) -> None:
+        if msg.cell == self.cell:
+            self.toolpath = msg.toolpath
+
+    def on_limits_ready(self, msg: LimitsReady) -> None:
+        self.limits = (msg.lower_deg, msg.upper_deg)
+
+    def on_reply(self, msg: Reply) -> None:
+        self.show_reply(msg.command, msg.ok, msg.text, msg.severity)
+        if msg.report:
+            self.push_screen(ReportDialog(msg.command, msg.report))
+
+    def on_cells_listed(self, msg: CellsListed) -> None:
+        self.push_screen(CellsDialog(msg.cells, self.cell), lambda name: name and self.switch_cell(name))
+
+    def show_reply(self, command: str, ok: bool, text: str, severity: str = "") -> None:
+        """The reply stays on the reply line; a refusal or a failure is also a toast."""
+        self.reply = (command, ok, text)
+        if not ok or severity in ("error", "warning"):
+            self.notify(text, title=command, severity=severity or "error", timeout=8)
+
+    # --- commands ---------------------------------------------------------------------------
 
     def action_command(self, name: str) -> None:
-        self.log_line(f"> {name}")
-        self.run_command(name)
+        cmd = COMMANDS[name]
+
+        def ask_values(_: object = True) -> None:
+            if not cmd.asks:
+                self.run_command(name, {})
+                return
+            current = self._current_values()
+            self.push_screen(ValuesDialog(cmd.label.capitalize(), cmd.asks, current),
+                             lambda values: values is not None and self.run_command(name, values))
+
+        if cmd.confirm:
+            self.push_screen(ConfirmDialog(cmd.label.capitalize(), cmd.confirm),
+                             lambda yes: yes and ask_values())
+        else:
+            ask_values()
+
+    def _current_values(self) -> dict[str, float]:
+        st, t = self.station_state, self.temps
+        out: dict[str, float] = {}
+        if st is not None:
+            out.update(speed_r=st.speed_r, flow_r=st.flow_r, rtf=st.rtf)
+        if t is not None:
+            out.update(nozzle_c=t.nozzle_target_c, bed_c=t.bed_target_c)
+        return out
 
     @work(thread=True, group="commands")
-    def run_command(self, name: str) -> None:
-        _, fn = COMMANDS[name]
+    def run_command(self, name: str, values: dict[str, Any]) -> None:
+        cmd = COMMANDS[name]
+        if self.client is None:
+            self.post_message(Reply(name, False, "not connected to a cell"))
+            return
         try:
-            text = describe(name, fn(self.client))
-            self.call_from_thread(self.log_line, f"[green]{name}[/green]: {escape(text)}")
+            result = cmd.call(self.client, values)
         except FabricError as err:
-            self.call_from_thread(self.log_line, f"[red]{name} failed {escape(f'[{err.code}]')}[/red]: "
-                                                 f"{escape(err.message)}")
+            self.post_message(Reply(name, False, f"[{err.code}] {err.message}"))
+            return
+        line, report = describe(name, result)
+        severity = "error" if isinstance(result, s.CollisionReport) and not result.collision_free else ""
+        if isinstance(result, s.ReadyReport) and not result.ready:
+            severity = "warning"
+        self.post_message(Reply(name, True, line, report if cmd.report else "", severity))
+
+    @work(thread=True, group="commands")
+    def run_call(self, label: str, fn: Callable[[Client], Any], refresh_jobs: bool = False) -> None:
+        """A job command (``fn(client)``), answered on the reply line."""
+        if self.client is None:
+            return
+        try:
+            result = fn(self.client)
+        except FabricError as err:
+            self.post_message(Reply(label, False, f"[{err.code}] {err.message}"))
+            return
+        text = getattr(result, "message", "") or "ok"
+        self.post_message(Reply(label, True, text))
+        if isinstance(result, s.JobList):
+            self.post_message(JobsListed(self.cell, result.jobs))
+        elif refresh_jobs and self.link is not None:
+            self.link.refresh_jobs()
+
+    @work(thread=True, group="jobs")
+    def refresh_jobs(self) -> None:
+        if self.link is not None:
+            self.link.refresh_jobs()
+
+    # --- jobs, cells, help ---------------------------------------------------------------------
+
+    def action_submit(self) -> None:
+        self.open_submit()
+
+    @work(thread=True, group="submit")
+    def open_submit(self) -> None:
+        """Ask the slicer what it offers, then show the dialog."""
+        backends: dict[str, str] = {"builtin": ""}
+        profiles: list[str] = []
+        if self.client is not None:
+            try:
+                b = self.client.backends()
+                backends, profiles = b.backends, b.profiles
+            except FabricError as err:
+                self.post_message(Reply("submit", False, f"slicer: {err.message} (G-code still works)"))
+        self.call_from_thread(self.push_screen, SubmitDialog(self.files_root, backends, profiles),
+                              lambda choice: choice is not None and self.submit(choice))
+
+    @work(thread=True, group="submit")
+    def submit(self, choice: SubmitChoice) -> None:
+        if self.client is None:
+            return
+        source = "gcode" if choice.path.suffix.lower() in GCODE_SUFFIXES else "model"
+        try:
+            req = s.JobSubmit(model=choice.path.read_bytes(), filename=choice.path.name, source=source,
+                              profile=choice.profile, backend=choice.backend, start=choice.start, rtf=choice.rtf)
+            acc = self.client.submit(req)
+        except (FabricError, OSError) as err:
+            self.post_message(Reply("submit", False, getattr(err, "message", str(err))))
+            return
+        self.post_message(Reply("submit", True, f"job {acc.job_id} queued: {choice.path.name}"))
+        if self.link is not None:
+            self.link.refresh_jobs()
+
+    @work(thread=True, group="cells")
+    def action_cells(self) -> None:
+        if self.client is not None:
+            self.post_message(CellsListed(self.client.cells(timeout=2.0)))
+
+    def action_help(self) -> None:
+        self.push_screen(HelpDialog())
+
+    def time_text(self, t_s: float) -> str:
+        return time.strftime("%H:%M:%S", time.localtime(t_s)) if t_s else "-"

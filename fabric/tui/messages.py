@@ -1,22 +1,65 @@
-"""Messages the telemetry feed posts to the console (small dataclasses; attributes down, messages up)."""
+"""Messages posted up to the console (small classes; attributes down, messages up)."""
 from __future__ import annotations
 
 from typing import Any
 
 from textual.message import Message
 
+__all__ = ["Telemetry", "Liveliness", "Reply", "ProgramReady", "LimitsReady", "JobsListed", "CellsListed"]
+
 
 class Telemetry(Message):
-    """One decoded telemetry message from topic ``topic`` (pose, extrusion, temps, state, events)."""
+    """One decoded message of ``topic`` (pose, extrusion, temps, state, events, jobs) from cell ``cell``."""
 
-    def __init__(self, topic: str, payload: Any) -> None:
+    def __init__(self, cell: str, topic: str, payload: Any) -> None:
         super().__init__()
-        self.topic, self.payload = topic, payload
+        self.cell, self.topic, self.payload = cell, topic, payload
 
 
 class Liveliness(Message):
-    """Which services are alive now."""
+    """Which services of cell ``cell`` are alive (a full answer, or one change)."""
 
-    def __init__(self, alive: dict[str, bool]) -> None:
+    def __init__(self, cell: str, alive: dict[str, bool]) -> None:
         super().__init__()
-        self.alive = alive
+        self.cell, self.alive = cell, alive
+
+
+class Reply(Message):
+    """What a command answered: ``ok`` and one line of text, or a longer ``report`` to show in a dialog."""
+
+    def __init__(self, command: str, ok: bool, text: str, report: str = "", severity: str = "") -> None:
+        super().__init__()
+        self.command, self.ok, self.text, self.report = command, ok, text, report
+        self.severity = severity or ("information" if ok else "error")
+
+
+class ProgramReady(Message):
+    """The loaded program's toolpath (``toolpath`` None: no program, or it could not be read)."""
+
+    def __init__(self, cell: str, program_id: str, toolpath: Any) -> None:
+        super().__init__()
+        self.cell, self.program_id, self.toolpath = cell, program_id, toolpath
+
+
+class LimitsReady(Message):
+    """Joint names and limits of the cell model (degrees)."""
+
+    def __init__(self, names: list[str], lower_deg: list[float], upper_deg: list[float]) -> None:
+        super().__init__()
+        self.names, self.lower_deg, self.upper_deg = names, lower_deg, upper_deg
+
+
+class JobsListed(Message):
+    """The supervisor's job list (queue order, then history)."""
+
+    def __init__(self, cell: str, jobs: list[Any]) -> None:
+        super().__init__()
+        self.cell, self.jobs = cell, jobs
+
+
+class CellsListed(Message):
+    """Cells on the fabric: name -> the services alive there."""
+
+    def __init__(self, cells: dict[str, list[str]]) -> None:
+        super().__init__()
+        self.cells = cells

@@ -1,0 +1,69 @@
+"""Text the console shows: durations, the ETA, job rows and records (pure functions, tested alone)."""
+from __future__ import annotations
+
+import time
+
+from fabric import schemas as s
+
+__all__ = ["duration_text", "eta_text", "layer_text", "job_outcome", "job_report", "STATE_STYLE"]
+
+STATE_STYLE = {"idle": "white on grey23", "ready": "black on green", "printing": "black on green",
+               "moving": "black on dark_cyan", "paused": "black on yellow", "stopped": "white on dark_orange3",
+               "fault": "bold white on red", "interrupted": "bold white on red"}
+
+
+def duration_text(seconds: float) -> str:
+    """``42s``, ``3m12s``, ``2h05m``."""
+    seconds = max(0.0, float(seconds))
+    if seconds < 60:
+        return f"{seconds:.0f}s"
+    if seconds < 3600:
+        return f"{int(seconds // 60)}m{int(seconds % 60):02d}s"
+    return f"{int(seconds // 3600)}h{int(seconds % 3600 // 60):02d}m"
+
+
+def layer_text(st: s.StationState) -> str:
+    """Layer n/N as people count (the wire's layer is 0-based, -1 before the first)."""
+    return f"layer {st.layer + 1 if st.layer >= 0 else 0}/{st.layers_total}"
+
+
+def eta_text(st: s.StationState, now_s: float) -> str:
+    """Wall-clock time the print ends at the current real-time factor (``now_s``: the wall clock)."""
+    if st.state not in ("printing", "paused", "moving") or st.total_s <= 0:
+        return ""
+    if st.state == "paused":
+        return f"{duration_text(st.remaining_s)} left (paused)"
+    if st.rtf == 0:
+        return f"{duration_text(st.remaining_s)} sim left, ETA: at max speed"
+    wall_s = st.remaining_s / st.rtf
+    return f"ETA {time.strftime('%H:%M:%S', time.localtime(now_s + wall_s))} (in {duration_text(wall_s)})"
+
+
+def job_outcome(rec: s.JobRecord) -> str:
+    return rec.state + (f": {rec.reason}" if rec.reason else "")
+
+
+def job_report(rec: s.JobRecord) -> str:
+    """A job's whole record, as the job dialog shows it."""
+    when = lambda t: time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(t)) if t else "-"  # noqa: E731
+    lines = [f"{rec.filename} ({rec.source}, {rec.backend or '-'} / {rec.profile or '-'})",
+             f"state     {rec.state}" + (" (prepared)" if rec.prepared else "")
+             + (f", waiting for the {rec.waiting_for}" if rec.waiting_for else ""),
+             f"stage     {rec.stage or '-'}"]
+    if rec.reason:
+        lines.append(f"reason    {rec.reason}")
+    lines += [f"created   {when(rec.created_s)}", f"started   {when(rec.started_s)}", f"ended     {when(rec.ended_s)}"]
+    if rec.started_s:
+        lines.append(f"duration  {duration_text(rec.sim_elapsed_s)} simulated, {duration_text(rec.wall_elapsed_s)} wall")
+        lines.append(f"material  {rec.deposited_mm3:.0f} mm3 deposited, {rec.filament_mm:.0f} mm filament")
+    if rec.plan is not None:
+        p = rec.plan
+        lines.append(f"plan      {p.layers} layers, {p.moves} moves, {p.extruded_mm3:.0f} mm3, "
+                     f"estimate {duration_text(p.estimate_s)}")
+    if rec.collisions is not None:
+        c = rec.collisions
+        lines.append("check     " + ("collision-free" if c.collision_free else
+                                     f"COLLISION {c.first_hit.body_a} <-> {c.first_hit.body_b}"))
+    if rec.error is not None:
+        lines.append(f"error     [{rec.error.code}] {rec.error.message}")
+    return "\n".join(lines)

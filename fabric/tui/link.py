@@ -1,0 +1,118 @@
+"""The console's link to one cell: telemetry subscriptions read on threads, posted up as messages."""
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from typing import Callable
+
+from textual.message import Message
+
+from fabric.client import AliveSubscription, Client, Subscription
+from fabric.errors import FabricError
+from fabric.tui.messages import JobsListed, Liveliness, ProgramReady, Telemetry
+
+__all__ = ["CellLink", "STREAMS"]
+
+log = logging.getLogger("fabric.tui")
+
+STREAMS = (("station", "pose"), ("station", "extrusion"), ("station", "temps"), ("station", "state"),
+           ("station", "events"), ("supervisor", "jobs"))
+THROTTLED = {"pose", "extrusion", "temps"}     # sampled streams: the screen needs at most UI_PERIOD_S of them
+UI_PERIOD_S = 0.1
+
+
+class CellLink:
+    """Follows one cell for the console. Zenoh callbacks only enqueue (the client's subscriptions); one
+    thread per stream decodes and posts :class:`Telemetry`; blocking queries run on their own threads.
+    Every message names its cell, so the console drops what a link it closed still posted."""
+
+    def __init__(self, client: Client, post: Callable[[Message], object]) -> None:
+        self.client, self.post = client, post
+        self.cell = client.keys.cell
+        self._stop = threading.Event()
+        self._subs: list[Subscription] = []
+        self._threads: list[threading.Thread] = []
+        self._alive_sub: AliveSubscription | None = None
+        self._program_id = ""
+
+    def open(self) -> None:
+        for service, topic in STREAMS:
+            sub = self.client.subscribe(service, topic)
+            self._subs.append(sub)
+            self._spawn(self._feed, topic, sub, name=f"tui:{topic}")
+        # liveliness changes are posted from the Zenoh callback (posting does not block)
+        self._alive_sub = self.client.subscribe_alive(
+            lambda name, alive: self.post(Liveliness(self.cell, {name: alive})))
+        self._spawn(self._snapshot, name="tui:snapshot")
+
+    def close(self) -> None:
+        self._stop.set()
+        for sub in self._subs:
+            sub.close()
+        if self._alive_sub is not None:
+            self._alive_sub.close()
+        for t in self._threads:
+            t.join(timeout=1.0)
+
+    def _spawn(self, fn: Callable, *args: object, name: str) -> None:
+        t = threading.Thread(target=fn, args=args, name=name, daemon=True)
+        self._threads.append(t)
+        t.start()
+
+    # --- threads ---------------------------------------------------------------
+
+    def _feed(self, topic: str, sub: Subscription) -> None:
+        last_post = 0.0
+        while not self._stop.is_set():
+            try:
+                msg = sub.get(timeout=0.25)
+            except queue.Empty:
+                continue
+            except FabricError as err:
+                log.warning("bad %s message: %s", topic, err)
+                continue
+            if topic in THROTTLED:
+                now = time.monotonic()
+                if now - last_post < UI_PERIOD_S:
+                    continue
+                last_post = now
+            self.post(Telemetry(self.cell, topic, msg))
+            if topic == "state" and msg.program_id != self._program_id:
+                self._program_id = msg.program_id
+                self._spawn(self._fetch_program, msg.program_id, name="tui:program")
+
+    def _snapshot(self) -> None:
+        """Snapshot first (then the streams carry the changes): liveliness, state, jobs."""
+        self.post(Liveliness(self.cell, self.client.alive(timeout=2.0)))
+        try:
+            st = self.client.state()
+        except FabricError as err:
+            log.info("no station state: %s", err)
+        else:
+            self.post(Telemetry(self.cell, "state", st))
+            if st.program_id != self._program_id:
+                self._program_id = st.program_id
+                self._fetch_program(st.program_id)
+        self.refresh_jobs()
+
+    def refresh_jobs(self) -> None:
+        """Ask the supervisor for the job list (blocking: call from a thread)."""
+        try:
+            self.post(JobsListed(self.cell, self.client.jobs().jobs))
+        except FabricError as err:
+            log.info("no job list: %s", err)
+
+    def _fetch_program(self, program_id: str) -> None:
+        from fabric.programs import program_from_artifact
+        from fabric.tui.toolpath import Toolpath
+        if not program_id:
+            self.post(ProgramReady(self.cell, "", None))
+            return
+        try:
+            program = program_from_artifact(self.client.artifact("planner", program_id, timeout=30.0))
+            self.post(ProgramReady(self.cell, program_id, Toolpath.from_program(program)))
+        except FabricError as err:
+            log.warning("program %s not readable: %s", program_id, err)
+            self.post(ProgramReady(self.cell, program_id, None))

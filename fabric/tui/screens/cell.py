@@ -1,0 +1,89 @@
+"""The Cell screen: state banner, progress and ETA, temperatures, robot, extruder and the live layer view."""
+from __future__ import annotations
+
+from typing import Any
+
+from textual.app import ComposeResult
+from textual.containers import Container
+from textual.events import Resize
+from textual.screen import Screen
+from textual.widgets import Footer, Header
+
+from fabric.tui.widgets.banner import StateBanner
+from fabric.tui.widgets.extruder_panel import ExtruderPanel
+from fabric.tui.widgets.job_progress import JobProgress
+from fabric.tui.widgets.joints_panel import JointsPanel
+from fabric.tui.widgets.reply_line import ReplyLine
+from fabric.tui.widgets.temps_panel import TempsPanel
+from fabric.tui.widgets.toolpath_view import ToolpathView
+
+WIDE_COLS, WIDE_ROWS = 120, 36     # from this size on, the layer view takes a column of its own
+
+
+class CellScreen(Screen):
+    """Reads the console's state (app attributes) and hands it down to its widgets."""
+
+    def compose(self) -> ComposeResult:
+        yield Header()
+        yield StateBanner(id="banner")
+        yield JobProgress(clock=self.app.wall_clock, id="progress")
+        with Container(id="cell-grid"):
+            yield TempsPanel(clock=self.app.monotonic_clock, id="temps")
+            yield ToolpathView(id="toolpath")
+            yield JointsPanel(id="joints")
+            yield ExtruderPanel(id="extruder")
+        yield ReplyLine(id="reply")
+        yield Footer(compact=True)
+
+    def on_mount(self) -> None:
+        for widget_id, title in (("temps", "temperatures"), ("toolpath", "layer"), ("joints", "robot"),
+                                 ("extruder", "extruder")):
+            self.query_one(f"#{widget_id}").border_title = title
+        app = self.app
+        self.watch(app, "station_state", self._on_state)
+        self.watch(app, "pose", self._on_pose)
+        self.watch(app, "extrusion", self._on_extrusion)
+        self.watch(app, "temps", self._on_temps)
+        self.watch(app, "alive", self._on_alive)
+        self.watch(app, "toolpath", lambda tp: setattr(self.query_one(ToolpathView), "toolpath", tp))
+        self.watch(app, "limits", lambda lim: setattr(self.query_one(JointsPanel), "limits", lim))
+        self.watch(app, "reply", self._on_reply)
+
+    def on_resize(self, event: Resize) -> None:
+        self.set_class(event.size.width >= WIDE_COLS and event.size.height >= WIDE_ROWS, "wide")
+
+    # --- attributes down -------------------------------------------------------------
+
+    def _on_state(self, st: Any) -> None:
+        self.query_one(StateBanner).state = st
+        self.query_one(JobProgress).state = st
+        self.query_one(ExtruderPanel).state = st
+        if st is not None:
+            self.query_one(ToolpathView).layer_index = st.layer
+
+    def _on_pose(self, pose: Any) -> None:
+        self.query_one(JointsPanel).pose = pose
+        if pose is not None:
+            self.query_one(ToolpathView).nozzle_xyz_mm = list(pose.xyz_mm)
+
+    def _on_extrusion(self, e: Any) -> None:
+        self.query_one(StateBanner).extrusion = e
+        self.query_one(ExtruderPanel).extrusion = e
+        if e is not None:
+            view = self.query_one(ToolpathView)
+            view.row_index = e.row
+            if e.layer >= 0:
+                view.layer_index = e.layer
+
+    def _on_temps(self, t: Any) -> None:
+        self.query_one(StateBanner).temps = t
+        self.query_one(TempsPanel).temps = t
+
+    def _on_alive(self, alive: dict) -> None:
+        self.query_one(StateBanner).alive = dict(alive)
+        self.query_one(ExtruderPanel).alive = dict(alive)
+
+    def _on_reply(self, reply: Any) -> None:
+        if reply is not None:
+            line = self.query_one(ReplyLine)
+            line.command, line.text, line.ok = reply

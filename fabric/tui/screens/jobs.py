@@ -1,0 +1,114 @@
+"""The Jobs screen: submit a file, the queue (reorder, remove, start next) and the history with outcome,
+duration and material."""
+from __future__ import annotations
+
+from typing import Any
+
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Vertical
+from textual.screen import Screen
+from textual.widgets import DataTable, Footer, Header, Label
+
+from fabric import schemas as s
+from fabric.tui.format import duration_text, job_report
+from fabric.tui.screens.confirm import ConfirmDialog
+from fabric.tui.screens.report import ReportDialog
+from fabric.tui.widgets.reply_line import ReplyLine
+
+WAITING_STATES = ("queued", "slicing", "planning", "checking")     # reorderable (the supervisor's queue)
+
+
+class JobsScreen(Screen):
+    BINDINGS = [Binding("a", "submit", "submit"), Binding("n", "next", "next job"),
+                Binding("delete,backspace", "remove", "remove"), Binding("left_square_bracket", "move(-1)", "up"),
+                Binding("right_square_bracket", "move(1)", "down")]
+
+    def compose(self) -> ComposeResult:
+        yield Header()
+        with Vertical(id="jobs-body"):
+            yield Label("queue: a submit · n next (plate clear) · [ ] reorder · del remove · enter details",
+                        classes="section-title")
+            yield DataTable(id="queue", cursor_type="row", zebra_stripes=True)
+            yield Label("history", classes="section-title")
+            yield DataTable(id="history", cursor_type="row", zebra_stripes=True)
+        yield ReplyLine(id="reply")
+        yield Footer(compact=True)
+
+    def on_mount(self) -> None:
+        self.query_one("#queue", DataTable).add_columns("job", "state", "file", "stage / waiting for")
+        self.query_one("#history", DataTable).add_columns("job", "outcome", "file", "duration sim/wall",
+                                                          "material", "ended", "reason")
+        self.watch(self.app, "jobs", self._on_jobs)
+        self.watch(self.app, "reply", self._on_reply)
+
+    # --- attributes down -------------------------------------------------------------
+
+    def _on_jobs(self, jobs: list[s.JobRecord]) -> None:
+        queue_t, history_t = self.query_one("#queue", DataTable), self.query_one("#history", DataTable)
+        keep_q, keep_h = self._selected("#queue"), self._selected("#history")
+        queue_t.clear()
+        history_t.clear()
+        for rec in jobs:
+            if rec.state in s.FINAL_JOB_STATES:
+                continue
+            waiting = rec.waiting_for and f"waiting for the {rec.waiting_for}"
+            queue_t.add_row(rec.job_id, rec.state, rec.filename, waiting or rec.stage or rec.reason, key=rec.job_id)
+        done = sorted((r for r in jobs if r.state in s.FINAL_JOB_STATES), key=lambda r: -r.ended_s)
+        for rec in done:
+            took = (f"{duration_text(rec.sim_elapsed_s)} / {duration_text(rec.wall_elapsed_s)}"
+                    if rec.started_s else "-")
+            material = f"{rec.deposited_mm3:.0f} mm3 {rec.filament_mm / 1000:.2f} m" if rec.started_s else "-"
+            outcome = {"finished": "[green]finished[/]", "failed": "[red]failed[/]"}.get(rec.state, rec.state)
+            history_t.add_row(rec.job_id, outcome, rec.filename, took, material,
+                              self.app.time_text(rec.ended_s), rec.reason, key=rec.job_id)
+        for table, key in ((queue_t, keep_q), (history_t, keep_h)):
+            if key is not None and key in table.rows:
+                table.move_cursor(row=table.get_row_index(key))
+
+    def _on_reply(self, reply: Any) -> None:
+        if reply is not None:
+            line = self.query_one(ReplyLine)
+            line.command, line.text, line.ok = reply
+
+    def _selected(self, table_id: str) -> str | None:
+        table = self.query_one(table_id, DataTable)
+        if table.row_count == 0:
+            return None
+        return table.coordinate_to_cell_key(table.cursor_coordinate).row_key.value
+
+    def _record(self, job_id: str | None) -> s.JobRecord | None:
+        return next((r for r in self.app.jobs if r.job_id == job_id), None)
+
+    # --- actions ---------------------------------------------------------------------
+
+    def action_submit(self) -> None:
+        self.app.action_submit()
+
+    def action_next(self) -> None:
+        self.app.run_call("job next", lambda c: c.job_next())
+
+    def action_remove(self) -> None:
+        table_id = "#history" if self.query_one("#history", DataTable).has_focus else "#queue"
+        rec = self._record(self._selected(table_id))
+        if rec is None:
+            return
+
+        def confirmed(yes: bool | None) -> None:
+            if yes:
+                self.app.run_call("job remove", lambda c: c.job_remove(rec.job_id))
+        self.app.push_screen(ConfirmDialog("Remove job", f"Remove job {rec.job_id} ({rec.filename})?"), confirmed)
+
+    def action_move(self, delta: int) -> None:
+        rec = self._record(self._selected("#queue"))
+        waiting = [r.job_id for r in self.app.jobs if r.state in WAITING_STATES]
+        if rec is None or rec.job_id not in waiting:
+            self.app.show_reply("job move", False, "only a waiting job (queued, slicing, planning, checking) moves")
+            return
+        position = max(0, min(len(waiting) - 1, waiting.index(rec.job_id) + delta))
+        self.app.run_call("job move", lambda c: c.job_move(rec.job_id, position), refresh_jobs=True)
+
+    def on_data_table_row_selected(self, event: DataTable.RowSelected) -> None:
+        rec = self._record(event.row_key.value)
+        if rec is not None:
+            self.app.push_screen(ReportDialog(f"Job {rec.job_id}", job_report(rec)))

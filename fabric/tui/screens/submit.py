@@ -1,0 +1,77 @@
+"""Submit a print job: a model (STL, 3MF, OBJ) or G-code from a file picker, with the slicer's back-ends and profiles."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.screen import ModalScreen
+from textual.validation import Number
+from textual.widgets import Button, Checkbox, DirectoryTree, Input, Label, Select
+
+from fabric.tui.widgets.model_tree import PRINTABLE_SUFFIXES, ModelTree
+
+
+@dataclass(frozen=True)
+class SubmitChoice:
+    """What the operator chose: the file, how to slice it, and whether to start once loaded."""
+
+    path: Path
+    backend: str
+    profile: str
+    start: bool
+    rtf: float
+
+
+class SubmitDialog(ModalScreen[SubmitChoice | None]):
+    BINDINGS = [Binding("escape", "dismiss(None)", "cancel")]
+
+    def __init__(self, root: Path, backends: dict[str, str], profiles: list[str]) -> None:
+        super().__init__()
+        self.root = root
+        self.backends = {name: version for name, version in backends.items() if version} or {"builtin": "?"}
+        self.profiles = profiles or ["taz-pla-medium"]
+
+    def compose(self) -> ComposeResult:
+        with Vertical(classes="dialog", id="submit-dialog"):
+            yield Label("Submit a print job (STL, 3MF, OBJ or G-code)", classes="dialog-title")
+            yield ModelTree(self.root, id="submit-tree")
+            yield Input(placeholder="file path (or pick one above)", id="submit-path")
+            with Horizontal(classes="field"):
+                yield Select([(f"{n} {v}", n) for n, v in self.backends.items()], value=next(iter(self.backends)),
+                             allow_blank=False, id="submit-backend")
+                yield Select([(p, p) for p in self.profiles], value=self.profiles[0], allow_blank=False,
+                             id="submit-profile")
+            with Horizontal(classes="field"):
+                yield Checkbox("start when loaded", value=True, id="submit-start")
+                yield Input("1", placeholder="rtf 0..1e6 (0 = max)", id="submit-rtf",
+                            validators=[Number(minimum=0, maximum=1e6)], type="number")
+            yield Label("", id="submit-error", classes="error")
+            with Horizontal(classes="dialog-buttons"):
+                yield Button("Cancel", id="cancel")
+                yield Button("Submit", id="submit", variant="primary")
+
+    def on_directory_tree_file_selected(self, event: DirectoryTree.FileSelected) -> None:
+        self.query_one("#submit-path", Input).value = str(event.path)
+
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        if event.button.id == "submit":
+            self.submit()
+        else:
+            self.dismiss(None)
+
+    def submit(self) -> None:
+        error = self.query_one("#submit-error", Label)
+        path = Path(self.query_one("#submit-path", Input).value.strip()).expanduser()
+        if not path.is_file() or path.suffix.lower() not in PRINTABLE_SUFFIXES:
+            error.update(f"pick a file ({', '.join(PRINTABLE_SUFFIXES)})")
+            return
+        rtf_in = self.query_one("#submit-rtf", Input)
+        if not rtf_in.validate(rtf_in.value).is_valid:
+            error.update("the real-time factor is 0..1e6 (0 = as fast as possible)")
+            return
+        self.dismiss(SubmitChoice(path, str(self.query_one("#submit-backend", Select).value),
+                                  str(self.query_one("#submit-profile", Select).value),
+                                  self.query_one("#submit-start", Checkbox).value, float(rtf_in.value)))

@@ -1,0 +1,36 @@
+"""The print's progress: a bar, layer n/N, percent, and the wall-clock ETA at the current real-time factor."""
+from __future__ import annotations
+
+import time
+from typing import Any, Callable
+
+from rich.text import Text
+from textual.reactive import reactive
+from textual.widgets import Static
+
+from fabric.tui.format import eta_text, layer_text
+
+
+class JobProgress(Static):
+    """Attribute: ``state`` (StationState). ``clock`` gives the wall time the ETA is counted from."""
+
+    state: reactive[Any] = reactive(None, always_update=True)
+
+    def __init__(self, clock: Callable[[], float] = time.time, **kw: Any) -> None:
+        super().__init__(**kw)
+        self.clock = clock
+
+    def render(self) -> Text:
+        st = self.state
+        if st is None or (st.layers_total == 0 and st.total_s == 0):
+            return Text(" no program loaded", style="dim")
+        tail = f" {layer_text(st)}  {100 * st.progress_r:5.1f} %  {eta_text(st, self.clock())}".rstrip()
+        bar_w = max(10, self.size.width - len(tail) - 1)
+        done = int(round(bar_w * st.progress_r))
+        colour = {"paused": "yellow", "stopped": "dark_orange3", "fault": "red", "interrupted": "red"}.get(
+            st.state, "green")
+        text = Text("█" * done, style=colour)
+        text.append("░" * (bar_w - done), style="grey42")
+        text.append(tail)
+        text.no_wrap, text.overflow = True, "crop"
+        return text

@@ -1,0 +1,74 @@
+"""Nozzle and bed temperatures with their set points, and a live graph of the last minutes."""
+from __future__ import annotations
+
+import time
+from collections import deque
+from typing import Any, Callable
+
+import numpy as np
+from rich.text import Text
+from textual.reactive import reactive
+from textual.widgets import Static
+
+from fabric.tui.braille import BrailleCanvas
+
+HISTORY_S = 300.0            # the graph's span (wall clock)
+SAMPLE_PERIOD_S = 0.5        # one sample kept per this much wall time
+NOZZLE_STYLE, BED_STYLE = "red1", "dodger_blue1"
+
+
+class TempsPanel(Static):
+    """Attribute: ``temps`` (Temps). Each new value is kept (at most every SAMPLE_PERIOD_S) for the graph."""
+
+    temps: reactive[Any] = reactive(None, always_update=True)
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic, **kw: Any) -> None:
+        super().__init__(**kw)
+        self.clock = clock
+        self.history: deque[tuple[float, float, float, float, float]] = deque(maxlen=2000)
+
+    def watch_temps(self, t: Any) -> None:
+        if t is None:
+            return
+        now = self.clock()
+        if self.history and now - self.history[-1][0] < SAMPLE_PERIOD_S:
+            self.history[-1] = (self.history[-1][0], t.nozzle_c, t.nozzle_target_c, t.bed_c, t.bed_target_c)
+        else:
+            self.history.append((now, t.nozzle_c, t.nozzle_target_c, t.bed_c, t.bed_target_c))
+        while self.history and now - self.history[0][0] > HISTORY_S:
+            self.history.popleft()
+
+    def render(self) -> Text:
+        t = self.temps
+        if t is None:
+            return Text("waiting for temperatures ...", style="dim")
+        text = Text()
+        text.append("nozzle ", style=NOZZLE_STYLE).append(f"{t.nozzle_c:5.1f} / {t.nozzle_target_c:5.1f} C\n")
+        text.append("bed    ", style=BED_STYLE).append(f"{t.bed_c:5.1f} / {t.bed_target_c:5.1f} C")
+        rows = self.content_size.height - 2
+        if rows >= 2 and len(self.history) >= 2:
+            text.append("\n").append(self._graph(self.content_size.width - 4, rows))
+        return text
+
+    def _graph(self, width: int, height: int) -> Text:
+        """Temperatures over the last HISTORY_S: dotted set points, solid readings; the top value on the left."""
+        h = np.array(self.history)
+        top_c = max(50.0, float(h[:, 1:].max()) * 1.1)
+        canvas = BrailleCanvas(width, height)
+        w_px, h_px = canvas.size_px
+        x = (h[:, 0] - (h[-1, 0] - HISTORY_S)) / HISTORY_S * (w_px - 1)
+        y = lambda c: (h_px - 1) * (1 - c / top_c)  # noqa: E731
+        for col, style in ((2, NOZZLE_STYLE), (4, BED_STYLE)):
+            xs = np.arange(0, w_px, 4)
+            canvas.dots(xs, np.interp(xs, x, y(h[:, col])), f"dim {style}")
+        for col, style in ((1, NOZZLE_STYLE), (3, BED_STYLE)):
+            yc = y(h[:, col])
+            canvas.lines(x[:-1], yc[:-1], x[1:], yc[1:], style, rank=1)
+        rows = canvas.rows()
+        labels = [f"{top_c:3.0f}"] + ["   "] * (height - 2) + ["  0"]
+        out = Text()
+        for i, row in enumerate(rows):
+            out.append(labels[i] + " ", style="grey50").append(row)
+            if i < len(rows) - 1:
+                out.append("\n")
+        return out
