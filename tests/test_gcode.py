@@ -107,7 +107,13 @@ def test_arc_clockwise_r_form_and_full_circle() -> None:
     ("G1 X1\n\nG1 Xabc Y2\n", 3, "no value"),
     ("G0 X2\nG1 Y\n", 2, "no value"),
     ("G1 X1 -5\n", 1, "unexpected text"),
-    ("G1 X 5\n", 1, "no value"),
+    ("G1 X ; 5\n", 1, "no value"),
+    ("G1 X1\nG1 X1e30\n", 2, "exponent form"),
+    ("G1 X1 E2.5E3\n", 1, "exponent form"),
+    ("G1 X1 X2\n", 1, "X appears twice"),
+    ("G1 X1\nG1 X2 E1 Y2 e3\n", 2, "E appears twice"),
+    ("G90 G21\n", 1, "G appears twice"),
+    ("N7 G1 X1 x2\n", 1, "X appears twice"),
     ("G1 X1\nG3 X10 Y0 R2\n", 2, "smaller than half"),
     ("G1 F0\n", 1, "feed"),
     ("G1 X1\nG1.2.3 X4\n", 2, "malformed command"),
@@ -120,6 +126,19 @@ def test_malformed_known_commands_raise_with_line(text: str, line: int, what: st
     assert ei.value.details["line"] == line
     assert what in str(ei.value)
     assert ei.value.details["text"]
+
+
+def test_what_senders_and_controllers_write_is_read_as_they_read_it() -> None:
+    """Lowercase, blanks between letter and number, line numbers, checksums, both comment styles."""
+    plain = tp_of("G21\nG90\nM83\nG1 X10 Y5 Z0.3 F1200\nG1 X20 Y5 E0.8\nG28 X Y\nG1 X3 Y4\n")
+    numbered = [f"N{i} {cmd}" for i, cmd in enumerate(["G21", "G90", "M83"], 1)]
+    styled = tp_of("\n".join(f"{line}*{_checksum(line)}" for line in numbered) + "\n"
+                   "g1 x 10 y 5 z .3 f 1200 ; first point\n"
+                   "G 1 (to the right) X20\tY5 E+0.8\r\n"
+                   "G28 X Y\n"
+                   "N 9 G1 X3 Y4 ; X9\n")
+    for name in ("xyz_mm", "e_mm", "feed_mm_s", "line"):
+        assert np.array_equal(getattr(plain, name), getattr(styled, name)), name
 
 
 def test_unknown_commands_are_counted_not_fatal() -> None:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from fabric.errors import GcodeError
@@ -104,3 +105,58 @@ def test_huge_values_are_rejected_not_overflowed() -> None:
             assert exc.details["line"] >= 1
         else:
             assert np.isfinite(tp.xyz_mm).all()
+
+
+# -- ambiguity refused, controller styles accepted ---------------------------------------------------
+number = st.decimals(-1000, 1000, places=3, allow_nan=False, allow_infinity=False).map(lambda d: f"{d:f}")
+feed = st.integers(1, 9000).map(str)
+word = st.sampled_from("XYZEF").flatmap(lambda k: (feed if k == "F" else number).map(lambda v: (k, v)))
+move = st.lists(word, min_size=1, max_size=5, unique_by=lambda w: w[0])
+
+
+@FAST
+@given(st.lists(move, min_size=1, max_size=6), st.data())
+def test_a_repeated_letter_or_an_exponent_is_refused_on_its_line(moves: list, data: st.DataObject) -> None:
+    lines = ["G1 " + " ".join(k + v for k, v in m) for m in moves]
+    bad = data.draw(st.integers(0, len(lines) - 1))
+    letter, value = data.draw(st.sampled_from(moves[bad]))
+    if data.draw(st.booleans()):
+        lines[bad] += f" {letter.lower()}{value}"                            # the letter again
+        what = "appears twice"
+    else:                                                                    # "X1.5e3"
+        lines[bad] = lines[bad].replace(f"{letter}{value}", f"{letter}{value}{data.draw(st.sampled_from('eE'))}3")
+        what = "exponent form"
+    with pytest.raises(GcodeError) as err:
+        parse_gcode("\n".join(lines) + "\n")
+    assert err.value.details["line"] == bad + 1 and what in str(err.value)
+
+
+@FAST
+@given(st.lists(move, min_size=1, max_size=8), st.data())
+def test_any_style_a_controller_accepts_reads_the_same(moves: list, data: st.DataObject) -> None:
+    lines = ["G1 " + " ".join(k + v for k, v in m) for m in moves]
+    styled = []
+    for i, m in enumerate(moves):
+        gap = data.draw(st.sampled_from(["", " ", "  ", "\t"]))
+        words = [(k.lower() if data.draw(st.booleans()) else k) + gap + v for k, v in m]
+        line = f"G{gap}1 " + " ".join(words)
+        style = data.draw(st.sampled_from(["plain", "numbered", "comment", "paren"]))
+        if style == "numbered":
+            body = f"N{i + 1} {line}"
+            line = f"{body}*{_xor(body)}"
+        elif style == "comment":
+            line += " ; X999 E999"
+        elif style == "paren":
+            line = line.replace(" ", " (note) ", 1)
+        styled.append(line)
+    plain = parse_gcode("\n".join(lines) + "\n")
+    other = parse_gcode("\n".join(styled) + "\n")
+    for name in ("xyz_mm", "e_mm", "feed_mm_s", "line"):
+        assert np.array_equal(getattr(plain, name), getattr(other, name)), name
+
+
+def _xor(text: str) -> int:
+    c = 0
+    for ch in text.encode():
+        c ^= ch
+    return c

@@ -18,8 +18,11 @@ How it works, without a Python object per line or per word:
   rounded exactly like ``float()``; longer numbers fall back to ``float()``.
 
 A value that is not ``[+-]digits[.digits]`` is *malformed*; a letter with no
-value is *empty*. The lexer does not judge: the interpreter decides which
-words matter (those of known commands) and raises :class:`GcodeError` there.
+value is *empty*. Blanks between a letter and its number are allowed, as
+controllers read them (``G 1 X 5``); an ``E`` written against a number
+(``X1e30``) is noted as a possible exponent. The lexer does not judge: the
+interpreter decides which words matter (those of known commands) and raises
+:class:`GcodeError` there.
 """
 from __future__ import annotations
 
@@ -62,6 +65,7 @@ class Lexed:
     orphan_lines: np.ndarray   # lines with text before their first word (``5 G1``, ``G1 X 5``)
     checksum_bad_lines: np.ndarray  # lines whose ``*nn`` checksum does not match
     code_end: np.ndarray       # (n_lines,) byte offset where the line's comment starts (or its end)
+    exponent_lines: np.ndarray  # lines with an E word written against a number (``X1e30``)
 
 
 def _rep(byte: int) -> np.uint64:
@@ -171,7 +175,7 @@ def lex_block(block: bytes | memoryview) -> Lexed:
     if n == 0:
         z = np.zeros(0, np.int64)
         return Lexed(0, z, z, z.astype(np.uint8), z.astype(float), z.astype(np.uint8),
-                     z.astype(bool), z, z, z)
+                     z.astype(bool), z, z, z, z)
     buf = np.zeros(_PAD + n + 1 + _PAD, np.uint8)
     buf[_PAD:_PAD + n] = np.frombuffer(block, np.uint8)
     buf[_PAD + n] = ord("\n")
@@ -214,9 +218,14 @@ def lex_block(block: bytes | memoryview) -> Lexed:
     w_line = line_of_sep[li]
     keep = w_pos < code_end[w_line]
     li, w_pos, w_line = li[keep], w_pos[keep], w_line[keep]
-    w_end = sep_pos[li + 1]
-    value, status = parse_numbers(buf, w_pos + 1, w_end)
+    w_start, w_end = w_pos + 1, sep_pos[li + 1]
+    joined = _join_spaced_values(sep_pos, sep_cls, li, w_start, w_end)
+    value, status = parse_numbers(buf, w_start, w_end)
     letter = buf[w_pos] & np.uint8(0xDF)
+    # an E against a number ("X1e30", "X1E30"): an exponent, or an E word with no blank before it
+    e_word = np.flatnonzero((letter == ord("E")) & (w_end > w_start))
+    before = buf[w_pos[e_word] - 1]
+    exponent_lines = np.unique(w_line[e_word[((before >= ord("0")) & (before <= ord("9"))) | (before == ord("."))]])
     # Command word: first of its line, after a leading N line number.
     first = np.concatenate([[True], w_line[1:] != w_line[:-1]]) if len(w_line) else np.zeros(0, bool)
     lineno = first & (letter == ord("N"))
@@ -225,7 +234,9 @@ def lex_block(block: bytes | memoryview) -> Lexed:
         w_line, letter, value, status = w_line[keepw], letter[keepw], value[keepw], status[keepw]
         first = np.concatenate([[True], w_line[1:] != w_line[:-1]]) if len(w_line) else first[keepw]
     # Orphans: "other" bytes that follow a blank/comment/newline rather than a letter.
-    gap = np.flatnonzero((sep_pos[1:] - sep_pos[:-1] > 1) & (sep_cls[:-1] != C_LETTER))
+    loose = (sep_pos[1:] - sep_pos[:-1] > 1) & (sep_cls[:-1] != C_LETTER)
+    loose[joined] = False                         # text that became a word's value ("X 5")
+    gap = np.flatnonzero(loose)
     o_pos = sep_pos[gap] + 1
     o_line = line_of_sep[gap] + is_nl[gap]
     inl = o_line < n_lines
@@ -234,7 +245,35 @@ def lex_block(block: bytes | memoryview) -> Lexed:
     bad_sum = _check_sums(buf, line_start, star_lines, star_k, sep_pos)
     return Lexed(n_lines=n_lines, line_start=line_start - _PAD, word_line=w_line,
                  word_letter=letter, word_value=value, word_status=status, word_first=first,
-                 orphan_lines=orphan_lines, checksum_bad_lines=bad_sum, code_end=code_end - _PAD)
+                 orphan_lines=orphan_lines, checksum_bad_lines=bad_sum, code_end=code_end - _PAD,
+                 exponent_lines=exponent_lines)
+
+
+def _join_spaced_values(sep_pos: np.ndarray, sep_cls: np.ndarray, li: np.ndarray, w_start: np.ndarray,
+                        w_end: np.ndarray) -> np.ndarray:
+    """Words written with blanks between letter and number (``X 5``, ``G 1``), as controllers read them.
+
+    A word whose value is empty and whose letter is followed by blanks, then by
+    value bytes, takes those bytes as its value (``w_start`` and ``w_end`` are
+    changed in place). Returns the separator indices (the last blank before
+    each value) whose following text was taken, so it is not an orphan. A
+    letter followed by blanks and another letter or a comment stays empty
+    (``G28 X Y``).
+    """
+    spaced = np.flatnonzero((w_end == w_start) & (sep_cls[li + 1] == C_SPACE))
+    if len(spaced) == 0:
+        return spaced
+    n = len(sep_pos)
+    gap = np.zeros(n, bool)
+    gap[:-1] = sep_pos[1:] - sep_pos[:-1] > 1     # value bytes follow separator i
+    stop = np.where((sep_cls != C_SPACE) | gap, np.arange(n), n)
+    first = np.minimum.accumulate(stop[::-1])[::-1]   # the first stop at or after each separator
+    k = first[li[spaced] + 1]                     # the pad newline always stops: k < n
+    took = sep_cls[k] == C_SPACE
+    spaced, k = spaced[took], k[took]
+    w_start[spaced] = sep_pos[k] + 1
+    w_end[spaced] = sep_pos[k + 1]
+    return k
 
 
 def _check_sums(buf: np.ndarray, line_start: np.ndarray, star_lines: np.ndarray,

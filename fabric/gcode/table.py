@@ -3,8 +3,9 @@
 Every known command (:data:`fabric.gcode.commands.KNOWN`) of a block becomes
 one row; its parameter words fill the columns of :data:`PARAMS` (NaN where a
 word is absent, ``has`` says which are present). Malformed words, values out
-of range, orphan text and bad checksums are collected as :class:`LineError`
-(the interpreter raises the first one); unknown commands are counted by name.
+of range, orphan text, bad checksums, a letter repeated on a line and numbers
+in exponent form are collected as :class:`LineError` (the interpreter raises
+the first one); unknown commands are counted by name.
 """
 from __future__ import annotations
 
@@ -95,9 +96,25 @@ def _count_unknown(unknown: dict[str, int], letter: np.ndarray, value: np.ndarra
         unknown[name] = unknown.get(name, 0) + int(n)
 
 
+def _repeated_letter_lines(lx: Lexed) -> np.ndarray:
+    """Lines where a letter occurs in two words (``G1 X1 X2``, two E words, ``G90 G21``).
+
+    Per line, the sum of one bit per word's letter equals the OR of those bits
+    exactly when no letter repeats (a repeat carries into a higher bit).
+    """
+    if len(lx.word_line) == 0:
+        return lx.word_line
+    starts = np.flatnonzero(lx.word_first)
+    bits = np.left_shift(np.int64(1), (lx.word_letter.astype(np.int64) - ord("A")) & 31)
+    total = np.add.reduceat(bits, starts)
+    union = np.bitwise_or.reduceat(bits, starts)
+    return lx.word_line[starts[total != union]]
+
+
 def _word_errors(lx: Lexed, w_row: np.ndarray, param_word: np.ndarray, r_code: np.ndarray,
                  line_to_row: np.ndarray, errors: list[LineError]) -> None:
-    """Malformed or empty parameter words, and orphan text or bad checksums on command lines."""
+    """Malformed or empty parameter words; orphan text, bad checksums, exponents and repeated letters on
+    command lines."""
     st = lx.word_status
     bad = np.flatnonzero(param_word & (st == W_BAD))
     if len(bad):
@@ -109,7 +126,16 @@ def _word_errors(lx: Lexed, w_row: np.ndarray, param_word: np.ndarray, r_code: n
         if len(e):
             errors.append(LineError(int(lx.word_line[e[0]]), f"{chr(lx.word_letter[e[0]])} has no value"))
     for lines, message in ((lx.orphan_lines, "unexpected text (a number with no letter)"),
-                           (lx.checksum_bad_lines, "checksum mismatch")):
+                           (lx.checksum_bad_lines, "checksum mismatch"),
+                           (lx.exponent_lines, "a number in exponent form, or an E word with no blank before it "
+                                               "(write 'X1 E30', numbers as plain decimals)")):
         hit = lines[line_to_row[lines] >= 0] if len(lines) else lines
         if len(hit):
             errors.append(LineError(int(hit[0]), message))
+    repeated = _repeated_letter_lines(lx)
+    repeated = repeated[line_to_row[repeated] >= 0] if len(repeated) else repeated
+    if len(repeated):
+        ln = int(repeated[0])
+        letters, counts = np.unique(lx.word_letter[lx.word_line == ln], return_counts=True)
+        errors.append(LineError(ln, f"{chr(letters[counts > 1][0])} appears twice on the line "
+                                    "(one value per letter, one command per line)"))
