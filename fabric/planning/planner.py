@@ -32,6 +32,7 @@ import numpy as np
 from fabric.gcode import Toolpath, parse_gcode, parse_gcode_file
 from fabric.planning.mapping import map_toolpath
 from fabric.planning.material import resolve_material
+from fabric.planning.post.names import program_name
 from fabric.planning.options import PlanOptions
 from fabric.planning.report import PlanResult, PlanStats, Reachability
 from fabric.robot.frames import inv_T, quat_from_R
@@ -72,7 +73,7 @@ def _parse_and_plan(parse: Callable[..., Toolpath], source: Any, cell: Any, opti
     opt = options or PlanOptions()
     t0 = time.perf_counter()
     tp = parse(source, chord_tol_mm=opt.chord_tol_mm, progress=_sub(progress, 0.0, 0.25))
-    meta = {"filename": Path(filename).name, "name": Path(filename).stem} if filename else {}
+    meta = {"filename": Path(filename).name, "name": program_name(Path(filename).stem)} if filename else {}
     return plan_toolpath(tp, cell, opt, _sub(progress, 0.25, 1.0), parse_s=time.perf_counter() - t0, meta=meta,
                          on_program=on_program)
 

@@ -9,6 +9,7 @@ import numpy as np
 from fabric.errors import ValidationError
 from fabric.planning.post.csv import write_csv
 from fabric.planning.post.krl import write_krl
+from fabric.planning.post.names import program_name
 from fabric.planning.post.rapid import RapidOptions, write_rapid
 from fabric.planning.post.urscript import write_urscript
 from fabric.motion.program import Program
@@ -26,7 +27,9 @@ def export_program(program: Program, fmt: str, path: str | Path, *, tool_T: np.n
     ``rapid`` and ``krl`` write into the directory ``path`` (created if needed):
     RAPID one ``<module>.mod`` per module and ``<name>.pgf`` listing them; KRL
     ``<name>.src`` and ``<name>.dat``. ``urscript`` and ``csv`` write the file ``path``.
+    ``name`` is made valid for every controller language first (:func:`program_name`).
     """
+    name = program_name(name)
     if fmt not in FORMATS:
         raise ValidationError(f"unknown export format {fmt!r} (one of {', '.join(FORMATS)})", field="format",
                               value=fmt)
@@ -71,8 +74,9 @@ def write_export(program: Program, fmt: str, out: TextIO, cell: Any = None, *, m
 
     RAPID writes its modules one after another (main first, print modules of at
     most ``module_targets`` targets); KRL writes a self-contained ``.src`` with
-    the frames inline.
+    the frames inline. ``name`` is made valid for every controller language first (:func:`program_name`).
     """
+    name = program_name(name)
     if fmt not in FORMATS:
         raise ValidationError(f"unknown export format {fmt!r} (one of {', '.join(FORMATS)})", field="format",
                               value=fmt)
