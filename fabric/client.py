@@ -23,7 +23,7 @@ import zenoh
 from fabric import codec
 from fabric import schemas as s
 from fabric.config import SessionSettings, zenoh_config
-from fabric.errors import DecodeError, FabricError, ServiceUnavailable, error_from_code
+from fabric.errors import DecodeError, FabricError, PermissionDenied, ServiceUnavailable, error_from_code
 from fabric.keys import ALIVE_EVERY_CELL, ENDPOINTS, SERVICES, TOPICS, Keys, parse_alive
 
 __all__ = ["Client", "Subscription", "AliveSubscription", "wait_connected"]
@@ -92,19 +92,22 @@ class AliveSubscription:
 class Client:
     """Typed access to one cell's services over a Zenoh session."""
 
-    def __init__(self, session: zenoh.Session, cell: str) -> None:
+    def __init__(self, session: zenoh.Session, cell: str, role: str | None = None) -> None:
+        """``role``: the role of this session's credentials on a secured fabric (None: no local check)."""
         self.session = session
         self.keys = Keys(cell)
+        self.role = role
 
     @classmethod
     @contextmanager
     def connect(cls, settings: SessionSettings) -> Iterator["Client"]:
         """Open a session from ``settings`` and close it on exit."""
+        from fabric.security.zconfigs import role_of_config
         session = _open(settings)
         try:
             if settings.connect:
                 wait_connected(session, CONNECT_WINDOW_S)
-            yield cls(session, settings.cell)
+            yield cls(session, settings.cell, role_of_config(settings.config_file))
         finally:
             session.close()
 
@@ -112,6 +115,8 @@ class Client:
 
     def call(self, service: str, command: str, request: Any = None, timeout: float | None = None) -> Any:
         ep = ENDPOINTS[(service, command)]
+        if self.role is not None:
+            _check_role(self.role, service, command)
         req = request if request is not None else ep.request()
         if not isinstance(req, ep.request):
             raise TypeError(f"{service}/{command} takes {ep.request.TYPE}, not {type(req).__name__}")
@@ -386,15 +391,39 @@ class _ChunkWriter:
 def _open(settings: SessionSettings) -> zenoh.Session:
     """Open a session; a client that finds no router retries briefly, then says where it looked."""
     end = time.monotonic() + CONNECT_WINDOW_S
+    first = True
     while True:
         try:
             return zenoh.open(zenoh_config(settings))
         except zenoh.ZError as exc:
-            if time.monotonic() >= end:
+            last = time.monotonic() >= end
+            if (first and settings.config_file) or last:     # a secured hub that refused us: say why
+                _refused(settings)
+            first = False
+            if last:
                 raise ServiceUnavailable(f"cannot reach the fabric hub at {', '.join(settings.connect)} "
                                          f"(is 'fabric-cli up' or 'fabric-cli router' running?)",
                                          connect=settings.connect, reason=str(exc)) from None
             time.sleep(0.1)
+
+
+def _refused(settings: SessionSettings) -> None:
+    """Raise PermissionDenied with the reason when a secured hub refused these credentials."""
+    from fabric.security.diagnose import explain_refusal
+    why = explain_refusal(settings.config_file, settings.connect)
+    if why is not None:
+        raise PermissionDenied(f"the fabric hub at {', '.join(settings.connect)} refused this session: {why}",
+                               connect=settings.connect, config=settings.config_file)
+
+
+def _check_role(role: str, service: str, command: str) -> None:
+    """Refuse at once what the hub would drop unanswered for this role."""
+    from fabric.security.roles import MONITOR_COMMANDS, may_call
+    if not may_call(role, service, command):
+        allowed = ", ".join(sorted(f"{svc}/{cmd}" for svc, cmd in MONITOR_COMMANDS)) if role == "monitor" else ""
+        raise PermissionDenied(f"the {role} role may not run {service}/{command} (ask an operator)"
+                               + (f"; it may run {allowed}" if allowed else ""),
+                               role=role, service=service, command=command)
 
 
 def wait_connected(session: zenoh.Session, deadline_s: float) -> bool:

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import zenoh
 
+from fabric.errors import ConfigError
+
 __all__ = ["SessionSettings", "DEFAULT_HUB", "add_data_argument", "default_data_root", "service_data_dir",
            "add_session_args", "add_cell_argument", "settings_from_args", "zenoh_config"]
 
@@ -108,15 +110,33 @@ def settings_from_args(ns: argparse.Namespace, default_mode: str = "peer") -> Se
     the part of the cell whose declarations reached it first.
     """
     st = SessionSettings(cell=ns.cell)
-    st.mode = ns.mode or default_mode
-    if ns.connect:
-        st.connect = list(ns.connect)
-    if ns.listen:
-        st.listen = list(ns.listen)
+    in_file = _file_settings(ns.zconfig) if ns.zconfig else {}
+    st.mode = ns.mode or in_file.get("mode") or default_mode
+    if ns.connect or in_file.get("connect"):
+        st.connect = list(ns.connect or in_file["connect"])
+    if ns.listen or in_file.get("listen"):
+        st.listen = list(ns.listen or in_file["listen"])
     st.config_file = ns.zconfig
     st.multicast = bool(ns.multicast)
     st.lease_ms = int(getattr(ns, "lease_ms", DEFAULT_LEASE_MS))
     return st
+
+
+def _file_settings(path: str) -> dict:
+    """What a config file says about mode and endpoints (a flag not given keeps the file's value)."""
+    try:
+        conf = zenoh.Config.from_file(path)
+    except zenoh.ZError as exc:
+        raise ConfigError(f"cannot read the Zenoh config {path}: {exc}", field="--config", value=path) from None
+    found = {}
+    for name, field in (("mode", "mode"), ("connect", "connect/endpoints"), ("listen", "listen/endpoints")):
+        try:
+            value = json.loads(conf.get_json(field))
+        except (zenoh.ZError, ValueError):
+            continue
+        if (name == "mode" and value in MODES) or (name != "mode" and isinstance(value, list) and value):
+            found[name] = value
+    return found
 
 
 def zenoh_config(st: SessionSettings) -> zenoh.Config:

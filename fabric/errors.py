@@ -18,6 +18,7 @@ class that matches it)::
     ├── NotFound                     "not_found"       unknown job / artifact / robot
     ├── SlicerError                  "slicer"          an external slicer failed
     ├── ServiceUnavailable           "unavailable"     no service answered in time
+    ├── PermissionDenied             "forbidden"       the caller's role may not do this
     └── InternalError                "internal"        unexpected failure (bug)
 
 Every error carries ``details``: a dict of plain values that a caller can act
@@ -35,6 +36,7 @@ may rely on, by class (others may be present)::
     StateError         state: str, command: str
     NotFound           what was looked for (job_id, artifact_id, backend, ...): str
     ServiceUnavailable key: str, timeout_s: float, or missing: list[str]
+    PermissionDenied   role: str, service: str, command: str
 """
 from __future__ import annotations
 
@@ -44,7 +46,7 @@ __all__ = [
     "FabricError", "BadRequest", "DecodeError", "ValidationError", "GcodeError",
     "MeshError", "ProfileError", "ConfigError", "PlacementError", "UnreachableError",
     "CollisionError", "StateError", "NotFound", "SlicerError", "ServiceUnavailable",
-    "InternalError", "error_from_code", "UNREACHABLE_REASONS",
+    "PermissionDenied", "InternalError", "error_from_code", "UNREACHABLE_REASONS",
 ]
 
 UNREACHABLE_REASONS = ("out of reach", "joint limit", "singular", "joint jump")
@@ -143,6 +145,12 @@ class SlicerError(FabricError):
 
 class ServiceUnavailable(FabricError):
     code = "unavailable"
+
+
+class PermissionDenied(FabricError):
+    """The caller's role (its credentials) may not do this; the hub would drop the request unanswered."""
+
+    code = "forbidden"
 
 
 class InternalError(FabricError):

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from fabric import schemas as s
 
 __all__ = ["ROOT", "SERVICES", "TOPICS", "Endpoint", "ENDPOINTS", "Keys", "valid_cell", "parse_alive",
-           "ALIVE_EVERY_CELL"]
+           "ALIVE_EVERY_CELL", "EVERY_KEY"]
 
 ROOT = "am"
 SERVICES = ("station", "slicer", "planner", "collision", "supervisor")
@@ -115,6 +115,13 @@ class Keys:
         self.cell = valid_cell(cell)
         self.prefix = f"{ROOT}/{cell}"
 
+    @classmethod
+    def every_cell(cls) -> "Keys":
+        """Key expressions that match every cell (``am/*/...``): access-control rules, fabric-wide listings."""
+        keys = cls.__new__(cls)
+        keys.cell, keys.prefix = "*", f"{ROOT}/*"
+        return keys
+
     def alive(self, service: str) -> str:
         return f"{self.prefix}/alive/{service}"
 
@@ -146,6 +153,9 @@ class Keys:
             raise ValueError(f"not an artifact key: {key}")
         return tail
 
+
+EVERY_KEY = f"{ROOT}/**"
+"""Every key of the fabric, of every cell."""
 
 ALIVE_EVERY_CELL = f"{ROOT}/*/alive/*"
 """Every liveliness token of every cell on the fabric (to list the cells present)."""

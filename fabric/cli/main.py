@@ -8,7 +8,7 @@ import sys
 import threading
 from pathlib import Path
 
-from fabric.cli import job_cmds, pipeline_cmds, station_cmds
+from fabric.cli import auth_cmds, job_cmds, pipeline_cmds, station_cmds
 from fabric.cli.output import emit, fail
 from fabric.client import Client
 from fabric.config import add_cell_argument, add_data_argument, add_session_args, settings_from_args
@@ -45,17 +45,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--services", nargs="+", choices=SERVICES, default=list(SERVICES))
     p.add_argument("--no-hub", action="store_true", help="do not host the hub (a router runs elsewhere)")
     p.add_argument("--log-dir", type=Path, default=None, help="write each service's log there")
+    p.add_argument("--secure", type=Path, default=None, metavar="DIR",
+                   help="hub with TLS, passwords and roles; credentials from 'fabric-cli auth init DIR'")
     add_data_argument(p)
     add_cell_argument(p, "for every service of the cell")
     p.set_defaults(local=_cmd_up)
 
     p = sub.add_parser("router", parents=[common], help="host the fabric hub (a Zenoh router) in this process")
+    p.add_argument("--secure", type=Path, default=None, metavar="DIR",
+                   help="TLS, passwords and roles; credentials from 'fabric-cli auth init DIR'")
     p.set_defaults(local=_cmd_router)
 
     station_cmds.register(sub, common)
     pipeline_cmds.register(sub, common)
     job_cmds.register(sub, common)
     importlib.import_module("fabric.cli.record_cmds").register(sub, common)     # record, plot, preview
+    auth_cmds.register(sub, common)
 
     cell = sub.add_parser("cell", help="the cell configuration")
     csub = cell.add_subparsers(dest="cell_cmd", required=True)
@@ -99,7 +104,14 @@ def _cmd_up(a: argparse.Namespace) -> int:
     extra = {}
     if a.cell_config:
         extra = {n: ["--cell-config", a.cell_config] for n in ("station", "slicer", "planner", "collision")}
-    return run_up(settings_from_args(a), tuple(a.services), not a.no_hub, a.log_dir, extra, a.data_dir)
+    settings = settings_from_args(a)
+    if a.secure is None:
+        return run_up(settings, tuple(a.services), not a.no_hub, a.log_dir, extra, a.data_dir)
+    from fabric.security.credentials import Credentials
+    creds = Credentials(a.secure.resolve()).check()
+    settings.connect = list(a.connect or creds.hub_endpoints())
+    settings.listen = list(a.listen or [])
+    return run_up(settings, tuple(a.services), not a.no_hub, a.log_dir, extra, a.data_dir, secure=creds)
 
 
 def _cmd_router(a: argparse.Namespace) -> int:
@@ -107,11 +119,19 @@ def _cmd_router(a: argparse.Namespace) -> int:
     from fabric.cli.up import hub_settings
     from fabric.config import zenoh_config
     st = hub_settings(settings_from_args(a))
+    conf = zenoh_config(st)
+    if a.secure is not None:
+        from fabric.security.credentials import Credentials
+        from fabric.security.hub import hub_zenoh_config
+        creds = Credentials(a.secure.resolve()).check()
+        st.listen = list(a.listen or creds.listen_endpoints())
+        conf = hub_zenoh_config(creds, st, st.listen)
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    with zenoh.open(zenoh_config(st)):
-        print(f"fabric hub listening on {', '.join(st.listen)} (Ctrl-C stops it)", flush=True)
+    with zenoh.open(conf):
+        secured = " (TLS, passwords, roles)" if a.secure is not None else ""
+        print(f"fabric hub listening on {', '.join(st.listen)}{secured} (Ctrl-C stops it)", flush=True)
         stop.wait()
     return 0
 

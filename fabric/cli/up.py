@@ -6,7 +6,9 @@ the launcher even if it is killed (``PR_SET_PDEATHSIG``). A child that exits
 is reported and restarted with a growing pause (0.5 s, doubling up to 30 s;
 back to 0.5 s once it has run for a minute). With ``--listen`` the hub
 listens there and the children connect there; with ``--connect`` (and
-``--no-hub``) they join a hub elsewhere.
+``--no-hub``) they join a hub elsewhere. With ``--secure DIR`` the hub
+enforces TLS, passwords and roles (``fabric.security``) and every service
+joins it as a client with the services' credentials.
 """
 from __future__ import annotations
 
@@ -27,6 +29,8 @@ from fabric.client import Client
 from fabric.config import SessionSettings, zenoh_config
 from fabric.errors import FabricError, ServiceUnavailable
 from fabric.keys import SERVICES, Keys
+from fabric.security.credentials import Credentials
+from fabric.security.hub import hub_zenoh_config, role_settings
 
 __all__ = ["CellProcesses", "hub_settings", "run_up"]
 
@@ -70,12 +74,22 @@ class CellProcesses:
 
     def __init__(self, settings: SessionSettings, services: tuple[str, ...] = SERVICES, host_hub: bool = True,
                  log_dir: Path | None = None, extra_args: dict[str, list[str]] | None = None,
-                 data_dir: Path | None = None) -> None:
+                 data_dir: Path | None = None, secure: Credentials | None = None) -> None:
         self.services, self.host_hub = services, host_hub
         self.log_dir, self.extra_args, self.data_dir = log_dir, extra_args or {}, data_dir
-        # the hub listens on --listen (else on the --connect endpoint); everyone else connects there
-        hub_eps = list(settings.listen or settings.connect) if host_hub else list(settings.connect)
-        self.settings = replace(settings, connect=hub_eps, listen=[])
+        self.secure = secure
+        if secure is None:
+            # the hub listens on --listen (else on the --connect endpoint); everyone else connects there
+            self.hub_listen = list(settings.listen or settings.connect)
+            hub_eps = self.hub_listen if host_hub else list(settings.connect)
+            self.settings = replace(settings, connect=hub_eps, listen=[])
+            self.client_settings = self.settings
+        else:
+            # secured: the hub listens on TLS (--listen, else where hub.json5 says); services join as clients
+            # with the services' credentials, this launcher with the operator's
+            self.hub_listen = list(settings.listen) or secure.listen_endpoints()
+            self.settings = role_settings(secure, settings, "service")
+            self.client_settings = role_settings(secure, settings, "operator")
         self.children: dict[str, _Child] = {}
         self.hub: zenoh.Session | None = None
         self._pgid: int | None = None
@@ -88,17 +102,22 @@ class CellProcesses:
     def start(self, deadline_s: float = 60.0) -> None:
         """Host the hub, start every service and wait until all are alive (or stop them all)."""
         if self.host_hub:
-            self.hub = zenoh.open(zenoh_config(hub_settings(self.settings)))
+            self.hub = zenoh.open(self._hub_config())
         try:
             for name in self.services:
                 self.children[name] = _Child(name, self._spawn(name), time.monotonic())
-            with Client.connect(self.settings) as client:
+            with Client.connect(self.client_settings) as client:
                 client.wait_alive(self.services, deadline_s)
         except (ServiceUnavailable, OSError) as exc:
             dead = {n: c.proc.poll() for n, c in self.children.items() if c.proc.poll() is not None}
             self.stop()
             raise ServiceUnavailable(f"services did not come up within {deadline_s:g} s ({exc}); exited: {dead}",
                                      exited=dead) from None
+
+    def _hub_config(self) -> zenoh.Config:
+        if self.secure is None:
+            return zenoh_config(hub_settings(self.settings))
+        return hub_zenoh_config(self.secure, self.settings, self.hub_listen)
 
     def _spawn(self, name: str) -> subprocess.Popen:
         cmd = [sys.executable, "-m", "fabric.cli.main", "serve", name, *self.settings.to_args()]
@@ -198,9 +217,10 @@ def stop_print_first(settings: SessionSettings, say=print, wait_s: float = STOP_
 
 
 def run_up(settings: SessionSettings, services: tuple[str, ...], host_hub: bool, log_dir: Path | None,
-           extra_args: dict[str, list[str]], data_dir: Path | None = None, out=print) -> int:
+           extra_args: dict[str, list[str]], data_dir: Path | None = None, out=print,
+           secure: Credentials | None = None) -> int:
     """Start the cell, report where it is, supervise until Ctrl-C, stop a running print, then stop everything."""
-    cell = CellProcesses(settings, services, host_hub, log_dir, extra_args, data_dir)
+    cell = CellProcesses(settings, services, host_hub, log_dir, extra_args, data_dir, secure)
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
@@ -211,7 +231,8 @@ def run_up(settings: SessionSettings, services: tuple[str, ...], host_hub: bool,
         out(f"!! {err.message}")
         return 1
     hub = ", ".join(cell.settings.connect)
-    out(f"cell '{settings.cell}' up in {time.monotonic() - t0:.1f} s; hub {hub if host_hub else '(external) ' + hub}")
+    out(f"cell '{settings.cell}' up in {time.monotonic() - t0:.1f} s; hub {hub if host_hub else '(external) ' + hub}"
+        + (f" (TLS, passwords, roles: {secure.root})" if secure is not None else ""))
     keys = Keys(settings.cell)
     for name, p in cell.procs.items():
         out(f"  {name:<11} pid {p.pid:<7} {keys.cmd_all(name)}")
@@ -223,7 +244,7 @@ def run_up(settings: SessionSettings, services: tuple[str, ...], host_hub: bool,
                 rc = 1
     finally:
         if "station" in services:
-            stop_print_first(cell.settings, out)
+            stop_print_first(cell.client_settings, out)
         out("stopping services ...")
         cell.stop()
     return rc

@@ -1,0 +1,1 @@
+"""A secured fabric: roles and what each may do, credentials (CA, certificates, passwords), Zenoh configs."""

@@ -1,0 +1,135 @@
+"""Why a secured hub refused a session, in one line: Zenoh only says it could not connect.
+
+Asked after ``zenoh.open`` failed: a TLS handshake of our own with the config's certificates tells a
+hub whose certificate we do not trust, a hub that refuses our certificate (missing, or from another
+CA) and a hub that accepts the certificate, so that what it refused was the user name or password.
+"""
+from __future__ import annotations
+
+import base64
+import json
+import socket
+import ssl
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from fabric.errors import ConfigError
+from fabric.security.zconfigs import read_json5
+
+__all__ = ["explain_refusal"]
+
+HANDSHAKE_TIMEOUT_S = 2.0
+VERDICT_WAIT_S = 0.5       # a hub that refuses our certificate says so right after the handshake
+
+
+def _tls_section(config_path: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The TLS and user/password sections. Zenoh does not give inline (base64) certificates back, so a
+    config written by ``auth init`` is read as the JSON it is; any other through Zenoh."""
+    try:
+        conf = read_json5(Path(config_path))
+        transport = conf.get("transport", {})
+        return transport.get("link", {}).get("tls", {}), transport.get("auth", {}).get("usrpwd", {})
+    except (ConfigError, AttributeError):
+        pass
+    zconf = zenoh.Config.from_file(config_path)
+
+    def section(path: str) -> dict[str, Any]:
+        try:
+            value = json.loads(zconf.get_json(path))
+        except (zenoh.ZError, ValueError):
+            return {}
+        return value if isinstance(value, dict) else {}
+    return section("transport/link/tls"), section("transport/auth/usrpwd")
+
+
+def _pem(tls: dict[str, Any], name: str) -> bytes | None:
+    """A PEM item of the TLS section, inline (``<name>_base64``) or by path."""
+    if tls.get(f"{name}_base64"):
+        return base64.b64decode(tls[f"{name}_base64"])
+    if tls.get(name):
+        return Path(tls[name]).read_bytes()
+    return None
+
+
+def _context(tls: dict[str, Any], tmp: Path) -> tuple[ssl.SSLContext, bool]:
+    ctx = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
+    ctx.check_hostname = bool(tls.get("verify_name_on_connect", True))
+    ca = _pem(tls, "root_ca_certificate")
+    if ca:
+        ctx.load_verify_locations(cadata=ca.decode())
+    cert, key = _pem(tls, "connect_certificate"), _pem(tls, "connect_private_key")
+    if cert and key:
+        (tmp / "cert.pem").write_bytes(cert)
+        (tmp / "key.pem").write_bytes(key)
+        ctx.load_cert_chain(tmp / "cert.pem", tmp / "key.pem")
+    return ctx, bool(cert and key)
+
+
+def _probe(endpoint: str, ctx: ssl.SSLContext, has_cert: bool, usrpwd: dict[str, Any]) -> str | None:
+    host, _, port = endpoint.removeprefix("tls/").rpartition(":")
+    host = host.strip("[]")
+    try:
+        raw = socket.create_connection((host, int(port)), timeout=HANDSHAKE_TIMEOUT_S)
+    except (OSError, ValueError):
+        return None                                   # not reachable: the caller says so
+    with raw:
+        try:
+            tls = ctx.wrap_socket(raw, server_hostname=host)
+        except ssl.SSLCertVerificationError as exc:
+            return (f"the hub's certificate is not trusted by this config (another fabric's credentials? "
+                    f"{exc.verify_message})")
+        except (ssl.SSLError, OSError) as exc:
+            return f"TLS with the hub failed ({exc})"
+        with tls:
+            tls.settimeout(VERDICT_WAIT_S)
+            try:
+                tls.recv(1)
+            except (TimeoutError, socket.timeout):
+                pass                                  # the hub accepted our certificate and waits for us
+            except (ssl.SSLError, OSError):
+                if not has_cert:
+                    return "the hub requires a client certificate and this config has none"
+                return "the hub refused this config's certificate (not signed by the fabric's CA)"
+    if not usrpwd.get("user"):
+        return "the hub requires a user name and password and this config has none"
+    return f"the hub refused the user name or password of {usrpwd['user']!r} (wrong, or changed since)"
+
+
+def _without_credentials(endpoints: list[str]) -> str | None:
+    """A hub that takes TCP connections but no session without credentials is a secured one."""
+    for ep in endpoints:
+        proto, _, address = ep.partition("/")
+        host, _, port = address.rpartition(":")
+        if proto not in ("tcp", "tls") or not port.isdigit():
+            continue
+        try:
+            socket.create_connection((host.strip("[]"), int(port)), timeout=HANDSHAKE_TIMEOUT_S).close()
+        except OSError:
+            continue
+        return ("it is a secured hub and this session has no credentials: give --config <DIR>/<role>.json5 "
+                "(from 'fabric-cli auth init DIR')")
+    return None
+
+
+def explain_refusal(config_path: str | None, endpoints: list[str]) -> str | None:
+    """Why the hub at one of ``endpoints`` refused a session opened with ``config_path``; None when no TLS
+    endpoint answered (the hub is not there) or the config has no TLS to check."""
+    if not config_path:
+        return _without_credentials(endpoints)
+    if not any(ep.startswith("tls/") for ep in endpoints):
+        return None
+    tls, usrpwd = _tls_section(config_path)
+    with tempfile.TemporaryDirectory(prefix="am-fabric-diag-") as tmp:
+        try:
+            ctx, has_cert = _context(tls, Path(tmp))
+        except (OSError, ssl.SSLError, ValueError) as exc:
+            return f"this config's certificates cannot be read ({exc})"
+        for ep in endpoints:
+            if ep.startswith("tls/"):
+                why = _probe(ep, ctx, has_cert, usrpwd)
+                if why is not None:
+                    return why
+    return None
