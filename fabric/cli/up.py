@@ -101,11 +101,21 @@ class CellProcesses:
 
     def start(self, deadline_s: float = 60.0) -> None:
         """Host the hub, start every service and wait until all are alive (or stop them all)."""
+        self.launch()
+        self.wait_up(deadline_s)
+
+    def launch(self) -> None:
+        """Host the hub and start every service, without waiting (several cells start side by side). Call it
+        from a thread that outlives the services: the kernel signals them when the thread that started them
+        ends (``PR_SET_PDEATHSIG`` follows the thread, not the process)."""
         if self.host_hub:
             self.hub = zenoh.open(self._hub_config())
+        for name in self.services:
+            self.children[name] = _Child(name, self._spawn(name), time.monotonic())
+
+    def wait_up(self, deadline_s: float = 60.0) -> None:
+        """Wait until every service is alive; if one is not by ``deadline_s``, stop them all and raise."""
         try:
-            for name in self.services:
-                self.children[name] = _Child(name, self._spawn(name), time.monotonic())
             with Client.connect(self.client_settings) as client:
                 client.wait_alive(self.services, deadline_s)
         except (ServiceUnavailable, OSError) as exc:
