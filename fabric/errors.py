@@ -49,10 +49,11 @@ __all__ = [
     "PermissionDenied", "InternalError", "error_from_code", "UNREACHABLE_REASONS",
 ]
 
-UNREACHABLE_REASONS = ("out of reach", "joint limit", "singular", "joint jump")
+UNREACHABLE_REASONS = ("out of reach", "joint limit", "singular", "joint jump", "off the plate", "below the plate")
 """Why a target is unreachable (``UnreachableError.details['reason']``): no solution at all, a
 solution only beyond a joint's limits, at a singularity, or a configuration change between two
-consecutive targets. ``fabric.robot.kinematics.ik_reason`` maps the IK status codes to these."""
+consecutive targets (``fabric.robot.kinematics.ik_reason`` maps the IK status codes to these); or
+outside the work envelope: beyond the plate's edges, or under its surface (``fabric.planning.envelope``)."""
 
 
 class FabricError(Exception):

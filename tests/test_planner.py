@@ -212,9 +212,14 @@ def test_unreachable_point_names_its_line(cell: Cell) -> None:
     with pytest.raises(UnreachableError) as ei:
         res.require_runnable()
     assert ei.value.details["gcode_line"] == 17
-    assert ei.value.details["reason"] == "out of reach"
+    assert ei.value.details["reason"] == "off the plate"              # the envelope speaks first
     assert "line 17" in str(ei.value)
     assert res.report.feasible_r < 1.0 and np.isnan(res.estimate_s)
+    allowed = plan_gcode(text, cell, PlanOptions(allow_off_plate=True))   # allowed: the robot still cannot
+    with pytest.raises(UnreachableError) as ei:
+        allowed.require_runnable()
+    assert (ei.value.details["gcode_line"], ei.value.details["reason"]) == (17, "out of reach")
+    assert allowed.report.counts["off the plate"] >= 1
 
 
 def test_blocks_of_ik_give_the_same_program(cell: Cell, tmp_path: Path) -> None:

@@ -202,7 +202,9 @@ def test_unreachable_reason_is_one_word_of_the_vocabulary():
     assert err.details == {"reason": "out of reach", "gcode_line": 6}
     with pytest.raises(TypeError, match="reason"):
         UnreachableError("far", reason=1)                 # an IK status code is not a reason: use ik_reason
-    assert {ik_reason(code) for code in IK_REASONS if code != IK_OK} == set(UNREACHABLE_REASONS)
+    from fabric.planning.envelope import ENVELOPE_REASONS
+    ik = {ik_reason(code) for code in IK_REASONS if code != IK_OK}
+    assert ik | set(ENVELOPE_REASONS.values()) == set(UNREACHABLE_REASONS) and not ik & set(ENVELOPE_REASONS.values())
     assert ik_reason(np.uint8(1)) == "out of reach"
     with pytest.raises(ValueError):
         ik_reason(IK_OK)

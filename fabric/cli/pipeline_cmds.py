@@ -60,7 +60,8 @@ def cmd_slice(c: Client, a: argparse.Namespace) -> int:
 
 def plan_file(c: Client, data: bytes, filename: str, a: argparse.Namespace) -> s.PlanSummary:
     req = s.PlanRequest(gcode=data, filename=filename, offset_mm=list(a.offset), speed_r=a.speed,
-                        tilt_deg=list(a.tilt), rot_step_deg=a.rot_step, filament_diameter_mm=a.filament_diameter)
+                        tilt_deg=list(a.tilt), rot_step_deg=a.rot_step, filament_diameter_mm=a.filament_diameter,
+                        allow_off_plate=a.allow_off_plate)
     acc = c.plan(req)
     st = c.wait_job("planner", acc.job_id, on_progress=_progress(a.json))
     if not a.json:
@@ -97,6 +98,10 @@ def cmd_plan(c: Client, a: argparse.Namespace) -> int:
         fu = r.first_unreachable
         if fu is not None:
             lines.append(f"NOT RUNNABLE: first unreachable target at G-code line {fu.gcode_line}: {fu.reason}")
+        outside = {k: v for k, v in r.unreachable_by_reason.items() if k in ("off the plate", "below the plate")}
+        if outside:
+            lines.append(", ".join(f"{n} targets {k}" for k, n in outside.items())
+                         + (" (allowed)" if r.allow_off_plate else " (--allow-off-plate to print anyway)"))
         lines += [f"wrote {fmt}: {path}" for fmt, path in written.items()]
         return "\n".join(lines)
     emit(result, a.json, text)
@@ -124,4 +129,6 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--module-targets", type=int, default=5000, help="targets per RAPID/KRL module")
     p.add_argument("--filament-diameter", type=float, default=None, metavar="MM",
                    help="filament diameter (default: as the G-code states it, else 1.75 mm with a warning)")
+    p.add_argument("--allow-off-plate", action="store_true",
+                   help="plan targets off the plate or below its surface as runnable (they are still counted)")
     p.set_defaults(run=cmd_plan)

@@ -50,6 +50,7 @@ class PlanOptions:
     chord_tol_mm: float = 0.01           # arc (G2/G3) chord tolerance
     ik_block_rows: int = 200_000         # rows solved per IK call: bounds memory, paces progress
     wobj_T: np.ndarray | None = None     # work object (plate frame in the base frame, mm); None: the cell's
+    allow_off_plate: bool = False        # targets off the plate or below it: counted, not fatal (envelope.py)
 
     def __post_init__(self) -> None:
         self.offset_mm = _vec(self.offset_mm, 3, "offset_mm")
@@ -90,6 +91,9 @@ class PlanOptions:
                                                                                  atol=1e-6):
                 raise ValidationError("wobj_T must be a rigid 4x4 transform", field="wobj_T")
             self.wobj_T = w
+        if not isinstance(self.allow_off_plate, bool):
+            raise ValidationError("allow_off_plate must be true or false", field="allow_off_plate",
+                                  value=repr(self.allow_off_plate))
         if not (isinstance(self.ik_block_rows, int) and self.ik_block_rows >= 1000):
             raise ValidationError("ik_block_rows must be an int >= 1000", field="ik_block_rows")
 

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from fabric.gcode import Toolpath, parse_gcode, parse_gcode_file
+from fabric.planning.envelope import envelope_status
 from fabric.planning.mapping import map_toolpath
 from fabric.planning.material import resolve_material
 from fabric.planning.post.names import program_name
@@ -279,7 +280,8 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
     _joint_speeds(prog, cell, float(prog.meta["approach_speed_mm_s"]))
     motion = prog.op <= MOVEL
     motion[-1] = False                       # the home move is not an IK target
-    report = Reachability.from_status(status, rot, motion, prog.gcode_line)
+    envelope = envelope_status(prog.xyz_mm, motion, cell.plate_size_mm)     # over the plate, not below it
+    report = Reachability.from_status(status, rot, motion, prog.gcode_line, envelope, opt.allow_off_plate)
     prog.meta.update(print_rows=n_print, options=opt.to_dict(), **material.meta(), **(meta or {}))
     if on_program is not None:               # the program is final: the estimate below only reads it
         on_program(prog)

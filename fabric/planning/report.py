@@ -10,22 +10,25 @@ from fabric.errors import UnreachableError
 from fabric.gcode.material import Material
 from fabric.gcode.toolpath import Toolpath
 from fabric.planning.material import ResolvedMaterial, resolve_material
-from fabric.robot.kinematics import (IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR,
-                                     ik_reason)
+from fabric.planning.envelope import ENV_BELOW_PLATE, ENV_OFF_PLATE, ENVELOPE_REASONS
+from fabric.robot.kinematics import IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR
 from fabric.motion.program import Program
 
 __all__ = ["Reachability", "PlanStats", "PlanResult", "UNREACHABLE_CODES"]
 
 # Statuses a program cannot run through. IK_SINGULAR rows have an exact
-# solution (the motion model slows the TCP there): reported, not fatal.
-UNREACHABLE_CODES = (IK_OUT_OF_REACH, IK_JOINT_LIMIT, IK_JUMP)
+# solution (the motion model slows the TCP there): reported, not fatal. Targets outside the work
+# envelope (fabric.planning.envelope) are fatal too unless the user allows them.
+UNREACHABLE_CODES = (IK_OUT_OF_REACH, IK_JOINT_LIMIT, IK_JUMP, ENV_OFF_PLATE, ENV_BELOW_PLATE)
+REASONS = {**IK_REASONS, **ENVELOPE_REASONS}
 
 
 @dataclass
 class Reachability:
-    """Per-row IK status of a program (non-motion rows repeat the previous row's status)."""
+    """Per-row status of a program (non-motion rows repeat the previous row's status): the IK's, or where
+    a target leaves the work envelope, why (unless allowed: then the IK's, and the envelope only counted)."""
 
-    status: np.ndarray                        # (N,) uint8, fabric.robot.kinematics IK_* codes
+    status: np.ndarray                        # (N,) uint8, IK_* codes, ENV_* codes
     rot_deg: np.ndarray                       # (N,) chosen rotation about the nozzle axis
     feasible_r: float                         # fraction of motion rows that are reachable
     counts: dict[str, int] = field(default_factory=dict)   # motion rows by reason
@@ -34,15 +37,25 @@ class Reachability:
 
     @classmethod
     def from_status(cls, status: np.ndarray, rot_deg: np.ndarray, motion: np.ndarray,
-                    gcode_line: np.ndarray) -> "Reachability":
+                    gcode_line: np.ndarray, envelope: np.ndarray | None = None,
+                    allow_off_plate: bool = False) -> "Reachability":
+        """The report of IK ``status`` and, if given, the ``envelope`` statuses (0 inside) of the same rows."""
+        allowed: dict[str, int] = {}
+        if envelope is not None and envelope.any():
+            if allow_off_plate:             # counted, not fatal: the IK's status stays
+                allowed = {REASONS[c]: int(n) for c, n in enumerate(np.bincount(envelope[motion])) if n and c}
+            else:
+                status = np.where(envelope > 0, envelope, status).astype(np.uint8)
         st = status[motion]
-        counts = {IK_REASONS.get(c, f"status {c}"): int(n) for c, n in enumerate(np.bincount(st)) if n}
+        counts = {REASONS.get(c, f"status {c}"): int(n) for c, n in enumerate(np.bincount(st)) if n}
+        for reason, n in allowed.items():
+            counts[reason] = counts.get(reason, 0) + n
         bad = motion & np.isin(status, UNREACHABLE_CODES)
         first = None
         row = -1
         if bad.any():
             row = int(np.argmax(bad))
-            first = (int(gcode_line[row]), ik_reason(status[row]))
+            first = (int(gcode_line[row]), REASONS[int(status[row])])
         ok = ~np.isin(st, UNREACHABLE_CODES)
         return cls(status=status, rot_deg=rot_deg, feasible_r=float(ok.mean()) if len(st) else 1.0,
                    counts=counts, first_unreachable=first, first_unreachable_row=row)

@@ -70,6 +70,7 @@ class PlanRequest:
     wobj_xyz_mm: list[float] | None = f(None, shape=(3,))     # work object override (e.g. after calibration)
     wobj_rpy_deg: list[float] | None = f(None, shape=(3,))
     filament_diameter_mm: float | None = f(None, ge=0.5, le=5.0)
+    allow_off_plate: bool = False               # targets off the plate or below it: counted, not fatal
 
 
 @schema("planner.UnreachableTarget")
@@ -92,7 +93,8 @@ class SlowedMove:
 class PlanSummary:
     """What a plan produced. The material: ``filament_diameter_mm`` turned E into ``extruded_mm3``; it came
     from ``material_source`` (the request's option, the G-code's comments, or assumed: then ``warnings``
-    says so); name, density and minimum extrusion temperature as the G-code states them (else empty)."""
+    says so); name, density and minimum extrusion temperature as the G-code states them (else empty).
+    ``unreachable_by_reason`` counts targets by reason, "off the plate" and "below the plate" included."""
     program_id: str
     targets: int
     moves: int
@@ -114,6 +116,7 @@ class PlanSummary:
     min_extrude_temp_c: float | None = None
     mass_g: float | None = None                # extruded_mm3 times the density, when the density is known
     warnings: list[str] = f(factory=list)
+    allow_off_plate: bool = False              # targets off the plate or below it were allowed (still counted)
 
 
 @schema("planner.ProgramMsg")

@@ -119,7 +119,7 @@ class PlannerService(Service):
                                np.asarray(req.wobj_rpy_deg or [0.0, 0.0, 0.0]))
         options = PlanOptions(offset_mm=tuple(req.offset_mm), tilt_deg=tuple(req.tilt_deg), speed_r=req.speed_r,
                               rot_step_deg=req.rot_step_deg, wobj_T=wobj,
-                              filament_diameter_mm=req.filament_diameter_mm)
+                              filament_diameter_mm=req.filament_diameter_mm, allow_off_plate=req.allow_off_plate)
         st = self.jobs.submit("plan", lambda job: self._run(job, req, options))
         return s.JobAccepted(job_id=st.job_id, kind="plan")
 
@@ -158,7 +158,7 @@ class PlannerService(Service):
             extruded_mm3=float(st.extruded_volume_mm3), path_mm=float(st.path_length_mm), first_unreachable=first,
             unreachable_by_reason={str(k): int(v) for k, v in rep.counts.items() if k != "ok"},
             elapsed_s=float(st.total_s), slowed_targets=0 if result.slowed_rows is None else len(result.slowed_rows),
-            first_slowed=_first_slowed(result, program), **_material_fields(st))
+            first_slowed=_first_slowed(result, program), allow_off_plate=req.allow_off_plate, **_material_fields(st))
         self.records.put("summary", pid, summary)
         return pid
 
