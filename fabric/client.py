@@ -12,8 +12,11 @@ timeout (or the one given). An error reply raises the matching
 """
 from __future__ import annotations
 
+import hashlib
+import os
 import queue
 import threading
+import uuid
 import time
 from contextlib import contextmanager
 from typing import Any, BinaryIO, Callable, Iterator
@@ -23,15 +26,32 @@ import zenoh
 from fabric import codec
 from fabric import schemas as s
 from fabric.config import SessionSettings, zenoh_config
-from fabric.errors import DecodeError, FabricError, PermissionDenied, ServiceUnavailable, error_from_code
+from fabric.errors import (BadRequest, DecodeError, FabricError, PermissionDenied, ServiceUnavailable,
+                           ValidationError, error_from_code)
+from fabric.schemas.upload import UPLOAD_CHUNK_BYTES, UPLOAD_CHUNK_MAX_BYTES
 from fabric.keys import ALIVE_EVERY_CELL, ENDPOINTS, SERVICES, TOPICS, Keys, parse_alive
 
-__all__ = ["Client", "Subscription", "AliveSubscription", "wait_connected"]
+__all__ = ["Client", "Subscription", "AliveSubscription", "wait_connected", "input_size"]
 
 DISCOVERY_WINDOW_S = 1.0   # retry a get that found no queryable for this long (declarations in flight)
 CONNECT_WINDOW_S = 3.0     # how long connect() waits for the first link
 ALIVE_ATTEMPTS = 5         # liveliness queries merged when an answer is incomplete (see Client.alive)
 ALIVE_BACKOFF_S = 0.01     # pause between those attempts
+
+
+def input_size(path: str | os.PathLike[str], max_bytes: int) -> int:
+    """The size of an input file the user named, checked before it is read: BadRequest when it is not
+    there, ValidationError (field ``size``) when it is larger than ``max_bytes``."""
+    try:
+        size = os.stat(path).st_size
+    except OSError:
+        raise BadRequest(f"no such file: {path}", file=str(path)) from None
+    if not os.path.isfile(path):
+        raise BadRequest(f"not a file: {path}", file=str(path))
+    if size > max_bytes:
+        raise ValidationError(f"{path} is {size / 2**20:,.1f} MB, more than the limit of {max_bytes / 2**20:,.0f} MB "
+                              "(--max-size-mb raises it)", field="size", file=str(path), value=size, limit=max_bytes)
+    return size
 
 
 class Subscription:
@@ -279,6 +299,29 @@ class Client:
         return self.call("slicer", "result", s.ArtifactQuery(artifact_id=gcode_id))
     def backends(self) -> s.Backends: return self.call("slicer", "backends")
     def plan(self, request: s.PlanRequest) -> s.JobAccepted: return self.call("planner", "plan", request)
+
+    def upload(self, service: str, path: str | os.PathLike[str], max_bytes: int,
+               chunk_bytes: int = UPLOAD_CHUNK_BYTES,
+               on_progress: Callable[[int, int], None] | None = None) -> str:
+        """Send a file to ``<service>/upload`` in pieces of ``chunk_bytes`` (its size checked against
+        ``max_bytes`` before a byte is read, see :func:`input_size`); returns the upload id to name in the
+        request (``PlanRequest.upload_id``, ``SliceRequest.upload_id``). Memory: one piece."""
+        size = input_size(path, max_bytes)
+        uid = uuid.uuid4().hex
+        digest = hashlib.sha256()
+        offset = 0
+        with open(path, "rb") as f:
+            while True:
+                data = f.read(min(chunk_bytes, UPLOAD_CHUNK_MAX_BYTES))
+                digest.update(data)
+                last = offset + len(data) >= size or not data
+                self.call(service, "upload", s.UploadChunk(upload_id=uid, offset=offset, total_bytes=size, data=data,
+                                                           sha256=digest.hexdigest() if last else ""))
+                offset += len(data)
+                if on_progress is not None:
+                    on_progress(offset, size)
+                if last:
+                    return uid
     def plan_summary(self, program_id: str) -> s.PlanSummary:
         return self.call("planner", "summary", s.ArtifactQuery(artifact_id=program_id))
     def export(self, program_id: str, fmt: str, module_targets: int = 5000) -> s.Artifact:

@@ -76,10 +76,12 @@ _TABLE = [
     _ep("slicer", "job", s.JobQuery, s.JobStatus, doc="a slicing job's status"),
     _ep("slicer", "result", s.ArtifactQuery, s.SliceResult, doc="summary of a slicing result by G-code id"),
     _ep("slicer", "backends", s.Empty, s.Backends, doc="installed back-ends and profiles"),
+    _ep("slicer", "upload", s.UploadChunk, s.UploadStatus, 30.0, "a large model, in chunks assembled on disk"),
     # planner
     _ep("planner", "plan", s.PlanRequest, s.JobAccepted, 30.0, "start planning G-code (a job)"),
     _ep("planner", "job", s.JobQuery, s.JobStatus, doc="a planning job's status"),
     _ep("planner", "summary", s.ArtifactQuery, s.PlanSummary, doc="summary of a planned program"),
+    _ep("planner", "upload", s.UploadChunk, s.UploadStatus, 30.0, "large G-code, in chunks assembled on disk"),
     _ep("planner", "export", s.ExportRequest, s.Artifact, 300.0, "RAPID / KRL / URScript / CSV"),
     _ep("planner", "export_chunk", s.ExportChunkRequest, s.ExportChunk, 120.0,
         "an export streamed in bounded chunks, read in order from offset 0"),

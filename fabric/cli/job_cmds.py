@@ -9,7 +9,8 @@ from pathlib import Path
 
 from fabric import schemas as s
 from fabric.cli.output import emit
-from fabric.cli.pipeline_cmds import parse_sets, read_input
+from fabric.cli.inputs import read_whole
+from fabric.cli.pipeline_cmds import parse_sets
 from fabric.client import Client
 from fabric.follow import follow_print
 
@@ -69,7 +70,7 @@ def _record_text(rec: s.JobRecord) -> str:
 
 def cmd_submit(c: Client, a: argparse.Namespace) -> int:
     source = "gcode" if Path(a.file).suffix.lower() in GCODE_SUFFIXES else "model"
-    req = s.JobSubmit(model=read_input(a.file), filename=Path(a.file).name, source=source, profile=a.profile,
+    req = s.JobSubmit(model=read_whole(a.file), filename=Path(a.file).name, source=source, profile=a.profile,
                       backend=a.backend, overrides=parse_sets(a.set), start=a.start, rtf=a.rtf)
     acc = c.submit(req)
     if not (a.wait or a.follow):

@@ -8,6 +8,7 @@ from pathlib import Path
 from fabric import schemas as s
 from fabric.cli.output import emit
 from fabric.client import Client
+from fabric.cli.inputs import gcode_source, model_source, read_input
 from fabric.errors import BadRequest
 
 __all__ = ["register", "parse_sets", "read_input"]
@@ -25,14 +26,6 @@ def parse_sets(items: list[str] | None) -> dict[str, str]:
     return out
 
 
-def read_input(path: str) -> bytes:
-    """The bytes of an input file the user named (a clear error when it is not there)."""
-    p = Path(path)
-    if not p.is_file():
-        raise BadRequest(f"no such file: {path}", file=path)
-    return p.read_bytes()
-
-
 def _progress(quiet: bool):
     if quiet:
         return None
@@ -42,7 +35,7 @@ def _progress(quiet: bool):
 
 
 def cmd_slice(c: Client, a: argparse.Namespace) -> int:
-    req = s.SliceRequest(model=read_input(a.model), filename=Path(a.model).name, profile=a.profile,
+    req = s.SliceRequest(**model_source(c, read_input(a.model)), filename=Path(a.model).name, profile=a.profile,
                          backend=a.backend, overrides=parse_sets(a.set),
                          center_xy_mm=list(a.center) if a.center else None)
     acc = c.slice(req)
@@ -59,7 +52,7 @@ def cmd_slice(c: Client, a: argparse.Namespace) -> int:
 
 
 def plan_file(c: Client, data: bytes, filename: str, a: argparse.Namespace) -> s.PlanSummary:
-    req = s.PlanRequest(gcode=data, filename=filename, offset_mm=list(a.offset), speed_r=a.speed,
+    req = s.PlanRequest(**gcode_source(c, data), filename=filename, offset_mm=list(a.offset), speed_r=a.speed,
                         tilt_deg=list(a.tilt), rot_step_deg=a.rot_step, filament_diameter_mm=a.filament_diameter,
                         allow_off_plate=a.allow_off_plate)
     acc = c.plan(req)

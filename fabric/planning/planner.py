@@ -54,17 +54,18 @@ def _sub(progress: Progress | None, a: float, b: float) -> Progress | None:
     return lambda f: progress(a + (b - a) * min(max(f, 0.0), 1.0))
 
 
-def plan_gcode(text: str | bytes, cell: Any, options: PlanOptions | None = None,
+def plan_gcode(text: str | bytes | os.PathLike[str], cell: Any, options: PlanOptions | None = None,
                progress: Progress | None = None, filename: str | None = None,
                on_program: ProgramReady | None = None) -> PlanResult:
-    """Plan G-code held in memory for ``cell`` (a :class:`fabric.robot.cell.Cell`).
+    """Plan G-code held in memory, or in a file named by a path, for ``cell`` (a :class:`fabric.robot.cell.Cell`).
 
     ``filename`` (optional) names the job: the program's ``meta`` gets
     ``filename`` and ``name`` (its stem), which exports use. ``on_program`` is
     called with the program as soon as it is final, before the cycle-time
     estimate (e.g. to start encoding it on another thread); it must not change it.
     """
-    return _parse_and_plan(parse_gcode, text, cell, options, progress, filename, on_program)
+    parse = parse_gcode_file if isinstance(text, os.PathLike) else parse_gcode     # a path: read in blocks
+    return _parse_and_plan(parse, text, cell, options, progress, filename, on_program)
 
 
 def _parse_and_plan(parse: Callable[..., Toolpath], source: Any, cell: Any, options: PlanOptions | None,

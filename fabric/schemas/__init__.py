@@ -7,6 +7,7 @@ from fabric.schemas.pipeline import (FINAL_JOB_STATES, ON_STATION_JOB_STATES, PR
                                      ProgramMsg, ServiceInfo, SliceRequest, SliceResult, SlowedMove,
                                      UnreachableTarget)
 from fabric.schemas.export import ExportChunk, ExportChunkRequest
+from fabric.schemas.upload import UploadChunk, UploadStatus
 from fabric.schemas.station import (CalibrationReport, Check, Event, EventList, EventsQuery,
                                     Extrusion, LoadRequest, MeshRequest, Overrides, Pose,
                                     ReadyReport, StartRequest, StationState, Temps, TimeInfo)
@@ -18,7 +19,7 @@ __all__ = [
     "FINAL_JOB_STATES", "ON_STATION_JOB_STATES", "PRINT_JOB_STATES", "Backends", "CollisionHit", "CollisionReport", "CollisionRequest", "ExportRequest", "FabricStatus", "JobList",
     "JobMove", "JobRecord", "JobSubmit", "PlanRequest", "PlanSummary", "ProgramMsg", "ServiceInfo", "SliceRequest",
     "SliceResult", "SlowedMove", "UnreachableTarget",
-    "ExportChunk", "ExportChunkRequest",
+    "ExportChunk", "ExportChunkRequest", "UploadChunk", "UploadStatus",
     "CalibrationReport", "Check", "Event", "EventList", "EventsQuery", "Extrusion", "LoadRequest",
     "MeshRequest", "Overrides", "Pose", "ReadyReport", "StartRequest", "StationState", "Temps", "TimeInfo",
 ]

@@ -17,21 +17,21 @@ PRINT_JOB_STATES = ("queued", "slicing", "planning", "checking", "loaded", "prin
 FINAL_JOB_STATES = ("finished", "stopped", "failed")
 ON_STATION_JOB_STATES = ("loaded", "printing", "paused", "interrupted")
 WAITING_FOR = ("", "plate", "station", "queue")    # the operator's `job next`, a busy station, jobs ahead
-MAX_MODEL_BYTES = 256 << 20
 MATERIAL_SOURCES = ("option", "gcode", "assumed")  # where a plan's filament diameter came from
 
 
 # --- slicer ------------------------------------------------------------------
 
-@schema("slicer.SliceRequest")
+@schema("slicer.SliceRequest", version=2)
 class SliceRequest:
-    """Slice a model sent as bytes (so the slicer may run on another host)."""
+    """Slice a model sent as bytes (so the slicer may run on another host), inline or uploaded in chunks."""
     model: bytes
     filename: str = f(max_len=255)
     profile: str = "taz-pla-medium"
     backend: str = f("builtin", choices=BACKENDS)
     overrides: dict[str, str] = f(factory=dict)
     center_xy_mm: list[float] | None = f(None, shape=(2,))
+    upload_id: str = f("", max_len=64)          # a model sent in chunks to slicer/upload (then ``model`` is empty)
 
 
 @schema("slicer.SliceResult")
@@ -55,9 +55,10 @@ class Backends:
 
 # --- planner -----------------------------------------------------------------
 
-@schema("planner.PlanRequest", version=2)
+@schema("planner.PlanRequest", version=3)
 class PlanRequest:
-    """Plan G-code given inline (``gcode``) or by the slicer's artifact id (``gcode_id``).
+    """Plan G-code given inline (``gcode``), uploaded in chunks (``upload_id``, planner/upload) or by the
+    slicer's artifact id (``gcode_id``).
 
     ``filament_diameter_mm`` overrides what the G-code states (None: as stated, else assumed and said so)."""
     gcode: bytes = b""
@@ -71,6 +72,7 @@ class PlanRequest:
     wobj_rpy_deg: list[float] | None = f(None, shape=(3,))
     filament_diameter_mm: float | None = f(None, ge=0.5, le=5.0)
     allow_off_plate: bool = False               # targets off the plate or below it: counted, not fatal
+    upload_id: str = f("", max_len=64)
 
 
 @schema("planner.UnreachableTarget")

@@ -33,6 +33,8 @@ from fabric.jobs import Job, JobRunner
 from fabric.programs import content_id, program_artifact, program_from_artifact
 from fabric.config import add_cell_argument, service_data_dir
 from fabric.runtime import Service
+from fabric.schemas.upload import MAX_GCODE_BYTES
+from fabric.uploads import UploadStore
 from fabric.robot.cell import Cell
 from fabric.robot.frames import xyzrpy_to_T
 from fabric.motion.program import Program
@@ -73,6 +75,8 @@ class PlannerService(Service):
         self.handle("summary", self.on_summary)
         self.handle("export", self.on_export)
         self.handle("export_chunk", self.on_export_chunk)
+        self.uploads = UploadStore(self.data_dir / "uploads", MAX_GCODE_BYTES)     # large G-code, in pieces
+        self.handle("upload", self.uploads.put)
         self.serve_pins()
         self.exports: dict[tuple[str, str, int], ExportStream] = {}   # streamed exports being read
         self.recent: dict[str, PlannedProgram] = {}                   # program id -> the last plans
@@ -111,8 +115,11 @@ class PlannerService(Service):
         return art.artifact_id
 
     def on_plan(self, req: s.PlanRequest) -> s.JobAccepted:
-        if not req.gcode and not req.gcode_id:
-            raise BadRequest("give the G-code inline (gcode) or a slicer artifact id (gcode_id)", field="gcode")
+        if not req.gcode and not req.gcode_id and not req.upload_id:
+            raise BadRequest("give the G-code inline (gcode), uploaded (upload_id) or a slicer artifact id "
+                             "(gcode_id)", field="gcode")
+        if req.upload_id:
+            self.uploads.path(req.upload_id)        # NotFound now, not in the job
         wobj = None
         if req.wobj_xyz_mm is not None or req.wobj_rpy_deg is not None:
             wobj = xyzrpy_to_T(np.asarray(req.wobj_xyz_mm or [0.0, 0.0, 0.0]),
@@ -128,6 +135,8 @@ class PlannerService(Service):
         if req.gcode_id:
             job.progress(0.0, "fetching G-code")
             data = self.client.artifact("slicer", req.gcode_id).data
+        if req.upload_id:
+            data = self.uploads.path(req.upload_id)    # read from disk in blocks while it is parsed
         job.progress(0.0, "planning")
         name = req.filename.rsplit(".", 1)[0] + ".program"
         encoding: list[Future[s.Artifact]] = []

@@ -1,4 +1,5 @@
-"""Slicer service: model bytes in, G-code out, as a job; back-ends builtin, PrusaSlicer and Slic3r."""
+"""Slicer service: model bytes in (inline, or uploaded in pieces), G-code out, as a job; back-ends builtin,
+PrusaSlicer and Slic3r."""
 from __future__ import annotations
 
 import argparse
@@ -12,6 +13,8 @@ from fabric.jobs import Job, JobRunner
 from fabric.programs import content_id
 from fabric.config import add_cell_argument, service_data_dir
 from fabric.runtime import Service
+from fabric.schemas.upload import MAX_MODEL_BYTES
+from fabric.uploads import UploadStore
 from fabric.robot.cell import Cell
 from fabric.slicing import Placement, available_backends, list_profiles, load_profile, slice_model
 
@@ -32,6 +35,8 @@ class SlicerService(Service):
         self.handle("job", lambda q: self.jobs.get(q.job_id))
         self.handle("result", self.on_result)
         self.handle("backends", self.on_backends)
+        self.uploads = UploadStore(self.data_dir / "uploads", MAX_MODEL_BYTES)     # large models, in pieces
+        self.handle("upload", self.uploads.put)
         self.serve_pins()
 
     def close(self) -> None:
@@ -40,6 +45,8 @@ class SlicerService(Service):
 
     def on_slice(self, req: s.SliceRequest) -> s.JobAccepted:
         profile = load_profile(req.profile, req.overrides)     # a bad profile fails now, not in the job
+        if req.upload_id:
+            self.uploads.path(req.upload_id)                    # NotFound now, not in the job
         backends = available_backends()
         if backends.get(req.backend) is None:
             raise NotFound(f"slicer back-end '{req.backend}' is not installed on this host",
@@ -49,7 +56,8 @@ class SlicerService(Service):
         return s.JobAccepted(job_id=st.job_id, kind="slice")
 
     def _run(self, job: Job, req: s.SliceRequest, profile, placement) -> str:
-        res = slice_model(req.model, req.filename, profile, backend=req.backend, placement=placement,
+        model = self.uploads.path(req.upload_id).read_bytes() if req.upload_id else req.model
+        res = slice_model(model, req.filename, profile, backend=req.backend, placement=placement,
                           plate_size_mm=self.plate_size_mm, build_height_mm=self.build_height_mm,
                           progress=lambda fr: job.progress(fr, "slicing"))
         data = res.gcode.encode() if isinstance(res.gcode, str) else bytes(res.gcode)

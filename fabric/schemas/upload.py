@@ -1,0 +1,39 @@
+"""Large inputs sent in chunks: a G-code file or a model travels as pieces of a few MB, assembled on disk.
+
+One giant message would be held whole by the sender, the hub (a Zenoh router)
+and the receiver; pieces of at most ``UPLOAD_CHUNK_MAX_BYTES`` keep every
+process bounded. The client checks the file's size against the limit before
+reading a byte (``MAX_GCODE_BYTES``, ``MAX_MODEL_BYTES``, configurable).
+"""
+from __future__ import annotations
+
+from fabric.schemas.base import f, schema
+
+__all__ = ["UploadChunk", "UploadStatus", "UPLOAD_CHUNK_MAX_BYTES", "UPLOAD_CHUNK_BYTES", "MAX_GCODE_BYTES",
+           "MAX_MODEL_BYTES", "INLINE_MAX_BYTES", "UPLOAD_ID_PATTERN"]
+
+UPLOAD_CHUNK_MAX_BYTES = 8 << 20      # the largest piece a service takes
+UPLOAD_CHUNK_BYTES = 4 << 20          # what the client sends
+INLINE_MAX_BYTES = 4 << 20            # smaller inputs travel inside the request itself
+MAX_GCODE_BYTES = 512 << 20           # default limits, checked by the client up front and by the service
+MAX_MODEL_BYTES = 256 << 20
+UPLOAD_ID_PATTERN = r"[A-Za-z0-9_-]{8,64}"
+
+
+@schema("upload.Chunk")
+class UploadChunk:
+    """Bytes ``[offset, offset + len(data))`` of an input of ``total_bytes``; offset 0 starts (or restarts)
+    the upload, every next offset is where the last piece ended. The last piece carries ``sha256`` of the
+    whole input, which the service checks before the upload can be used."""
+    upload_id: str = f(max_len=64)
+    offset: int = f(ge=0)
+    total_bytes: int = f(ge=0)
+    data: bytes = b""
+    sha256: str = f("", max_len=64)
+
+
+@schema("upload.Status")
+class UploadStatus:
+    upload_id: str
+    received_bytes: int
+    done: bool = False
