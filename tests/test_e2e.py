@@ -109,6 +109,10 @@ def test_demo_path_through_the_processes(running_cell, client, tmp_path):
     assert rec.state == "finished" and rec.collisions.collision_free
     assert rec.started_s > 0 and rec.ended_s >= rec.started_s and rec.sim_elapsed_s > 0
     assert rec.deposited_mm3 == pytest.approx(rec.plan.extruded_mm3, rel=1e-6)
+    sliced = client.slice_result(rec.gcode_id)              # one volume from the slicer to the twin
+    assert rec.plan.extruded_mm3 == pytest.approx(sliced.extruded_mm3, rel=5e-3)
+    assert rec.plan.material_source == "gcode" and rec.plan.filament_diameter_mm == 2.85
+    assert client.state().deposited_mm3 == pytest.approx(rec.deposited_mm3, rel=1e-9)
     assert [j.state for j in client.jobs().jobs] == ["finished"]
     info = client.time()
     assert info.total_s == pytest.approx(rec.plan.estimate_s, rel=1e-6)
