@@ -255,7 +255,14 @@ def one_cell(tmp: Path, monitors: int, pose_hz: float, calls: int, print_s: floa
         peer = Client(zenoh.open(zenoh_config(bench.settings["load"])), "load")
         with Client.connect(replace(bench.settings["load"], mode="client")) as fab:
             fab.wait_alive(("station",), deadline_s=30)
+            key, empty = fab.keys.cmd("station", "position"), codec.encode(s.Empty())
+
+            def urgent_position() -> s.Pose:          # the same query at interactive priority, not batched
+                for reply in fab.session.get(key, payload=empty, timeout=5.0, priority=zenoh.Priority.INTERACTIVE_HIGH,
+                                             express=True):
+                    return codec.decode(reply.ok.payload.to_bytes(), s.Pose)
             designs = {"fabric client (via hub)": fab.position, "fabric peer (direct)": peer.position,
+                       "client, query at interactive priority": urgent_position,
                        "paper: asyncio TCP, new connection per request": lambda: paper_position(port)}
             idle = round_trips(designs, calls)
             mons = [Monitor.start(bench.endpoint, "load") for _ in range(monitors)]
