@@ -7,6 +7,7 @@ import csv
 import json
 import queue
 import signal
+import sys
 import threading
 import time
 from pathlib import Path
@@ -136,6 +137,7 @@ def cmd_record(c: Client, a: argparse.Namespace) -> int:
         r.start()
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    print(f"recording {' '.join(topics)} to {out} (Ctrl-C stops)", file=sys.stderr, flush=True)
     rows: list[dict[str, Any]] = []
     counts: dict[str, int] = {t: 0 for t in topics}
     bad = 0

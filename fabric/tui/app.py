@@ -47,7 +47,7 @@ class FabricConsole(App):
         Binding("s", "command('start')", "start"), Binding("p", "command('pause')", "pause"),
         Binding("r", "command('resume')", "resume"), Binding("x", "command('stop')", "stop"),
         Binding("o", "command('overrides')", "override"), Binding("question_mark", "help", "keys"),
-        Binding("q", "quit", "quit"), Binding("f", "command('rtf')", "sim speed", show=False),
+        Binding("q", "quit", "quit", show=False), Binding("f", "command('rtf')", "sim speed", show=False),
         Binding("v", "command('recover')", "recover", show=False),
         Binding("h", "command('home')", "home", show=False),
         Binding("k", "command('calibrate')", "calibrate", show=False),

@@ -43,16 +43,18 @@ class BrailleCanvas:
 
     def lines(self, x0: np.ndarray, y0: np.ndarray, x1: np.ndarray, y1: np.ndarray, style: str = "",
               rank: int = 0) -> None:
-        """Draw segments (pixel coordinates, floats allowed), sampled at one dot per pixel of length."""
+        """Draw segments (pixel coordinates, floats allowed), sampled twice per pixel of length; dots are
+        the pixels the samples fall in (floor of x + 0.5: ``np.rint`` rounds halves to even, which
+        would skip every other pixel along a line through half-pixel coordinates)."""
         x0, y0, x1, y1 = (np.atleast_1d(np.asarray(v, dtype=float)) for v in (x0, y0, x1, y1))
         if not len(x0):
             return
-        steps = np.maximum(np.abs(x1 - x0), np.abs(y1 - y0)).astype(np.int64) + 1
+        steps = (2 * np.maximum(np.abs(x1 - x0), np.abs(y1 - y0))).astype(np.int64) + 2
         seg = np.repeat(np.arange(len(x0)), steps)
         start = np.repeat(np.cumsum(steps) - steps, steps)
         t = (np.arange(int(steps.sum())) - start) / np.maximum(steps[seg] - 1, 1)
-        xs = np.rint(x0[seg] + (x1[seg] - x0[seg]) * t)
-        ys = np.rint(y0[seg] + (y1[seg] - y0[seg]) * t)
+        xs = np.floor(x0[seg] + (x1[seg] - x0[seg]) * t + 0.5)
+        ys = np.floor(y0[seg] + (y1[seg] - y0[seg]) * t + 0.5)
         self.dots(xs, ys, style, rank)
 
     def mark(self, x_px: float, y_px: float, char: str, style: str) -> None:

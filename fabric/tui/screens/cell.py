@@ -86,4 +86,4 @@ class CellScreen(Screen):
     def _on_reply(self, reply: Any) -> None:
         if reply is not None:
             line = self.query_one(ReplyLine)
-            line.command, line.text, line.ok = reply
+            line.command, line.ok, line.text = reply

@@ -22,7 +22,7 @@ def event_data_text(data: dict) -> str:
 
 
 class EventsScreen(Screen):
-    BINDINGS = [Binding("slash", "search", "search"), Binding("escape", "clear", "clear filter", show=False)]
+    BINDINGS = [Binding("slash", "search", "search", show=False), Binding("escape", "clear", "clear filter", show=False)]
 
     def __init__(self) -> None:
         super().__init__()
@@ -88,7 +88,7 @@ class EventsScreen(Screen):
     # --- filters ----------------------------------------------------------------------
 
     def on_select_changed(self, event: Select.Changed) -> None:
-        self.kind = None if event.value is Select.BLANK else str(event.value)
+        self.kind = None if event.value in (Select.NULL, Select.BLANK) else str(event.value)
         self.rows = []
         self.redraw()
         self.load(self.kind)

@@ -20,14 +20,16 @@ WAITING_STATES = ("queued", "slicing", "planning", "checking")     # reorderable
 
 
 class JobsScreen(Screen):
-    BINDINGS = [Binding("a", "submit", "submit"), Binding("n", "next", "next job"),
-                Binding("delete,backspace", "remove", "remove"), Binding("left_square_bracket", "move(-1)", "up"),
-                Binding("right_square_bracket", "move(1)", "down")]
+    # listed on the screen itself (the footer keeps the console's keys, the same on every screen)
+    BINDINGS = [Binding("a", "submit", "submit", show=False), Binding("n", "next", "next job", show=False),
+                Binding("delete,backspace", "remove", "remove", show=False),
+                Binding("left_square_bracket", "move(-1)", "up", show=False),
+                Binding("right_square_bracket", "move(1)", "down", show=False)]
 
     def compose(self) -> ComposeResult:
         yield Header()
         with Vertical(id="jobs-body"):
-            yield Label("queue: a submit · n next (plate clear) · [ ] reorder · del remove · enter details",
+            yield Label("queue  a submit · n next (plate clear) · [ ] move · del remove · ⏎ record",
                         classes="section-title")
             yield DataTable(id="queue", cursor_type="row", zebra_stripes=True)
             yield Label("history", classes="section-title")
@@ -37,7 +39,7 @@ class JobsScreen(Screen):
 
     def on_mount(self) -> None:
         self.query_one("#queue", DataTable).add_columns("job", "state", "file", "stage / waiting for")
-        self.query_one("#history", DataTable).add_columns("job", "outcome", "file", "duration sim/wall",
+        self.query_one("#history", DataTable).add_columns("job", "outcome", "file", "sim / wall",
                                                           "material", "ended", "reason")
         self.watch(self.app, "jobs", self._on_jobs)
         self.watch(self.app, "reply", self._on_reply)
@@ -53,14 +55,14 @@ class JobsScreen(Screen):
             if rec.state in s.FINAL_JOB_STATES:
                 continue
             waiting = rec.waiting_for and f"waiting for the {rec.waiting_for}"
-            queue_t.add_row(rec.job_id, rec.state, rec.filename, waiting or rec.stage or rec.reason, key=rec.job_id)
+            queue_t.add_row(rec.job_id[:8], rec.state, rec.filename, waiting or rec.stage or rec.reason, key=rec.job_id)
         done = sorted((r for r in jobs if r.state in s.FINAL_JOB_STATES), key=lambda r: -r.ended_s)
         for rec in done:
-            took = (f"{duration_text(rec.sim_elapsed_s)} / {duration_text(rec.wall_elapsed_s)}"
+            took = (f"{duration_text(rec.sim_elapsed_s)}/{duration_text(rec.wall_elapsed_s)}"
                     if rec.started_s else "-")
-            material = f"{rec.deposited_mm3:.0f} mm3 {rec.filament_mm / 1000:.2f} m" if rec.started_s else "-"
+            material = f"{rec.deposited_mm3:.0f} mm3" if rec.started_s else "-"
             outcome = {"finished": "[green]finished[/]", "failed": "[red]failed[/]"}.get(rec.state, rec.state)
-            history_t.add_row(rec.job_id, outcome, rec.filename, took, material,
+            history_t.add_row(rec.job_id[:8], outcome, rec.filename, took, material,
                               self.app.time_text(rec.ended_s), rec.reason, key=rec.job_id)
         for table, key in ((queue_t, keep_q), (history_t, keep_h)):
             if key is not None and key in table.rows:
@@ -69,7 +71,7 @@ class JobsScreen(Screen):
     def _on_reply(self, reply: Any) -> None:
         if reply is not None:
             line = self.query_one(ReplyLine)
-            line.command, line.text, line.ok = reply
+            line.command, line.ok, line.text = reply
 
     def _selected(self, table_id: str) -> str | None:
         table = self.query_one(table_id, DataTable)

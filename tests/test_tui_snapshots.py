@@ -1,0 +1,112 @@
+"""SVG snapshots of each console screen at 80x24 and 160x48, in a fixed state (no services, frozen clocks)."""
+from __future__ import annotations
+
+import itertools
+import time
+
+import numpy as np
+import pytest
+
+from fabric import schemas as s
+from fabric.motion.program import MOVEL, PRINT, Program
+from fabric.tui.app import FabricConsole
+from fabric.tui.toolpath import Toolpath
+
+pytestmark = pytest.mark.timeout(120)
+
+SIZES = {"80x24": (80, 24), "160x48": (160, 48)}
+NOW_S = 1_767_225_600.0          # 2026-01-01 00:00:00 UTC
+
+
+@pytest.fixture(autouse=True)
+def utc(monkeypatch):
+    """The ETA and job times are local times: fix the zone."""
+    monkeypatch.setenv("TZ", "UTC")
+    time.tzset()
+    yield
+    monkeypatch.undo()
+    time.tzset()
+
+
+def square_layers(layers: int = 4, side_mm: float = 40.0) -> Toolpath:
+    """A program of square perimeters with a diagonal infill line per layer."""
+    pts = []
+    for k in range(layers):
+        z = 0.3 * (k + 1)
+        for x, y, flow in ((0, 0, 0.0), (side_mm, 0, 1), (side_mm, side_mm, 1), (0, side_mm, 1), (0, 0, 1),
+                           (side_mm, side_mm, 1), (side_mm / 2, 0, 0.0), (side_mm / 2, side_mm, 1)):
+            pts.append((x + 80, y + 90, z, flow, k))
+    prog = Program.empty(len(pts) + 1)
+    prog.op[:] = MOVEL
+    prog.section[1:] = PRINT
+    prog.xyz_mm[1:] = [(x, y, z) for x, y, z, _, _ in pts]
+    prog.xyz_mm[0] = prog.xyz_mm[1]
+    prog.flow_mm3_mm[1:] = [f for *_, f, _ in pts]
+    prog.layer[1:] = [k for *_, k in pts]
+    return Toolpath.from_program(prog)
+
+
+def job(job_id: str, state: str, filename: str, **kw) -> s.JobRecord:
+    return s.JobRecord(job_id=job_id, filename=filename, state=state, created_s=NOW_S - 3600, **kw)
+
+
+JOBS = [
+    job("a1b2c3d4e5f6", "printing", "bracket.stl", stage="printing layer 3", started_s=NOW_S - 600),
+    job("b2c3d4e5f6a1", "queued", "vase.stl", prepared=True, waiting_for="plate", stage="prepared"),
+    job("c3d4e5f6a1b2", "finished", "sample_part.stl", started_s=NOW_S - 7200, ended_s=NOW_S - 5600,
+        sim_elapsed_s=1587.2, wall_elapsed_s=1600.0, deposited_mm3=6529.0, filament_mm=2712.0),
+    job("d4e5f6a1b2c3", "stopped", "gear.3mf", started_s=NOW_S - 9000, ended_s=NOW_S - 8800,
+        sim_elapsed_s=200.0, wall_elapsed_s=20.0, deposited_mm3=512.0, filament_mm=213.0,
+        reason="stopped by the operator at layer 4 of 40"),
+    job("e5f6a1b2c3d4", "failed", "tower.stl", ended_s=NOW_S - 9500, reason="unreachable: G-code line 1234"),
+]
+EVENTS = [
+    s.Event(seq=1, t_sim_s=2.7, kind="started", data={"rows": 11898, "estimate_s": 1587.2}),
+    s.Event(seq=2, t_sim_s=5.8, kind="layer", layer=0, gcode_line=8, data={"z_mm": 0.5}),
+    s.Event(seq=3, t_sim_s=325.8, kind="temp_reached", layer=0, gcode_line=10, data={"heater": "bed", "temp_c": 59}),
+    s.Event(seq=4, t_sim_s=325.8, kind="temp_reached", layer=0, gcode_line=11,
+            data={"heater": "nozzle", "temp_c": 215}),
+    s.Event(seq=5, t_sim_s=465.5, kind="layer", layer=1, gcode_line=464, data={"z_mm": 1.7}),
+    s.Event(seq=6, t_sim_s=480.0, kind="override", layer=1, data={"speed_r": 1.5}),
+    s.Event(seq=7, t_sim_s=517.1, kind="layer", layer=2, gcode_line=848, data={"z_mm": 2.3}),
+    s.Event(seq=8, t_sim_s=530.2, kind="paused", layer=2, gcode_line=900, data={"reason": "operator"}),
+]
+
+
+def frozen_console() -> FabricConsole:
+    ticks = itertools.count(0.0, 15.0)          # each temperature sample 15 s after the last
+    return FabricConsole(None, wall_clock=lambda: NOW_S, monotonic_clock=lambda: next(ticks))
+
+
+async def fill(pilot, screen: str) -> None:
+    app: FabricConsole = pilot.app
+    app.cell = "cell1"
+    app.sub_title = "cell cell1"
+    app.alive = {"station": True, "slicer": True, "planner": True, "collision": True, "supervisor": False}
+    app.limits = ([-180.0, -90.0, -230.0, -200.0, -115.0, -400.0], [180.0, 110.0, 50.0, 200.0, 115.0, 400.0])
+    app.toolpath = square_layers()
+    app.station_state = s.StationState(state="printing", program_id="p", job_id="a1b2c3d4e5f6", t_sim_s=530.0,
+                                       elapsed_s=527.0, total_s=1587.0, remaining_s=1060.0, progress_r=0.31,
+                                       deposited_mm3=2024.0, planned_mm3=6529.0, layer=2, layers_total=4,
+                                       rtf=10.0, speed_r=1.5, flow_r=1.0)
+    for k in range(21):
+        app.temps = s.Temps(nozzle_c=min(215.0, 25 + 19 * k), nozzle_target_c=215.0, bed_c=min(60.0, 25 + 4 * k),
+                            bed_target_c=60.0, t_sim_s=10.0 * k)
+    app.pose = s.Pose(seq=100, t_sim_s=530.0, q_deg=[12.5, 35.2, -20.1, 0.4, 108.0, -12.0],
+                      xyz_mm=[120.0, 90.0, 0.9], quat_wxyz=[0.0, 1.0, 0.0, 0.0], base_xyz_mm=[480.0, 10.0, 200.0])
+    app.extrusion = s.Extrusion(seq=50, t_sim_s=530.0, on=True, flow_mm3_s=4.25, extruded_mm3=2024.0,
+                                filament_mm=841.0, layer=2, row=19, gcode_line=900, flow_r=1.0)
+    app.jobs = list(JOBS)
+    app.reply = ("overrides", True, "speed x1.50  flow x1.00  rtf 10")
+    await app.switch_mode(screen)
+    if screen == "events":
+        app.screen.show_events(None, EVENTS)
+    await pilot.pause()
+
+
+@pytest.mark.parametrize("size", SIZES)
+@pytest.mark.parametrize("screen", ["cell", "jobs", "events"])
+def test_screen_snapshot(snap_compare, screen, size):
+    async def run_before(pilot) -> None:
+        await fill(pilot, screen)
+    assert snap_compare(frozen_console(), terminal_size=SIZES[size], run_before=run_before)
