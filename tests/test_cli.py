@@ -114,7 +114,12 @@ def test_plan_unreachable_names_the_line(settings, tmp_path):
     bad.write_text("G21\nG90\nM83\nG1 Z0.3 F600\nG1 X100 Y100 E1\nG1 X2000 Y100 E5 ; far off the plate\n")
     r = cli(settings, "plan", str(bad))
     assert r.returncode == 2
-    assert "line 6" in r.stdout and "out of reach" in r.stdout
+    assert "line 6" in r.stdout and "off the plate" in r.stdout and "--allow-off-plate" in r.stdout
+    assert "cycle time n/a" in r.stdout and "-1.0" not in r.stdout
+    assert "filament 1.75 mm (ASSUMED)" in r.stdout and "warning: the G-code states no filament diameter" in r.stdout
+    r = cli(settings, "plan", str(bad), "--allow-off-plate", "--filament-diameter", "2.85")
+    assert r.returncode == 2 and "line 6: out of reach" in r.stdout and "(allowed)" in r.stdout
+    assert "filament 2.85 mm (as asked)" in r.stdout and "warning" not in r.stdout
     r = cli(settings, "plan", str(bad), "--csv", str(tmp_path / "x.csv"), "--rapid", str(tmp_path / "x.mod"))
     assert r.returncode == 1 and "error [unreachable]" in r.stderr and "line 6" in r.stderr
     # all or nothing: the CSV (which could be written) is not left either, nor any temporary file

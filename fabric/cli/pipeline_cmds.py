@@ -26,6 +26,11 @@ def parse_sets(items: list[str] | None) -> dict[str, str]:
     return out
 
 
+def _cycle_time(r: s.PlanSummary) -> str:
+    """The estimate in words: none when the program cannot run (the summary holds -1)."""
+    return f"{r.estimate_s:.1f} s" if r.estimate_s >= 0 else "n/a (not runnable)"
+
+
 def _progress(quiet: bool):
     if quiet:
         return None
@@ -79,7 +84,7 @@ def cmd_plan(c: Client, a: argparse.Namespace) -> int:
     def text(_):
         r = summary
         lines = [f"program {r.program_id[:12]}: {r.targets} targets, {r.moves} moves, {r.layers} layers, "
-                 f"cycle time {r.estimate_s:.1f} s, {r.extruded_mm3:.0f} mm3, feasible {100 * r.feasible_r:.2f} %"]
+                 f"cycle time {_cycle_time(r)}, {r.extruded_mm3:.0f} mm3, feasible {100 * r.feasible_r:.2f} %"]
         stated = {"option": "as asked", "gcode": "as the G-code states", "assumed": "ASSUMED"}[r.material_source]
         lines.append(f"material {r.material or 'unnamed'}, filament {r.filament_diameter_mm:g} mm ({stated})"
                      + (f", {r.mass_g:.1f} g" if r.mass_g is not None else ""))
