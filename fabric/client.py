@@ -328,21 +328,26 @@ class Client:
         request = s.ExportRequest(program_id=program_id, fmt=fmt, module_targets=module_targets)
         return self.call("planner", "export", request)
     def export_chunk(self, program_id: str, fmt: str, offset: int = 0, limit_bytes: int = 4 << 20,
-                     module_targets: int = 5000) -> s.ExportChunk:
-        """One chunk of a streamed export (offset 0 starts it; then each offset where the last chunk ended)."""
+                     module_targets: int = 5000, *, job_id: str = "") -> s.ExportChunk:
+        """One chunk of a streamed export (offset 0 starts it; then each offset where the last chunk ended).
+
+        With ``job_id`` (and ``program_id`` empty) the program of that plan job, as soon as it exists."""
         return self.call("planner", "export_chunk", s.ExportChunkRequest(
-            program_id=program_id, fmt=fmt, offset=offset, limit_bytes=limit_bytes, module_targets=module_targets))
+            program_id=program_id, fmt=fmt, offset=offset, limit_bytes=limit_bytes, module_targets=module_targets,
+            job_id=job_id))
 
     def export_to(self, program_id: str, fmt: str, out: BinaryIO, module_targets: int = 5000,
-                  limit_bytes: int = 16 << 20) -> int:
+                  limit_bytes: int = 16 << 20, *, job_id: str = "") -> int:
         """Stream an export into ``out`` chunk by chunk; returns the bytes written.
 
         A chunk is what the planner has formatted by the time it is asked, up to ``limit_bytes``. Chunks
-        are written to ``out`` by a helper thread while the next one is fetched (memory: a few chunks)."""
+        are written to ``out`` by a helper thread while the next one is fetched (memory: a few chunks).
+        With ``job_id`` (``program_id`` empty) the export of a plan job still running starts as soon as its
+        program is final (an empty chunk meanwhile: asked again)."""
         offset = 0
         with _ChunkWriter(out) as writer:
             while True:
-                chunk = self.export_chunk(program_id, fmt, offset, limit_bytes, module_targets)
+                chunk = self.export_chunk(program_id, fmt, offset, limit_bytes, module_targets, job_id=job_id)
                 writer.write(chunk.data)
                 offset += len(chunk.data)
                 if chunk.done:

@@ -7,7 +7,7 @@ import pytest
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.errors import BadRequest, NotFound, UnreachableError, ValidationError
+from fabric.errors import BadRequest, FabricError, NotFound, UnreachableError, ValidationError
 from fabric.planning.post.atomic import AtomicFiles
 from fabric.planning.post.stream import ExportStream
 from fabric.robot.cell import Cell
@@ -77,6 +77,31 @@ def test_unreachable_program_exports_only_csv(session, settings, cell) -> None:
             with pytest.raises(UnreachableError):
                 client.export_chunk(st.result_id, "rapid", 0)
             assert client.export_to(st.result_id, "csv", io.BytesIO()) > 0
+    finally:
+        planner.close()
+
+
+@pytest.mark.parametrize("fmt", ["csv", "rapid"])
+def test_export_by_job_id_starts_before_the_job_ends(session, settings, cell, fmt: str) -> None:
+    """Asked for by job id right after the plan is accepted: the same bytes as the export by program id."""
+    planner = PlannerService(session, settings.cell, cell)
+    planner.start()
+    try:
+        with Client.connect(settings) as client:
+            client.wait_alive(("planner",), deadline_s=20)
+            acc = client.plan(s.PlanRequest(gcode=_GCODE.encode(), filename="grid.gcode"))
+            early = io.BytesIO()
+            client.export_to("", fmt, early, module_targets=300, limit_bytes=4096, job_id=acc.job_id)
+            st = client.wait_job("planner", acc.job_id, timeout=60)
+            assert early.getvalue() == client.export(st.result_id, fmt, module_targets=300).data
+            last = client.export_chunk("", fmt, 0, 1 << 20, 300, job_id=acc.job_id)
+            assert last.program_id == st.result_id and last.name == f"grid.{'csv' if fmt == 'csv' else 'mod'}"
+            with pytest.raises(NotFound):
+                client.export_chunk("", fmt, 0, job_id="0" * 12)
+            bad = client.plan(s.PlanRequest(gcode=b"G21\nG90\nG1 X1.2.3 Y4\n"))    # the job's error, typed
+            with pytest.raises(FabricError) as err:
+                client.export_to("", fmt, io.BytesIO(), job_id=bad.job_id)
+            assert err.value.code == "gcode"
     finally:
         planner.close()
 

@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import argparse
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import BinaryIO
 
 from fabric import schemas as s
 from fabric.cli.output import emit
@@ -56,29 +58,35 @@ def cmd_slice(c: Client, a: argparse.Namespace) -> int:
     return 0
 
 
-def plan_file(c: Client, data: bytes, filename: str, a: argparse.Namespace) -> s.PlanSummary:
+def plan_file(c: Client, data: bytes, filename: str, a: argparse.Namespace,
+              exports: dict[str, BinaryIO] | None = None) -> tuple[s.PlanSummary, dict[str, int]]:
+    """Plan G-code; returns its summary and the bytes of each export written into ``exports`` (format ->
+    binary stream). The exports are asked for by job id at once, so the planner streams each as soon as
+    the program is final (the CSV once its times are), while the job goes on with its cycle time and id."""
     req = s.PlanRequest(**gcode_source(c, data), filename=filename, offset_mm=list(a.offset), speed_r=a.speed,
                         tilt_deg=list(a.tilt), rot_step_deg=a.rot_step, filament_diameter_mm=a.filament_diameter,
                         allow_off_plate=a.allow_off_plate)
     acc = c.plan(req)
-    st = c.wait_job("planner", acc.job_id, on_progress=_progress(a.json))
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="plan-progress") as follow:
+        job = follow.submit(c.wait_job, "planner", acc.job_id, on_progress=_progress(a.json))
+        sizes = {fmt: c.export_to("", fmt, out, a.module_targets, job_id=acc.job_id)
+                 for fmt, out in (exports or {}).items()}
+        st = job.result()
     if not a.json:
         print(file=sys.stderr)
-    return c.plan_summary(st.result_id)
+    return c.plan_summary(st.result_id), sizes
 
 
 def cmd_plan(c: Client, a: argparse.Namespace) -> int:
     from fabric.planning.memory import keep_freed_memory    # only this command needs these
     from fabric.planning.post.atomic import AtomicFiles
     keep_freed_memory()                     # export chunks reuse the pages of the ones before
-    summary = plan_file(c, read_input(a.gcode), Path(a.gcode).name, a)
-    written = {}
+    data = read_input(a.gcode)
     with AtomicFiles() as files:          # every export file, or none (temporary files renamed at the end)
-        for fmt in EXPORT_FLAGS:
-            out = getattr(a, fmt)
-            if out:
-                c.export_to(summary.program_id, fmt, files.open(out), a.module_targets)
-                written[fmt] = out
+        targets = {fmt: getattr(a, fmt) for fmt in EXPORT_FLAGS if getattr(a, fmt)}
+        summary, _sizes = plan_file(c, data, Path(a.gcode).name, a,
+                                    {fmt: files.open(out) for fmt, out in targets.items()})
+    written = targets
     result = {"summary": summary, "written": written}
 
     def text(_):

@@ -43,7 +43,7 @@ from fabric.motion.program import APPROACH, MOVEJ, MOVEL, PRINT, RETURN_HOME, SE
 __all__ = ["plan_gcode", "plan_gcode_file", "plan_toolpath"]
 
 Progress = Callable[[float], None]
-ProgramReady = Callable[[Program], None]     # told the program once it is final
+ProgramReady = Callable[[Program, Reachability], None]     # told the program (and its reach) once it is final
 JUMP_DEG = 45.0          # joint step between consecutive linear targets flagged as a jump
 
 
@@ -62,7 +62,8 @@ def plan_gcode(text: str | bytes | os.PathLike[str], cell: Any, options: PlanOpt
     ``filename`` (optional) names the job: the program's ``meta`` gets
     ``filename`` and ``name`` (its stem), which exports use. ``on_program`` is
     called with the program as soon as it is final, before the cycle-time
-    estimate (e.g. to start encoding it on another thread); it must not change it.
+    estimate, with its reachability (e.g. to start encoding or exporting it on another thread); it must
+    not change either.
     """
     parse = parse_gcode_file if isinstance(text, os.PathLike) else parse_gcode     # a path: read in blocks
     return _parse_and_plan(parse, text, cell, options, progress, filename, on_program)
@@ -285,7 +286,7 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
     report = Reachability.from_status(status, rot, motion, prog.gcode_line, envelope, opt.allow_off_plate)
     prog.meta.update(print_rows=n_print, options=opt.to_dict(), **material.meta(), **(meta or {}))
     if on_program is not None:               # the program is final: the estimate below only reads it
-        on_program(prog)
+        on_program(prog, report)
     t2 = time.perf_counter()
     estimate = float("nan")
     slowed_rows = slowed_joint = t_end = None

@@ -9,11 +9,17 @@ __all__ = ["ExportChunkRequest", "ExportChunk", "MAX_CHUNK_BYTES"]
 MAX_CHUNK_BYTES = 64 << 20
 
 
-@schema("planner.ExportChunkRequest")
+@schema("planner.ExportChunkRequest", version=2)
 class ExportChunkRequest:
-    """The next chunk of an export. Offset 0 starts (or restarts) it; every next offset is where the last ended."""
-    program_id: str = f(max_len=128)
+    """The next chunk of an export. Offset 0 starts (or restarts) it; every next offset is where the last ended.
+
+    The program is a planned ``program_id``, or the program of the plan job ``job_id`` (``program_id``
+    empty): that export starts as soon as the job's program is final, before its cycle time and its id
+    are known (the CSV's ``t_s`` column waits for the times). Until then a chunk may come back empty and
+    not ``done``: ask again at the same offset."""
     fmt: str = f(choices=EXPORT_FORMATS)
+    program_id: str = f("", max_len=128)
+    job_id: str = f("", max_len=64)
     offset: int = f(0, ge=0)
     limit_bytes: int = f(4 << 20, ge=4096, le=MAX_CHUNK_BYTES)
     module_targets: int = f(5000, ge=10, le=1_000_000)

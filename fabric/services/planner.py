@@ -28,7 +28,7 @@ import zenoh
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.errors import BadRequest, FabricError, NotFound, UnreachableError
+from fabric.errors import BadRequest, FabricError, InternalError, NotFound, UnreachableError, error_from_code
 from fabric.jobs import Job, JobRunner
 from fabric.programs import content_id, program_artifact, program_from_artifact
 from fabric.config import add_cell_argument, service_data_dir
@@ -41,8 +41,10 @@ from fabric.motion.program import Program
 from fabric.motion.timing import StartState, time_program
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.memory import keep_freed_memory
+from fabric.planning.report import Reachability
 from fabric.planning.post import write_export
 from fabric.planning.post.stream import ExportStream
+from fabric.services.plan_handoff import PlanHandoff
 
 __all__ = ["PlannerService", "build", "add_arguments"]
 
@@ -50,6 +52,8 @@ MEDIA = {"rapid": "text/x-rapid", "krl": "text/x-krl", "urscript": "text/x-urscr
 SUFFIX = {"rapid": "mod", "krl": "src", "urscript": "script", "csv": "csv"}
 KEEP_PLANS = 1              # plans kept in memory for their exports (a million-row program is ~160 MB)
 MAX_EXPORT_STREAMS = 4      # streamed exports open at once (a reader that went away is dropped by the next)
+KEEP_HANDOFFS = 8           # plan jobs whose exports can still be asked for by job id
+JOB_EXPORT_POLL_S = 30.0    # an export by job id answers an empty chunk after this long without bytes
 BACKGROUND_NICE = 10        # nice value of the thread writing artifacts to disk
 
 
@@ -80,6 +84,8 @@ class PlannerService(Service):
         self.serve_pins()
         self.exports: dict[tuple[str, str, int], ExportStream] = {}   # streamed exports being read
         self.recent: dict[str, PlannedProgram] = {}                   # program id -> the last plans
+        self.handoffs: dict[str, PlanHandoff] = {}                    # job id -> what the plan job has so far
+        self._handoffs_lock = threading.Lock()
         self._unstored: dict[str, s.Artifact] = {}                    # artifacts not yet on disk
         self._unstored_lock = threading.Lock()
         self._storer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner-store",
@@ -138,16 +144,33 @@ class PlannerService(Service):
         if req.upload_id:
             data = self.uploads.path(req.upload_id)    # read from disk in blocks while it is parsed
         job.progress(0.0, "planning")
+        handoff = self._handoff(job.job_id)
+        try:
+            handoff.name = Path(req.filename).stem
+            pid = self._plan(job, req, options, data, handoff)
+        except FabricError as err:
+            handoff.failed(err)
+            raise
+        except Exception as exc:    # a bug: the job reports it; exports waiting on the job get it too
+            handoff.failed(InternalError(f"planning failed: {type(exc).__name__}: {exc}"))
+            raise
+        handoff.finished(pid)
+        return pid
+
+    def _plan(self, job: Job, req: s.PlanRequest, options: PlanOptions, data: bytes, handoff: PlanHandoff) -> str:
         name = req.filename.rsplit(".", 1)[0] + ".program"
         encoding: list[Future[s.Artifact]] = []
 
-        def encode(program: Program) -> None:
-            # the program is final: encode and hash it (its id) while the plan goes on with the cycle time
+        def program_ready(program: Program, report: Reachability) -> None:
+            # the program is final: exports by job id start formatting it, and it is encoded and hashed
+            # (its id) while the plan goes on with the cycle time
+            handoff.program_ready(program, _first_unreachable(report))
             encoding.append(self._encoder.submit(program_artifact, program, name))
 
         result = plan_gcode(data, self.cell, options, progress=lambda fr: job.progress(fr, "planning"),
-                            filename=req.filename, on_program=encode)
+                            filename=req.filename, on_program=program_ready)
         program = result.program
+        handoff.times_ready(result.t_end_s)
         art = encoding[0].result() if encoding else program_artifact(program, name=name)
         pid = self._store_later(art)
         self.recent.pop(pid, None)
@@ -155,10 +178,7 @@ class PlannerService(Service):
         while len(self.recent) > KEEP_PLANS:
             self.recent.pop(next(iter(self.recent)))
         rep = result.report
-        first = None
-        if rep.first_unreachable is not None:
-            line, reason = rep.first_unreachable
-            first = s.UnreachableTarget(gcode_line=int(line), reason=reason, row=int(rep.first_unreachable_row))
+        first = _first_unreachable(rep)
         st = result.stats
         estimate = float(result.estimate_s) if np.isfinite(result.estimate_s) else -1.0
         summary = s.PlanSummary(
@@ -170,6 +190,19 @@ class PlannerService(Service):
             first_slowed=_first_slowed(result, program), allow_off_plate=req.allow_off_plate, **_material_fields(st))
         self.records.put("summary", pid, summary)
         return pid
+
+    def _handoff(self, job_id: str) -> PlanHandoff:
+        """The hand-off of a plan job (made by the job or by the first export asking for it)."""
+        with self._handoffs_lock:
+            handoff = self.handoffs.get(job_id)
+            if handoff is None:
+                handoff = self.handoffs[job_id] = PlanHandoff()
+                ended = [k for k, h in self.handoffs.items() if h.ended]
+                for k in ended[:-1]:
+                    self.handoffs[k].release()      # memory: the exports keep only the last plan
+                for k in ended[:max(len(self.handoffs) - KEEP_HANDOFFS, 0)]:
+                    del self.handoffs[k]
+            return handoff
 
     def on_summary(self, req: s.ArtifactQuery) -> s.PlanSummary:
         summary = self.records.get("summary", req.artifact_id, s.PlanSummary)
@@ -186,28 +219,74 @@ class PlannerService(Service):
 
     def on_export_chunk(self, req: s.ExportChunkRequest) -> s.ExportChunk:
         """The next chunk of a streamed export: offset 0 starts it, each next offset is where the last ended."""
-        key = (req.program_id, req.fmt, req.module_targets)
+        if not req.program_id and not req.job_id:
+            raise BadRequest("name the program (program_id) or the plan job (job_id)", field="program_id")
+        key = (req.program_id or f"job:{req.job_id}", req.fmt, req.module_targets)
         stream = self.exports.get(key)
         if req.offset == 0:
-            write, name = self._exporter(req.program_id, req.fmt, req.module_targets)
+            if req.program_id:
+                write, name = self._exporter(req.program_id, req.fmt, req.module_targets)
+            else:
+                write, name = self._job_exporter(req.job_id, req.fmt, req.module_targets)
             if stream is not None:
                 stream.cancel()
             stream = self.exports[key] = ExportStream(write, name)
             while len(self.exports) > MAX_EXPORT_STREAMS:        # readers that went away
                 self.exports.pop(next(iter(self.exports))).cancel()
         elif stream is None:
-            self.on_summary(s.ArtifactQuery(artifact_id=req.program_id))     # NotFound for an unknown program
-            raise BadRequest(f"no {req.fmt} export of {req.program_id} in progress: start it at offset 0",
-                             field="offset", value=req.offset)
+            if req.program_id:
+                self.on_summary(s.ArtifactQuery(artifact_id=req.program_id))     # NotFound for an unknown program
+            else:
+                self.jobs.get(req.job_id)                                       # NotFound for an unknown job
+            raise BadRequest(f"no {req.fmt} export of {req.program_id or 'job ' + req.job_id} in progress: "
+                             f"start it at offset 0", field="offset", value=req.offset)
         try:
-            data = stream.read(req.offset, req.limit_bytes)
+            if req.program_id:
+                data = stream.read(req.offset, req.limit_bytes)
+            else:       # the job may still be planning: an empty chunk says "ask again"
+                data = stream.read(req.offset, req.limit_bytes, JOB_EXPORT_POLL_S, empty_on_timeout=True)
         except FabricError:
             self.exports.pop(key, None)
             raise
         if stream.done:
             self.exports.pop(key, None)
-        return s.ExportChunk(program_id=req.program_id, fmt=req.fmt, offset=req.offset, data=data, done=stream.done,
-                             name=stream.name, media_type=MEDIA[req.fmt])
+        program_id, name = req.program_id, stream.name
+        if not program_id:
+            handoff = self.handoffs.get(req.job_id)
+            program_id = handoff.program_id if handoff is not None else ""
+            name = f"{handoff.name or 'program'}.{SUFFIX[req.fmt]}" if handoff is not None else name
+        return s.ExportChunk(program_id=program_id, fmt=req.fmt, offset=req.offset, data=data, done=stream.done,
+                             name=name, media_type=MEDIA[req.fmt])
+
+    def _job_exporter(self, job_id: str, fmt: str, module_targets: int) -> tuple[Callable[[TextIO], None], str]:
+        """The writer of an export of plan job ``job_id``'s program: it waits for the program (and, for
+        the CSV, its times), so it can be started as soon as the job is accepted."""
+        st = self.jobs.get(job_id)                  # NotFound for an unknown job
+        with self._handoffs_lock:
+            handoff = self.handoffs.get(job_id)
+        if handoff is None or handoff.released:     # an older job: its program by id, or its error
+            if st.state == "finished":
+                return self._exporter(st.result_id, fmt, module_targets)
+            if st.state == "failed" and st.error is not None:
+                raise error_from_code(st.error.code, st.error.message, st.error.details)
+            handoff = self._handoff(job_id)
+
+        def job_failed() -> FabricError | None:
+            # a job that ended without handing over what the export waits for (it always should)
+            st = self.jobs.get(job_id)
+            if st.state not in s.FINAL_JOB_STATES:
+                return None
+            if st.error is not None:
+                return error_from_code(st.error.code, st.error.message, st.error.details)
+            return InternalError(f"plan job {job_id} ended ({st.state}) without its program")
+
+        def write(out: TextIO) -> None:
+            program = handoff.program(fmt, job_failed)
+            t_end = handoff.t_end_s(job_failed) if fmt == "csv" else None
+            write_export(program, fmt, out, self.cell, module_targets=module_targets, t_end_s=t_end,
+                         name=str(program.meta.get("name", "am_print")))
+
+        return write, ""
 
     def _exporter(self, program_id: str, fmt: str, module_targets: int) -> tuple[Callable[[TextIO], None], str]:
         """The writer of an export (text stream -> None) and its file name; typed errors up front."""
@@ -254,6 +333,13 @@ def _material_fields(stats) -> dict:
     return {"filament_diameter_mm": m.filament_diameter_mm, "material_source": m.source, "material": m.material or "",
             "density_g_cm3": m.density_g_cm3, "min_extrude_temp_c": m.min_extrude_temp_c, "mass_g": mass,
             "warnings": list(stats.warnings)}
+
+
+def _first_unreachable(report: Reachability) -> s.UnreachableTarget | None:
+    if report.first_unreachable is None:
+        return None
+    line, reason = report.first_unreachable
+    return s.UnreachableTarget(gcode_line=int(line), reason=reason, row=int(report.first_unreachable_row))
 
 
 def _first_slowed(result, program) -> s.SlowedMove | None:

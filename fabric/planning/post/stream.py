@@ -108,11 +108,13 @@ class ExportStream:
         except _Cancelled:
             return
 
-    def read(self, offset: int, limit_bytes: int, timeout_s: float = 60.0) -> bytes:
+    def read(self, offset: int, limit_bytes: int, timeout_s: float = 60.0, empty_on_timeout: bool = False) -> bytes:
         """The next at most ``limit_bytes`` bytes from ``offset`` (which must be where the last read ended).
 
-        Waits for the first piece only; the pieces already formatted after it are added up to the limit.
-        ``self.done`` is set once the last bytes have been returned.
+        Waits for the first piece only (up to ``timeout_s``: then an error, or with ``empty_on_timeout``
+        no bytes, the stream not done: a writer still waiting for its input); the pieces already
+        formatted after it are added up to the limit. ``self.done`` is set once the last bytes have been
+        returned.
         """
         if offset != self.offset:
             raise BadRequest(f"export chunks are read in order: offset {offset}, the stream stands at {self.offset}",
@@ -123,6 +125,8 @@ class ExportStream:
             try:
                 item = self._queue.get(timeout=timeout_s)
             except queue.Empty:
+                if empty_on_timeout:
+                    return b""
                 raise ServiceUnavailable(f"export writer produced nothing within {timeout_s:g} s",
                                          timeout_s=timeout_s) from None
             if isinstance(item, _Done):

@@ -1,0 +1,96 @@
+"""A plan job's program and CSV times, handed to exports of that job as soon as each exists.
+
+An export asked for by job id (``ExportChunkRequest.job_id``) starts formatting
+the moment the program is final: RAPID, KRL and URScript need only the joints,
+so they are written while the planner still computes the cycle time and the
+program's id (the sha256 of its encoded bytes); the CSV's ``t_s`` column waits
+for the times. A job that fails hands its error to the exports waiting on it.
+"""
+from __future__ import annotations
+
+import threading
+from typing import Callable
+
+import numpy as np
+
+from fabric import schemas as s
+from fabric.errors import FabricError, UnreachableError
+from fabric.motion.program import Program
+
+__all__ = ["PlanHandoff"]
+
+CHECK_S = 1.0       # how often a waiting export asks whether the job ended without telling (a bug)
+
+
+class PlanHandoff:
+    """What one plan job has produced so far; exports of the job wait here for what they need."""
+
+    def __init__(self) -> None:
+        self.name = ""                                  # the program's name (the G-code file's stem), set by the job
+        self.program_id = ""                            # known once the job has ended
+        self._cond = threading.Condition()
+        self._program: Program | None = None
+        self._unreachable: s.UnreachableTarget | None = None
+        self._timed = False
+        self._t_end_s: np.ndarray | None = None
+        self._error: FabricError | None = None
+        self.released = False                           # the program forgotten: export it by its id
+
+    @property
+    def ended(self) -> bool:
+        with self._cond:
+            return self._error is not None or bool(self.program_id)
+
+    def program_ready(self, program: Program, unreachable: s.UnreachableTarget | None) -> None:
+        with self._cond:
+            self._program, self._unreachable = program, unreachable
+            self._cond.notify_all()
+
+    def times_ready(self, t_end_s: np.ndarray | None) -> None:
+        """The time at each row (None when the program is not runnable: no times)."""
+        with self._cond:
+            self._timed, self._t_end_s = True, t_end_s
+            self._cond.notify_all()
+
+    def finished(self, program_id: str) -> None:
+        with self._cond:
+            self.program_id = program_id
+            self._cond.notify_all()
+
+    def failed(self, error: FabricError) -> None:
+        with self._cond:
+            self._error = error
+            self._cond.notify_all()
+
+    def release(self) -> None:
+        """Forget the program (an export already under way keeps its own reference)."""
+        with self._cond:
+            self._program = self._t_end_s = None
+            self.released = True
+
+    def _wait(self, ready: Callable[[], bool], job_failed: Callable[[], FabricError | None]) -> None:
+        """Wait (holding the lock) until ``ready()`` or an error; ``job_failed()`` is asked now and then
+        for the error of a job that ended without telling."""
+        while not self._cond.wait_for(lambda: ready() or self._error is not None, timeout=CHECK_S):
+            err = job_failed()
+            if err is not None and not ready():
+                self._error = err
+        if not ready():
+            raise self._error                           # type: ignore[misc]  (set: the wait ended)
+
+    def program(self, fmt: str, job_failed: Callable[[], FabricError | None]) -> Program:
+        """The final program, once there is one; a controller format of an unreachable program is refused."""
+        with self._cond:
+            self._wait(lambda: self._program is not None, job_failed)
+            fu = self._unreachable
+            if fu is not None and fmt != "csv":
+                raise UnreachableError(f"program is not runnable: first unreachable target at G-code line "
+                                       f"{fu.gcode_line} ({fu.reason})", gcode_line=fu.gcode_line,
+                                       reason=fu.reason, row=fu.row)
+            return self._program
+
+    def t_end_s(self, job_failed: Callable[[], FabricError | None]) -> np.ndarray | None:
+        """The time at each row, once the cycle time is known (None for a program that is not runnable)."""
+        with self._cond:
+            self._wait(lambda: self._timed, job_failed)
+            return self._t_end_s
