@@ -23,7 +23,8 @@ def cell() -> Cell:
 
 
 @pytest.mark.parametrize("text, name", [("my-part", "my_part"), ("my part (2)", "my_part_2"),
-                                        ("3dbenchy", "p_3dbenchy"), ("end", "end_prog"), ("DEF", "DEF_prog"), ("Pièce-été", "Piece_ete"),
+                                        ("3dbenchy", "p_3dbenchy"), ("end", "end_prog"), ("DEF", "DEF_prog"),
+                                        ("Pièce-été", "Piece_ete"),
                                         ("---", DEFAULT_NAME), ("", DEFAULT_NAME), ("a" * 40, "a" * 24),
                                         ("am_print", "am_print")])
 def test_names_are_made_valid(text: str, name: str) -> None:

@@ -13,8 +13,9 @@ only the first and last ``HEAD_BYTES`` of a file are read. Recognised::
     Simplify3D                       ;   filamentDiameters,2.85|2.85   ;   filamentDensities,1.25
 
 A list (several extruders: ``2.85,2.85``, ``2.85|2.85``, ``PLA;PLA``) gives its
-first value; a density of 0 (PrusaSlicer's "not set") is no statement. The first statement found wins, the head before the tail. A
-stated value that is not a number, or is out of range, is a
+first value; a density of 0 (PrusaSlicer's "not set") is no statement. The
+first statement found wins, the head before the tail. A stated value that is
+not a number, or is out of range, is a
 :class:`~fabric.errors.GcodeError` naming the line.
 """
 from __future__ import annotations
