@@ -70,10 +70,7 @@ class CellScreen(Screen):
         self.query_one(StateBanner).extrusion = e
         self.query_one(ExtruderPanel).extrusion = e
         if e is not None:
-            view = self.query_one(ToolpathView)
-            view.row_index = e.row
-            if e.layer >= 0:
-                view.layer_index = e.layer
+            self.query_one(ToolpathView).row_index = e.row      # the layer shown is the state's (one count)
 
     def _on_temps(self, t: Any) -> None:
         self.query_one(StateBanner).temps = t

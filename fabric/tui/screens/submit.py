@@ -46,15 +46,22 @@ class SubmitDialog(ModalScreen[SubmitChoice | None]):
                              id="submit-profile")
             with Horizontal(classes="field"):
                 yield Checkbox("start when loaded", value=True, id="submit-start")
-                yield Input("1", placeholder="rtf 0..1e6 (0 = max)", id="submit-rtf",
-                            validators=[Number(minimum=0, maximum=1e6)], type="number")
+                yield Label("rtf", classes="field-label")
+                yield Input(placeholder="0..1e6, 0 = max, empty = 1", id="submit-rtf",
+                            validators=[Number(minimum=0, maximum=1e6)], type="number", valid_empty=True)
             yield Label("", id="submit-error", classes="error")
             with Horizontal(classes="dialog-buttons"):
                 yield Button("Cancel", id="cancel")
                 yield Button("Submit", id="submit", variant="primary")
 
+    def on_mount(self) -> None:
+        self.query_one(ModelTree).focus()
+
     def on_directory_tree_file_selected(self, event: DirectoryTree.FileSelected) -> None:
         self.query_one("#submit-path", Input).value = str(event.path)
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        self.submit()
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         if event.button.id == "submit":
@@ -74,4 +81,4 @@ class SubmitDialog(ModalScreen[SubmitChoice | None]):
             return
         self.dismiss(SubmitChoice(path, str(self.query_one("#submit-backend", Select).value),
                                   str(self.query_one("#submit-profile", Select).value),
-                                  self.query_one("#submit-start", Checkbox).value, float(rtf_in.value)))
+                                  self.query_one("#submit-start", Checkbox).value, float(rtf_in.value or 1.0)))

@@ -39,6 +39,9 @@ class ValuesDialog(ModalScreen[dict[str, Any] | None]):
                 yield Button("Cancel", id="cancel")
                 yield Button("Apply", id="apply", variant="primary")
 
+    def on_mount(self) -> None:
+        self.query_one(Input).focus()
+
     def on_button_pressed(self, event: Button.Pressed) -> None:
         if event.button.id == "apply":
             self.apply()

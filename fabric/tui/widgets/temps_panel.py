@@ -51,12 +51,13 @@ class TempsPanel(Static):
         return text
 
     def _graph(self, width: int, height: int) -> Text:
-        """Temperatures over the last HISTORY_S: dotted set points, solid readings; the top value on the left."""
+        """Temperatures over the last HISTORY_S (or since the console started): dotted set points, solid readings; the top value on the left."""
         h = np.array(self.history)
         top_c = max(50.0, float(h[:, 1:].max()) * 1.1)
         canvas = BrailleCanvas(width, height)
         w_px, h_px = canvas.size_px
-        x = (h[:, 0] - (h[-1, 0] - HISTORY_S)) / HISTORY_S * (w_px - 1)
+        span_s = min(HISTORY_S, max(h[-1, 0] - h[0, 0], 10.0))      # fill the width until the history is full
+        x = (h[:, 0] - (h[-1, 0] - span_s)) / span_s * (w_px - 1)
         y = lambda c: (h_px - 1) * (1 - c / top_c)  # noqa: E731
         for col, style in ((2, NOZZLE_STYLE), (4, BED_STYLE)):
             xs = np.arange(0, w_px, 4)
