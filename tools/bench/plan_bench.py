@@ -379,8 +379,10 @@ cycle-time estimate (`fabric.motion.timing.time_program`) adds {b['cycle_time_es
 As a user runs it, the 20x target is {cli_status['csv']} for `--csv` ({r['ratio_cli_csv']:.1f}x) and
 {cli_status['rapid']} for `--rapid` ({r['ratio_cli_rapid']:.1f}x). A command is the CLI's start-up
 ({cli['cli_help_s']:.2f} s), the upload, the plan in the planner process (slower than in this process while
-other work shares the two CPUs), then the export, formatted at about the rate of the CSV writer alone and
-written to disk on a helper thread meanwhile. The first command against a fresh planner process (run 1) also
+other work shares the two CPUs) and the export: the CLI asks for it by job id at once, so the planner formats
+RAPID as soon as the joint program is final (while the cycle time and the program's id are computed) and the
+CSV once its times are, and the CLI writes it to disk on a helper thread meanwhile; with the two CPUs busy
+with other work, that overlap gains little. The first command against a fresh planner process (run 1) also
 pays for the first touch of the planner's memory (peak {cli['planner_peak_rss_mb']:.0f} MB); the planner keeps
 that memory afterwards, so later commands do not.
 """
