@@ -15,8 +15,9 @@ twin is checkpointed at a bounded cadence and after every command. A station
 killed mid-print comes back ``interrupted`` at the spot where it was lost,
 with its program, deposit record and event numbering; ``recover`` goes on.
 A tick that comes much later than due (the process was frozen or starved)
-never makes simulated time jump: the station interrupts a running print
-there and records a ``stall`` event.
+never makes simulated time jump: the stall is recorded as an event, and a
+print is interrupted there when the stall was long enough for the fabric to
+report the station gone.
 """
 from __future__ import annotations
 
@@ -46,7 +47,8 @@ __all__ = ["StationService", "build", "add_arguments"]
 
 TICK_S = 0.02
 STATE_PERIOD_S = 0.5          # state also re-published at this period (progress)
-STALL_S = 0.5                 # a tick this late means the process was frozen or starved
+STALL_S = 0.5                 # a tick this late: the process was frozen or starved (time is held, noted)
+STALL_INTERRUPT_S = 2.0       # this late, the fabric has reported the station gone: a print is interrupted
 JOB_EVENTS = ("started", "layer", "paused", "resumed", "recovered", "finished", "stopped", "fault", "interrupted")
 
 
@@ -174,11 +176,14 @@ class StationService(Service):
     # --- message builders (called with the lock held) ---------------------------
 
     def _stalled(self, gap_s: float) -> None:
-        """The tick came ``gap_s`` late: simulated time does not jump; a running print is interrupted."""
+        """The tick came ``gap_s`` late: simulated time does not jump (it is held, and the stall noted).
+        Past ``STALL_INTERRUPT_S`` (twice the default link lease: the fabric has reported the station
+        gone, and its clients may have acted on that) a running print is interrupted; a shorter hiccup
+        of a loaded machine is not."""
         why = f"the station stalled for {gap_s:.1f} s (process frozen or starved)"
         self.log.warning("%s: simulated time held at %.3f s", why, self.twin.t_sim_s)
         self.twin.note("stall", {"stalled_s": round(gap_s, 3), "state": self.twin.state})
-        if self.twin.state in ("printing", "paused"):
+        if gap_s >= STALL_INTERRUPT_S and self.twin.state in ("printing", "paused"):
             self.twin.interrupt(why + ": recover to go on")
 
     def _event_msg(self, ev) -> s.Event:
