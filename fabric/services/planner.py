@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import io
-import os
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
@@ -54,7 +53,6 @@ KEEP_PLANS = 1              # plans kept in memory for their exports (a million-
 MAX_EXPORT_STREAMS = 4      # streamed exports open at once (a reader that went away is dropped by the next)
 KEEP_HANDOFFS = 8           # plan jobs whose exports can still be asked for by job id
 JOB_EXPORT_POLL_S = 30.0    # an export by job id answers an empty chunk after this long without bytes
-BACKGROUND_NICE = 10        # nice value of the thread writing artifacts to disk
 
 
 @dataclass
@@ -88,14 +86,11 @@ class PlannerService(Service):
         self._handoffs_lock = threading.Lock()
         self._unstored: dict[str, s.Artifact] = {}                    # artifacts not yet on disk
         self._unstored_lock = threading.Lock()
-        self._storer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner-store",
-                                          initializer=_background_priority)
         self._encoder = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner-encode")
 
     def close(self) -> None:
         self.jobs.close()
         self._encoder.shutdown(wait=True)
-        self._storer.shutdown(wait=True)        # artifacts still being written reach the disk first
         super().close()
 
     def get_artifact(self, artifact_id: str) -> s.Artifact | None:
@@ -103,22 +98,16 @@ class PlannerService(Service):
             art = self._unstored.get(artifact_id)
         return art if art is not None else super().get_artifact(artifact_id)
 
-    def _store_later(self, art: s.Artifact) -> str:
-        """Serve ``art`` from memory at once and write it to the durable store on the background thread."""
+    def _encode_and_store(self, program: Program, name: str) -> s.Artifact:
+        """Encode the program as an artifact (its id is the hash), serve it from memory at once, write it
+        to the durable store, then serve it from there."""
+        art = program_artifact(program, name=name)
         with self._unstored_lock:
             self._unstored[art.artifact_id] = art
-
-        def store() -> None:
-            try:
-                self.store_artifact(art)
-            except Exception:      # noqa: BLE001 - logged; the artifact stays served from memory
-                self.log.exception("could not store program artifact %s", art.artifact_id)
-                return
-            with self._unstored_lock:
-                self._unstored.pop(art.artifact_id, None)
-
-        self._storer.submit(store)
-        return art.artifact_id
+        self.store_artifact(art)
+        with self._unstored_lock:
+            self._unstored.pop(art.artifact_id, None)
+        return art
 
     def on_plan(self, req: s.PlanRequest) -> s.JobAccepted:
         if not req.gcode and not req.gcode_id and not req.upload_id:
@@ -162,17 +151,19 @@ class PlannerService(Service):
         encoding: list[Future[s.Artifact]] = []
 
         def program_ready(program: Program, report: Reachability) -> None:
-            # the program is final: exports by job id start formatting it, and it is encoded and hashed
-            # (its id) while the plan goes on with the cycle time
+            # the program is final: exports by job id start formatting it, and it is encoded, hashed (its
+            # id) and written to the durable store while the plan goes on with the cycle time
             handoff.program_ready(program, _first_unreachable(report))
-            encoding.append(self._encoder.submit(program_artifact, program, name))
+            encoding.append(self._encoder.submit(self._encode_and_store, program, name))
 
         result = plan_gcode(data, self.cell, options, progress=lambda fr: job.progress(fr, "planning"),
                             filename=req.filename, on_program=program_ready)
         program = result.program
         handoff.times_ready(result.t_end_s)
-        art = encoding[0].result() if encoding else program_artifact(program, name=name)
-        pid = self._store_later(art)
+        # the job ends (its result is acknowledged) only once the program is on disk: a planner killed
+        # after that loses nothing a job was told
+        art = encoding[0].result() if encoding else self._encode_and_store(program, name)
+        pid = art.artifact_id
         self.recent.pop(pid, None)
         self.recent[pid] = PlannedProgram(program, result.t_end_s)    # for its exports (CSV times computed once)
         while len(self.recent) > KEEP_PLANS:
@@ -315,15 +306,6 @@ class PlannerService(Service):
             write_export(program, fmt, out, self.cell, module_targets=module_targets, t_end_s=t_end, name=name)
 
         return write, f"{program.meta.get('name', 'program')}.{SUFFIX[fmt]}"
-
-
-def _background_priority() -> None:
-    """Run this thread at a lower OS priority (Linux threads have their own nice value): the artifact
-    writes (hashing, encoding, fsync) give way to the export being formatted and sent."""
-    try:
-        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), BACKGROUND_NICE)
-    except (OSError, AttributeError):       # not Linux, or not allowed: same priority as the rest
-        pass
 
 
 def _material_fields(stats) -> dict:

@@ -239,7 +239,15 @@ class SupervisorService(Service):
             self.log.info("job %s waits: the station is %s", head.job_id, station.state)
             self._wait_for(head, "station")
             return
-        self.client.load(head.program_id, job_id=head.job_id)
+        try:
+            self.client.load(head.program_id, job_id=head.job_id)
+        except NotFound as err:                 # its program is gone (never acknowledged durably): plan again
+            self.log.warning("job %s: %s; preparing it again", head.job_id, err.message)
+            head.prepared, head.waiting_for, head.program_id = False, "", ""
+            head.stage = f"queued again: {err.message}"
+            self._save(head)
+            self.wake.set()
+            return
         head.state, head.stage, head.waiting_for = "loaded", "loaded on the station", ""
         self._save(head)
         self.log.info("job %s loaded on the station", head.job_id)
