@@ -30,7 +30,14 @@ def serve(name: str, settings: SessionSettings, options: argparse.Namespace,
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: stop.set())
     log = logging.getLogger(f"fabric.{name}")
-    with zenoh.open(zenoh_config(settings)) as session:
+    try:
+        session = zenoh.open(zenoh_config(settings))
+    except zenoh.ZError as exc:
+        from fabric.security.diagnose import explain_refusal
+        why = explain_refusal(settings.config_file, settings.connect) if settings.config_file else None
+        log.error("%s cannot join the fabric at %s: %s", name, ", ".join(settings.connect), why or exc)
+        return 2
+    with session:
         try:
             svc = module.build(session, settings.cell, options)
         except FabricError as err:

@@ -66,6 +66,7 @@ class StationService(Service):
         self.collision_report: s.CollisionReport | None = None
         self.journal = StationJournal(StationStore(self.data_dir / "station.sqlite"), self.artifacts, checkpoint_s)
         self.twin, self._backlog = self._restore()
+        self.clock_stop = threading.Event()         # set first on close: the clock thread ends
         self._seq_pose = 0
         self._last_state: tuple = ()
         self._last_state_s = 0.0
@@ -90,9 +91,10 @@ class StationService(Service):
         self._thread.start()
 
     def close(self) -> None:
-        super().close()
+        self.clock_stop.set()                        # the clock stops publishing before anything is undeclared
         if hasattr(self, "_thread"):                 # not there when start was refused
-            self._thread.join(timeout=2.0)
+            self._thread.join(timeout=5.0)
+        super().close()
         with self.lock:
             self.journal.checkpoint(self.twin, self.meta, force=True)
             self.journal.store.close()
@@ -123,7 +125,7 @@ class StationService(Service):
 
     def _sim_loop(self) -> None:
         """Run the clock; a failure inside the simulation faults the twin and is logged, never silent."""
-        while not self.closed.is_set():
+        while not self.clock_stop.is_set():
             try:
                 self._run_clock()
             except Exception as exc:  # a bug in the simulation: fault the job, keep the station serving
@@ -137,7 +139,7 @@ class StationService(Service):
         next_pose = last
         chunk_s = 1.0
         backlog, self._backlog = self._backlog, []
-        while not self.closed.wait(timeout=max(0.0, min(TICK_S, next_pose - time.monotonic()))):
+        while not self.clock_stop.wait(timeout=max(0.0, min(TICK_S, next_pose - time.monotonic()))):
             now = time.monotonic()
             with self.lock:
                 if now - last > STALL_S:
