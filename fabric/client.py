@@ -152,7 +152,12 @@ class Client:
         t0 = time.monotonic()
         while True:
             t_get = time.monotonic()
-            for reply in self.session.get(key, payload=payload, timeout=timeout):
+            try:
+                replies = self.session.get(key, payload=payload, timeout=timeout)
+            except zenoh.ZError as exc:          # this session was closed (e.g. the console is quitting)
+                raise ServiceUnavailable(f"cannot ask {what}: the fabric session is closed ({exc})",
+                                         key=key) from None
+            for reply in replies:
                 if reply.ok is not None:
                     return codec.decode(reply.ok.payload.to_bytes(), reply_type)
                 raise _error_of(reply.err.payload.to_bytes(), what, time.monotonic() - t0)
