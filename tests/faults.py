@@ -139,6 +139,9 @@ def run_with_fault(sc: SupervisedCell, service: str, delay_s: float) -> FaultRun
         t_kill = time.monotonic()
         killed_in = client.job(acc.job_id).state
         sc.kill(service)
+        gone_by = time.monotonic() + 10.0
+        while client.alive(timeout=0.3).get(service) and time.monotonic() < gone_by:
+            pass                                       # the kill is seen on the fabric before going on
         recovery = None
         notes: list[str] = []
         rec = wait_state(client, acc.job_id, ("finished", "failed", "stopped", "interrupted"), 300.0)
