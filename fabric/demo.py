@@ -105,8 +105,8 @@ def print_summary(sm: dict, say=print) -> None:
         f"{sm['wall_s']:.1f} s wall for the whole job")
     say(f"  collisions        {'none' if sm['collision_free'] else 'FOUND'} "
         f"({sm['collision_configs']} configurations, min clearance {sm['min_clearance_mm']:.1f} mm)")
-    say(f"  extruded volume   {sm['extruded_mm3']:.0f} mm3 (planned {sm['planned_mm3']:.0f}, "
-        f"model {sm['model_volume_mm3']:.0f})")
+    say(f"  extruded volume   {sm['extruded_mm3']:.0f} mm3 deposited by the twin (sliced {sm['sliced_mm3']:.0f}, "
+        f"planned {sm['planned_mm3']:.0f}; the model is {sm['model_volume_mm3']:.0f} mm3 solid)")
     say(f"  artifacts         {sm['out']}/ (G-code, RAPID .mod, CSV, toolpath.png, as-printed.stl)")
 
 
