@@ -2,7 +2,8 @@
 from fabric.schemas.base import REGISTRY, f, schema, to_plain, validate_into
 from fabric.schemas.common import (Ack, Artifact, ArtifactQuery, Empty, ErrorReply, JobAccepted,
                                    JobQuery, JobStatus, PinRequest)
-from fabric.schemas.pipeline import (FINAL_JOB_STATES, ON_STATION_JOB_STATES, PRINT_JOB_STATES, Backends, CollisionHit, CollisionReport, CollisionRequest, ExportRequest,
+from fabric.schemas.pipeline import (FINAL_JOB_STATES, ON_STATION_JOB_STATES, PRINT_JOB_STATES, Backends,
+                                     CollisionHit, CollisionReport, CollisionRequest, ExportRequest,
                                      FabricStatus, JobList, JobMove, JobRecord, JobSubmit, PlanRequest, PlanSummary,
                                      ProgramMsg, ServiceInfo, SliceRequest, SliceResult, SlowedMove,
                                      UnreachableTarget)
@@ -16,7 +17,8 @@ __all__ = [
     "REGISTRY", "f", "schema", "to_plain", "validate_into",
     "Ack", "Artifact", "ArtifactQuery", "Empty", "ErrorReply", "JobAccepted", "JobQuery", "JobStatus",
     "PinRequest",
-    "FINAL_JOB_STATES", "ON_STATION_JOB_STATES", "PRINT_JOB_STATES", "Backends", "CollisionHit", "CollisionReport", "CollisionRequest", "ExportRequest", "FabricStatus", "JobList",
+    "FINAL_JOB_STATES", "ON_STATION_JOB_STATES", "PRINT_JOB_STATES",
+    "Backends", "CollisionHit", "CollisionReport", "CollisionRequest", "ExportRequest", "FabricStatus", "JobList",
     "JobMove", "JobRecord", "JobSubmit", "PlanRequest", "PlanSummary", "ProgramMsg", "ServiceInfo", "SliceRequest",
     "SliceResult", "SlowedMove", "UnreachableTarget",
     "ExportChunk", "ExportChunkRequest", "UploadChunk", "UploadStatus",
