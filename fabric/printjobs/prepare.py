@@ -11,6 +11,7 @@ with that error.
 """
 from __future__ import annotations
 
+import itertools
 import logging
 import threading
 import time
@@ -69,7 +70,7 @@ class Preparer:
         rec.state, rec.stage, rec.progress_r = state, state, progress_r
         self.save(rec)
         deadline = time.monotonic() + self.budget_s
-        for attempt in range(1_000_000):
+        for attempt in itertools.count():
             if self.closed.is_set():
                 raise PrepareCancelled(rec.job_id)
             try:

@@ -320,6 +320,7 @@ class SupervisorService(Service):
         """Apply one event. A record it changes is saved with the event's number (never applied twice);
         the number of events that change nothing is saved at most every second (replaying those
         after a restart changes nothing either)."""
+        ended = None
         with self.lock:
             rec = self._record_of(job_id_of_event(ev))
             self._seen = ev.seq
@@ -328,12 +329,14 @@ class SupervisorService(Service):
                 self._seen_saved_s = time.monotonic()
                 if ev.kind == "started":
                     self.store.set_plate_clear(False)
-                self._release_if_final(rec)
                 if rec.state in s.FINAL_JOB_STATES:
-                    self.wake.set()
+                    ended = rec
             elif time.monotonic() - self._seen_saved_s > 1.0:
                 self.store.save(last_event_seq=ev.seq)
                 self._seen_saved_s = time.monotonic()
+        if ended is not None:                  # asking other services happens outside the lock
+            self._release(ended)
+            self.wake.set()
 
     def _record_of(self, job_id: str) -> s.JobRecord | None:
         if not job_id:

@@ -54,7 +54,8 @@ def job_report(rec: s.JobRecord) -> str:
         lines.append(f"reason    {rec.reason}")
     lines += [f"created   {when(rec.created_s)}", f"started   {when(rec.started_s)}", f"ended     {when(rec.ended_s)}"]
     if rec.started_s:
-        lines.append(f"duration  {duration_text(rec.sim_elapsed_s)} simulated, {duration_text(rec.wall_elapsed_s)} wall")
+        lines.append(f"duration  {duration_text(rec.sim_elapsed_s)} simulated, "
+                     f"{duration_text(rec.wall_elapsed_s)} wall")
         lines.append(f"material  {rec.deposited_mm3:.0f} mm3 deposited, {rec.filament_mm:.0f} mm filament")
     if rec.plan is not None:
         p = rec.plan

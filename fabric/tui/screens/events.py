@@ -22,7 +22,8 @@ def event_data_text(data: dict) -> str:
 
 
 class EventsScreen(Screen):
-    BINDINGS = [Binding("slash", "search", "search", show=False), Binding("escape", "clear", "clear filter", show=False)]
+    BINDINGS = [Binding("slash", "search", "search", show=False),
+                Binding("escape", "clear", "clear filter", show=False)]
 
     def __init__(self) -> None:
         super().__init__()
