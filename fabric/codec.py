@@ -16,7 +16,7 @@ import numpy as np
 from fabric.errors import DecodeError
 from fabric.schemas.base import REGISTRY, to_plain, validate_into
 
-__all__ = ["encode", "decode", "decode_any", "pack", "unpack", "MAX_ARRAY_BYTES"]
+__all__ = ["encode", "encode_pieces", "Spliced", "decode", "decode_any", "pack", "unpack", "MAX_ARRAY_BYTES"]
 
 T = TypeVar("T")
 MAX_ARRAY_BYTES = 1 << 30          # refuse absurd arrays before allocating
@@ -74,6 +74,68 @@ def encode(msg: Any) -> bytes:
     body = to_plain(msg)
     body["_t"], body["_v"] = msg.TYPE, msg.VERSION
     return pack(body)
+
+
+Buffer = bytes | bytearray | memoryview
+_BIG_BYTES = 1 << 16            # bytes fields at least this long are referenced, not copied
+
+
+class Spliced:
+    """Bytes given as pieces (already encoded elsewhere), packed by :func:`encode_pieces` as one bin
+    field without joining them (e.g. a large artifact's data)."""
+
+    def __init__(self, pieces: list[Buffer]) -> None:
+        self.pieces = pieces
+        self.size = sum(memoryview(p).nbytes for p in pieces)
+
+
+def encode_pieces(msg: Any) -> list[Buffer]:
+    """The bytes of :func:`encode` (``b"".join`` of the result equals them) as pieces: the data of every
+    array and of every large bytes field is a view of the caller's memory, never copied. For writing a
+    large message to a file or a hash without building it whole. The caller keeps ``msg`` unchanged
+    until the pieces are used."""
+    body = to_plain(msg)
+    body["_t"], body["_v"] = msg.TYPE, msg.VERSION
+    out: list[Buffer] = []
+    _pieces(body, out, msgpack.Packer(default=_default, use_bin_type=True))
+    return out
+
+
+def _pieces(value: Any, out: list[Buffer], packer: msgpack.Packer) -> None:
+    if isinstance(value, dict):
+        out.append(packer.pack_map_header(len(value)))
+        for k, v in value.items():
+            _pieces(k, out, packer)
+            _pieces(v, out, packer)
+    elif isinstance(value, (list, tuple)):
+        out.append(packer.pack_array_header(len(value)))
+        for v in value:
+            _pieces(v, out, packer)
+    elif isinstance(value, np.ndarray):
+        arr = np.ascontiguousarray(value)
+        if arr.dtype.byteorder == ">":
+            arr = arr.astype(arr.dtype.newbyteorder("<"))
+        data = memoryview(arr).cast("B") if arr.size else b""
+        _pieces({"nd": True, "dtype": arr.dtype.str, "shape": list(arr.shape), "data": Spliced([data])}, out, packer)
+    elif isinstance(value, Spliced):
+        out.append(_bin_header(value.size))
+        out.extend(value.pieces)
+    elif isinstance(value, (bytes, bytearray, memoryview)) and memoryview(value).nbytes >= _BIG_BYTES:
+        out.append(_bin_header(memoryview(value).nbytes))
+        out.append(value)
+    else:
+        out.append(packer.pack(value))
+
+
+def _bin_header(size: int) -> bytes:
+    """msgpack's header of a bin of ``size`` bytes (the smallest form, as the packer writes it)."""
+    if size < 1 << 8:
+        return b"\xc4" + size.to_bytes(1, "big")
+    if size < 1 << 16:
+        return b"\xc5" + size.to_bytes(2, "big")
+    if size < 1 << 32:
+        return b"\xc6" + size.to_bytes(4, "big")
+    raise ValueError(f"a bin of {size} bytes is beyond msgpack's 4 GiB")
 
 
 def decode(data: bytes, expected: type[T]) -> T:

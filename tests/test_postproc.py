@@ -204,3 +204,44 @@ def test_write_export_single_stream(plan, cell: Cell) -> None:
     out = io.StringIO()
     write_export(prog, "krl", out, cell)
     assert "$BASE={X 475.000" in out.getvalue() and "AM_BASE" not in out.getvalue()
+
+
+@pytest.mark.parametrize("window_rows", [7, 64, 1_000_000])
+def test_rapid_text_is_the_same_whatever_the_formatting_windows(plan, cell: Cell, monkeypatch, window_rows) -> None:
+    """MoveL lines come from aligned windows formatted ahead on worker threads; runs that span two
+    windows, or many, give the same text as one window over everything."""
+    from fabric.planning.post import rapid
+
+    def text() -> str:
+        out = io.StringIO()
+        write_rapid(plan.program, out, tool_T=cell.robot.tool_T, options=RapidOptions(targets_per_module=50))
+        return out.getvalue()
+    monkeypatch.setattr(rapid, "MOVEL_TEXT_ROWS", 10_000_000)
+    whole = text()
+    monkeypatch.setattr(rapid, "MOVEL_TEXT_ROWS", window_rows)
+    assert text() == whole
+
+
+def test_ordered_map_keeps_order_bounds_work_in_flight_and_raises_where_it_failed() -> None:
+    import threading
+    import time
+
+    from fabric.planning.post.ahead import ordered_map
+    running, peak, lock = [0], [0], threading.Lock()
+
+    def slow_square(k: int) -> int:
+        with lock:
+            running[0] += 1
+            peak[0] = max(peak[0], running[0])
+        time.sleep(0.002 * (k % 3))                 # finishing out of order
+        with lock:
+            running[0] -= 1
+        if k == 7:
+            raise ValueError("block 7")
+        return k * k
+    got = []
+    with pytest.raises(ValueError, match="block 7"):
+        for v in ordered_map(slow_square, range(20), workers=2, ahead=3):
+            got.append(v)
+    assert got == [k * k for k in range(7)] and peak[0] <= 2
+    assert list(ordered_map(lambda k: -k, iter([]))) == []

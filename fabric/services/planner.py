@@ -29,7 +29,7 @@ from fabric import schemas as s
 from fabric.client import Client
 from fabric.errors import BadRequest, FabricError, InternalError, NotFound, UnreachableError, error_from_code
 from fabric.jobs import Job, JobRunner
-from fabric.programs import content_id, program_artifact, program_from_artifact
+from fabric.programs import content_id, program_artifact_pieces, program_from_artifact
 from fabric.config import add_cell_argument, service_data_dir
 from fabric.runtime import Service
 from fabric.schemas.upload import MAX_GCODE_BYTES
@@ -84,30 +84,18 @@ class PlannerService(Service):
         self.recent: dict[str, PlannedProgram] = {}                   # program id -> the last plans
         self.handoffs: dict[str, PlanHandoff] = {}                    # job id -> what the plan job has so far
         self._handoffs_lock = threading.Lock()
-        self._unstored: dict[str, s.Artifact] = {}                    # artifacts not yet on disk
-        self._unstored_lock = threading.Lock()
-        self._encoder = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner-encode")
+        self._storer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner-store")
 
     def close(self) -> None:
         self.jobs.close()
-        self._encoder.shutdown(wait=True)
+        self._storer.shutdown(wait=True)
         super().close()
 
-    def get_artifact(self, artifact_id: str) -> s.Artifact | None:
-        with self._unstored_lock:
-            art = self._unstored.get(artifact_id)
-        return art if art is not None else super().get_artifact(artifact_id)
-
-    def _encode_and_store(self, program: Program, name: str) -> s.Artifact:
-        """Encode the program as an artifact (its id is the hash), serve it from memory at once, write it
-        to the durable store, then serve it from there."""
-        art = program_artifact(program, name=name)
-        with self._unstored_lock:
-            self._unstored[art.artifact_id] = art
-        self.store_artifact(art)
-        with self._unstored_lock:
-            self._unstored.pop(art.artifact_id, None)
-        return art
+    def _store_program(self, program: Program, name: str) -> str:
+        """Write the program to the durable store as an artifact (its id is the hash of its encoding,
+        computed and written from the program's own columns, no copy of the whole); returns the id."""
+        artifact_id, pieces = program_artifact_pieces(program, name=name)
+        return self.artifacts.put_encoded(artifact_id, pieces)
 
     def on_plan(self, req: s.PlanRequest) -> s.JobAccepted:
         if not req.gcode and not req.gcode_id and not req.upload_id:
@@ -148,13 +136,13 @@ class PlannerService(Service):
 
     def _plan(self, job: Job, req: s.PlanRequest, options: PlanOptions, data: bytes, handoff: PlanHandoff) -> str:
         name = req.filename.rsplit(".", 1)[0] + ".program"
-        encoding: list[Future[s.Artifact]] = []
+        storing: list[Future[str]] = []
 
         def program_ready(program: Program, report: Reachability) -> None:
             # the program is final: exports by job id start formatting it, and it is encoded, hashed (its
             # id) and written to the durable store while the plan goes on with the cycle time
             handoff.program_ready(program, _first_unreachable(report))
-            encoding.append(self._encoder.submit(self._encode_and_store, program, name))
+            storing.append(self._storer.submit(self._store_program, program, name))
 
         result = plan_gcode(data, self.cell, options, progress=lambda fr: job.progress(fr, "planning"),
                             filename=req.filename, on_program=program_ready)
@@ -162,8 +150,7 @@ class PlannerService(Service):
         handoff.times_ready(result.t_end_s)
         # the job ends (its result is acknowledged) only once the program is on disk: a planner killed
         # after that loses nothing a job was told
-        art = encoding[0].result() if encoding else self._encode_and_store(program, name)
-        pid = art.artifact_id
+        pid = storing[0].result() if storing else self._store_program(program, name)
         self.recent.pop(pid, None)
         self.recent[pid] = PlannedProgram(program, result.t_end_s)    # for its exports (CSV times computed once)
         while len(self.recent) > KEEP_PLANS:

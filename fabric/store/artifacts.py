@@ -78,13 +78,30 @@ class ArtifactStore:
         path = self._path(artifact.artifact_id)
         with self._lock:
             if not path.exists():
-                _write_atomic(path, codec.encode(artifact))
+                _write_atomic(path, [codec.encode(artifact)])
             size = path.stat().st_size
             with self._db:
                 self._db.execute("INSERT OR REPLACE INTO artifacts VALUES (?, ?, ?)",
                                  (artifact.artifact_id, size, time.time()))
             self._evict()
         return artifact.artifact_id
+
+    def put_encoded(self, artifact_id: str, pieces: list[codec.Buffer]) -> str:
+        """Store an artifact given as the pieces of its encoded message (``codec.encode_pieces`` of an
+        Artifact whose id its maker computed from the very data, e.g. ``program_artifact_pieces``): a
+        large artifact is written from the caller's memory, never joined or hashed again here (its
+        hash is checked whenever it is read)."""
+        _check_id(artifact_id)
+        path = self._path(artifact_id)
+        with self._lock:
+            if not path.exists():
+                _write_atomic(path, pieces)
+            size = path.stat().st_size
+            with self._db:
+                self._db.execute("INSERT OR REPLACE INTO artifacts VALUES (?, ?, ?)",
+                                 (artifact_id, size, time.time()))
+            self._evict()
+        return artifact_id
 
     def get(self, artifact_id: str) -> Artifact:
         """The artifact ``artifact_id`` (NotFound if absent or damaged on disk)."""
@@ -197,13 +214,14 @@ class ArtifactStore:
                 self._db.execute("INSERT INTO artifacts VALUES (?, ?, ?)", (artifact_id, on_disk[artifact_id], now))
 
 
-def _write_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` all-or-nothing: temp file, fsync, rename, fsync the directory."""
+def _write_atomic(path: Path, pieces: list[codec.Buffer]) -> None:
+    """Write ``pieces`` to ``path`` all-or-nothing: temp file, fsync, rename, fsync the directory."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=".tmp-", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
+            for piece in pieces:
+                fh.write(piece)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)

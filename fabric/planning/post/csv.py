@@ -5,6 +5,7 @@ from typing import TextIO
 
 import numpy as np
 
+from fabric.planning.post.ahead import ordered_map
 from fabric.planning.post.common import check_program, row_blocks, write_ascii
 from fabric.planning.post.numtext import FixedColumn, format_rows
 from fabric.motion.program import MOVEL, Program
@@ -26,12 +27,10 @@ def write_csv(program: Program, out: TextIO, t_end_s: np.ndarray | None = None) 
     if t_end_s is not None and len(t_end_s) != len(program):
         raise ValueError(f"t_end_s has {len(t_end_s)} rows, the program {len(program)}")
     out.write(",".join(CSV_COLUMNS) + "\n")
+    blocks = (np.flatnonzero(program.op[a:b] <= MOVEL) + a for a, b in row_blocks(0, len(program), CSV_BLOCK_ROWS))
     n = 0
-    for a, b in row_blocks(0, len(program), CSV_BLOCK_ROWS):
-        idx = np.flatnonzero(program.op[a:b] <= MOVEL) + a
-        if len(idx) == 0:
-            continue
-        write_ascii(out, csv_rows(program, idx, t_end_s))
+    for idx, text in ordered_map(lambda idx: (idx, csv_rows(program, idx, t_end_s)), (b for b in blocks if len(b))):
+        write_ascii(out, text)        # blocks formatted ahead on a second core, written in order
         n += len(idx)
     return n
 

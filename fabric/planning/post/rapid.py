@@ -29,12 +29,14 @@ pulse on ``doRetract``).
 from __future__ import annotations
 
 import re
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable, TextIO
 
 import numpy as np
 
 from fabric.errors import ValidationError
+from fabric.planning.post.ahead import AHEAD, WORKERS
 from fabric.planning.post.common import check_program, write_ascii, write_lines
 from fabric.planning.post.numtext import ChoiceColumn, Column, FixedColumn, format_rows, trimmed_text
 from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LayerStart,
@@ -46,7 +48,7 @@ __all__ = ["RapidOptions", "RapidExport", "write_rapid"]
 
 _IDENT = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,15}$")
 _E9 = "[9E9,9E9,9E9,9E9,9E9,9E9]"
-MOVEL_TEXT_ROWS = 50_000    # rows whose MoveL lines are formatted at once (runs of many modules)
+MOVEL_TEXT_ROWS = 50_000    # rows whose MoveL lines are formatted at once (aligned windows; runs of many modules)
 
 
 @dataclass
@@ -141,14 +143,17 @@ def write_rapid(program: Program, sink: TextIO | Callable[[str], TextIO], *,
     export.modules.append(main_name)
     export.targets.append(int(moving[slice(*bounds.get("Approach", (0, 0)))].sum()
                               + moving[slice(*bounds.get("ReturnHome", (0, 0)))].sum()))
-    for k in range(n_mod):
-        name = f"{opt.prefix}Print_{k + 1}"
-        out = _open(sink, name)
-        out.write(f"MODULE {name}\n  PROC Print_{k + 1}()\n")
-        ctx.rows(out, cuts[k], cuts[k + 1])
-        out.write("  ENDPROC\nENDMODULE\n")
-        export.modules.append(name)
-        export.targets.append(int(moving[cuts[k]:cuts[k + 1]].sum()))
+    try:
+        for k in range(n_mod):
+            name = f"{opt.prefix}Print_{k + 1}"
+            out = _open(sink, name)
+            out.write(f"MODULE {name}\n  PROC Print_{k + 1}()\n")
+            ctx.rows(out, cuts[k], cuts[k + 1])
+            out.write("  ENDPROC\nENDMODULE\n")
+            export.modules.append(name)
+            export.targets.append(int(moving[cuts[k]:cuts[k + 1]].sum()))
+    finally:
+        ctx.movel.close()
     return export
 
 
@@ -204,8 +209,8 @@ class _Emitter:
     def __init__(self, program: Program, opt: RapidOptions, names: _Names, speeds: np.ndarray) -> None:
         self.p, self.opt, self.names, self.speeds = program, opt, names, speeds
         self.walker = RowWalker(program, runs=True)
-        self.movel = _MoveLText.empty()
         self.tw = f"{opt.tool_name}\\WObj:={opt.wobj_name};"
+        self.movel = _MoveLWindows(self)
 
     def rows(self, out: TextIO, start: int, stop: int) -> None:
         lines: list[str] = []
@@ -216,16 +221,10 @@ class _Emitter:
             if isinstance(ev, Block):
                 self._block(ev)
             elif isinstance(ev, LinearRun):
-                write_ascii(out, self._run(ev))
+                write_ascii(out, self.movel.lines(ev.start, ev.stop))
             else:
                 self._format(ev, lines)
         write_lines(out, lines)
-
-    def _run(self, run: LinearRun) -> bytes:
-        """The ``MoveL`` lines of a run of plain linear moves (the same text as ``_format``)."""
-        if not self.movel.covers(run.start, run.stop):
-            self.movel = _MoveLText.of(self, run.start, max(run.stop, run.start + MOVEL_TEXT_ROWS))
-        return self.movel.lines(run.start, run.stop)
 
     def movel_columns(self, rows: np.ndarray) -> list[Column]:
         """The columns of the ``MoveL`` lines of some linear-move rows."""
@@ -335,10 +334,6 @@ class _MoveLText:
     starts: np.ndarray         # (M + 1,) where each line starts in ``text`` (and the end)
 
     @classmethod
-    def empty(cls) -> "_MoveLText":
-        return cls(np.zeros(0, dtype=np.intp), b"", np.zeros(1, dtype=np.intp))
-
-    @classmethod
     def of(cls, emitter: _Emitter, start: int, stop: int) -> "_MoveLText":
         p = emitter.p
         stop = min(stop, len(p))
@@ -347,11 +342,46 @@ class _MoveLText:
         ends = np.flatnonzero(np.frombuffer(text, dtype=np.uint8) == ord("\n")) + 1
         return cls(rows, text, np.concatenate([[0], ends]))
 
-    def covers(self, start: int, stop: int) -> bool:
-        """Whether the lines of the linear moves ``[start, stop)`` are all here."""
-        return len(self.rows) > 0 and self.rows[0] <= start and stop - 1 <= self.rows[-1]
-
     def lines(self, start: int, stop: int) -> bytes:
         """The lines of rows ``[start, stop)``, all linear moves."""
         k = int(np.searchsorted(self.rows, start))
         return self.text[self.starts[k]:self.starts[k + stop - start]]
+
+
+class _MoveLWindows:
+    """``MoveL`` lines by aligned windows of ``MOVEL_TEXT_ROWS`` rows; the windows after the one in use are
+    formatted ahead by ``WORKERS`` threads (numpy lets go of the interpreter lock: both cores format
+    while the walker writes). Memory: ``1 + AHEAD`` windows."""
+
+    def __init__(self, emitter: _Emitter) -> None:
+        self.emitter = emitter
+        self.n_rows = len(emitter.p)
+        self._pool = ThreadPoolExecutor(max_workers=WORKERS, thread_name_prefix="export-format")
+        self._windows: dict[int, Future[_MoveLText]] = {}
+
+    def lines(self, start: int, stop: int) -> bytes:
+        """The lines of rows ``[start, stop)``, all linear moves (a run may span two windows)."""
+        first, last = start // MOVEL_TEXT_ROWS, (stop - 1) // MOVEL_TEXT_ROWS
+        parts = []
+        for k in range(first, last + 1):
+            a, b = max(start, k * MOVEL_TEXT_ROWS), min(stop, (k + 1) * MOVEL_TEXT_ROWS)
+            parts.append(self._window(k).lines(a, b))
+        for k in [k for k in self._windows if k < last]:     # walked past: forget
+            del self._windows[k]
+        for k in range(last + 1, last + 1 + AHEAD):
+            if k * MOVEL_TEXT_ROWS < self.n_rows:
+                self._window_future(k)                        # format the next ones ahead
+        return parts[0] if len(parts) == 1 else b"".join(parts)
+
+    def _window(self, k: int) -> _MoveLText:
+        return self._window_future(k).result()
+
+    def _window_future(self, k: int) -> Future[_MoveLText]:
+        fut = self._windows.get(k)
+        if fut is None:
+            a = k * MOVEL_TEXT_ROWS
+            fut = self._windows[k] = self._pool.submit(_MoveLText.of, self.emitter, a, a + MOVEL_TEXT_ROWS)
+        return fut
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)

@@ -19,7 +19,7 @@ from fabric.errors import BadRequest, FabricError, InternalError, ServiceUnavail
 __all__ = ["ExportStream", "PIECE_BYTES"]
 
 PIECE_BYTES = 4 << 20       # what the writer hands over at a time
-QUEUE_DEPTH = 2             # pieces formatted ahead of the reader
+QUEUE_DEPTH = 8             # pieces formatted ahead of the reader (32 MB: the writer never waits on a chunk in transit)
 STALL_S = 120.0             # a writer whose reader went away gives up after this long
 
 
