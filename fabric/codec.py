@@ -70,9 +70,12 @@ def unpack(data: bytes) -> Any:
 
 
 def encode(msg: Any) -> bytes:
-    """Encode a schema instance with its type tag and version."""
+    """Encode a schema instance with its type tag and version. A field given as :class:`Spliced` pieces
+    (a bulk reply) is copied once, into the message's bytes."""
     body = to_plain(msg)
     body["_t"], body["_v"] = msg.TYPE, msg.VERSION
+    if any(isinstance(v, Spliced) for v in body.values()):
+        return b"".join(_pieces_of(body))
     return pack(body)
 
 
@@ -96,6 +99,10 @@ def encode_pieces(msg: Any) -> list[Buffer]:
     until the pieces are used."""
     body = to_plain(msg)
     body["_t"], body["_v"] = msg.TYPE, msg.VERSION
+    return _pieces_of(body)
+
+
+def _pieces_of(body: dict) -> list[Buffer]:
     out: list[Buffer] = []
     _pieces(body, out, msgpack.Packer(default=_default, use_bin_type=True))
     return out

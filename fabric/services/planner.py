@@ -25,6 +25,7 @@ from typing import Callable, TextIO
 import numpy as np
 import zenoh
 
+from fabric import codec
 from fabric import schemas as s
 from fabric.client import Client
 from fabric.errors import BadRequest, FabricError, InternalError, NotFound, UnreachableError, error_from_code
@@ -220,9 +221,9 @@ class PlannerService(Service):
                              f"start it at offset 0", field="offset", value=req.offset)
         try:
             if req.program_id:
-                data = stream.read(req.offset, req.limit_bytes)
+                data = stream.read_pieces(req.offset, req.limit_bytes)
             else:       # the job may still be planning: an empty chunk says "ask again"
-                data = stream.read(req.offset, req.limit_bytes, JOB_EXPORT_POLL_S, empty_on_timeout=True)
+                data = stream.read_pieces(req.offset, req.limit_bytes, JOB_EXPORT_POLL_S, empty_on_timeout=True)
         except FabricError:
             self.exports.pop(key, None)
             raise
@@ -233,8 +234,9 @@ class PlannerService(Service):
             handoff = self.handoffs.get(req.job_id)
             program_id = handoff.program_id if handoff is not None else ""
             name = f"{handoff.name or 'program'}.{SUFFIX[req.fmt]}" if handoff is not None else name
-        return s.ExportChunk(program_id=program_id, fmt=req.fmt, offset=req.offset, data=data, done=stream.done,
-                             name=name, media_type=MEDIA[req.fmt])
+        # the pieces are joined once, as the reply is encoded (a chunk is up to limit_bytes: 16 MB)
+        return s.ExportChunk(program_id=program_id, fmt=req.fmt, offset=req.offset, data=codec.Spliced(data),
+                             done=stream.done, name=name, media_type=MEDIA[req.fmt])
 
     def _job_exporter(self, job_id: str, fmt: str, module_targets: int) -> tuple[Callable[[TextIO], None], str]:
         """The writer of an export of plan job ``job_id``'s program: it waits for the program (and, for

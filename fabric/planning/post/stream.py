@@ -109,7 +109,13 @@ class ExportStream:
             return
 
     def read(self, offset: int, limit_bytes: int, timeout_s: float = 60.0, empty_on_timeout: bool = False) -> bytes:
-        """The next at most ``limit_bytes`` bytes from ``offset`` (which must be where the last read ended).
+        """:meth:`read_pieces` joined."""
+        return b"".join(self.read_pieces(offset, limit_bytes, timeout_s, empty_on_timeout))
+
+    def read_pieces(self, offset: int, limit_bytes: int, timeout_s: float = 60.0,
+                    empty_on_timeout: bool = False) -> list[memoryview | bytes]:
+        """The next at most ``limit_bytes`` bytes from ``offset`` (which must be where the last read ended),
+        as views of the formatted pieces (joined once, where the reply is encoded).
 
         Waits for the first piece only (up to ``timeout_s``: then an error, or with ``empty_on_timeout``
         no bytes, the stream not done: a writer still waiting for its input); the pieces already
@@ -120,13 +126,13 @@ class ExportStream:
             raise BadRequest(f"export chunks are read in order: offset {offset}, the stream stands at {self.offset}",
                              field="offset", value=offset, expected=self.offset)
         if self.done:
-            return b""
+            return []
         while not self._pending:
             try:
                 item = self._queue.get(timeout=timeout_s)
             except queue.Empty:
                 if empty_on_timeout:
-                    return b""
+                    return []
                 raise ServiceUnavailable(f"export writer produced nothing within {timeout_s:g} s",
                                          timeout_s=timeout_s) from None
             if isinstance(item, _Done):
@@ -134,7 +140,7 @@ class ExportStream:
                     self.cancel()
                     raise item.error
                 self.done = True
-                return b""
+                return []
             self._pending = memoryview(item)
         parts = [self._take(limit_bytes)]
         size = len(parts[0])
@@ -146,7 +152,7 @@ class ExportStream:
             parts.append(self._take(limit_bytes - size))
             size += len(parts[-1])
         self.offset += size
-        return b"".join(parts)
+        return parts
 
     def _take(self, limit_bytes: int) -> memoryview:
         part = self._pending[:limit_bytes]
