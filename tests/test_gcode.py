@@ -280,3 +280,26 @@ def test_real_slicer_files(tmp_path: Path, binary: str) -> None:
     xy = tp.xyz_mm[ext, :2]
     assert np.ptp(xy[tp.layer[ext] > 2], axis=0).max() <= 20.5
     assert tp.unknown_commands.get("M84") == 1
+
+
+def test_lexing_ahead_on_a_worker_gives_what_one_thread_gives(monkeypatch) -> None:
+    """Files are lexed a block ahead by a worker thread: with tiny blocks (many hand-overs), rows,
+    events, unknown commands and the error of a bad line are those of the plain one-thread walk."""
+    import fabric.gcode.reader as reader
+    from fabric.gcode.interp import lex_and_tabulate
+    lines = ["M83", "G28", "G1 Z0.3 F600", "M117 hi", "G1 X10 Y10 E0.5 F1200"]
+    lines += [f"G1 X{10 + k % 17} Y{10 + k % 11} E0.02" + (" ; note" if k % 5 == 0 else "") for k in range(3000)]
+    lines += ["M999", "G92 E0", "G1 X1 Y1 E1"]
+    text = "\n".join(lines) + "\n"
+    threaded = parse_gcode(text, block_bytes=1024)
+    monkeypatch.setattr(reader, "lexed_blocks", lambda blocks: map(lex_and_tabulate, blocks))
+    plain = parse_gcode(text, block_bytes=1024)
+    for name in ("xyz_mm", "e_mm", "feed_mm_s", "line", "event_row", "event_kind", "event_value"):
+        assert np.array_equal(getattr(threaded, name), getattr(plain, name)), name
+    assert len(threaded) > 3000 and threaded.unknown_commands == plain.unknown_commands
+    assert threaded.unknown_commands == {"M117": 1, "M999": 1}
+    bad = text.replace("G1 X12 Y12 E0.02\n", "G1 X12 Y1Q E0.02\n", 1)
+    monkeypatch.undo()
+    with pytest.raises(GcodeError) as err:
+        parse_gcode(bad, block_bytes=1024)
+    assert err.value.details["line"] == bad.splitlines().index("G1 X12 Y1Q E0.02") + 1

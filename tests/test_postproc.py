@@ -226,7 +226,7 @@ def test_ordered_map_keeps_order_bounds_work_in_flight_and_raises_where_it_faile
     import threading
     import time
 
-    from fabric.planning.post.ahead import ordered_map
+    from fabric.ahead import ordered_map
     running, peak, lock = [0], [0], threading.Lock()
 
     def slow_square(k: int) -> int:

@@ -29,13 +29,34 @@ from fabric.gcode.modal import anchored, ffill, modal_setting, shifted
 from fabric.gcode.table import CommandTable, LineError, command_table
 from fabric.gcode.toolpath import RowColumns, Toolpath
 
-__all__ = ["Interpreter", "DEFAULT_FEED_MM_S"]
+__all__ = ["Interpreter", "LexedBlock", "lex_and_tabulate", "DEFAULT_FEED_MM_S"]
 
 DEFAULT_FEED_MM_S = 25.0     # feed before the first F word (Marlin's 1500 mm/min)
 _G = dict(KNOWN)
 X, Y, Z, E, F, I, J, R, P, S, L = range(len(PARAMS))
 _G3 = _G["G3"]                 # G0, G1, G2, G3 are the first four codes: motion is ``code <= _G3``
 _EVENT_COLUMNS = ("ev_row", "ev_kind", "ev_value", "ev_aux", "ev_line")
+
+
+@dataclass
+class LexedBlock:
+    """A block lexed into its command table: the stateless first stage of :meth:`Interpreter.feed`, which
+    a worker thread can run for the next block while the interpreter resolves this one."""
+
+    block: bytes | memoryview
+    lx: Lexed
+    table: CommandTable
+    errors: list[LineError]        # malformed commands found so far (the later stages add theirs)
+    unknown: dict[str, int]        # unknown commands and their counts
+
+
+def lex_and_tabulate(block: bytes | memoryview) -> LexedBlock:
+    """Lex one block of whole lines and build its command table (no modal state: any thread, any order)."""
+    lx = lex_block(block)
+    errors: list[LineError] = []
+    unknown: dict[str, int] = {}
+    table = command_table(lx, errors, unknown)
+    return LexedBlock(block, lx, table, errors, unknown)
 
 
 @dataclass
@@ -109,10 +130,14 @@ class Interpreter:
 
     def feed(self, block: bytes | memoryview) -> None:
         """Interpret one block of whole lines (the last line may lack its newline)."""
-        lx = lex_block(block)
+        self.feed_lexed(lex_and_tabulate(block))
+
+    def feed_lexed(self, lexed: LexedBlock) -> None:
+        """Interpret the next block, lexed by :func:`lex_and_tabulate` (blocks in file order)."""
+        block, lx, table, errors = lexed.block, lexed.lx, lexed.table, lexed.errors
         st = self.state
-        errors: list[LineError] = []
-        table = command_table(lx, errors, self._unknown)
+        for name, count in lexed.unknown.items():
+            self._unknown[name] = self._unknown.get(name, 0) + count
         self._raise_first(block, lx, errors)
         modes = self._modes(table, errors)
         positions = self._positions(table, modes)

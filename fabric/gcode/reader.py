@@ -5,15 +5,17 @@ import os
 from collections.abc import Callable, Iterator
 from typing import BinaryIO
 
+from fabric.ahead import ordered_map
 from fabric.errors import NotFound, ValidationError
 from fabric.gcode.dialects import detect_slicer
-from fabric.gcode.interp import Interpreter
+from fabric.gcode.interp import Interpreter, LexedBlock, lex_and_tabulate
 from fabric.gcode.material import HEAD_BYTES, read_material
 from fabric.gcode.toolpath import Toolpath
 
 __all__ = ["parse_gcode", "parse_gcode_file", "iter_blocks", "BLOCK_BYTES"]
 
-BLOCK_BYTES = 1 << 18      # ~10k lines: the arrays of one block stay in the CPU cache
+BLOCK_BYTES = 1 << 19      # ~20k lines (measured fastest with the lexer a block ahead: 0.33 s for 1M moves)
+LEX_AHEAD = 2              # blocks lexed by a worker thread ahead of the interpreter
 
 
 def iter_blocks(stream: BinaryIO, block_bytes: int = BLOCK_BYTES) -> Iterator[bytes]:
@@ -32,6 +34,24 @@ def iter_blocks(stream: BinaryIO, block_bytes: int = BLOCK_BYTES) -> Iterator[by
             continue
         yield data[:cut]
         rest = data[cut:]
+
+
+def lexed_blocks(blocks: Iterator[bytes | memoryview]) -> Iterator[LexedBlock]:
+    """The blocks lexed into command tables by a worker thread while the caller interprets the one before
+    (lexing is stateless; the modal state is resolved in order by the interpreter)."""
+    return ordered_map(lex_and_tabulate, blocks, workers=1, ahead=LEX_AHEAD)
+
+
+def _memory_blocks(data: bytes | bytearray, view: memoryview, block_bytes: int) -> Iterator[memoryview]:
+    """Blocks of whole lines of G-code held in memory (views, no copies)."""
+    n, pos = len(view), 0
+    while pos < n:
+        stop = min(pos + block_bytes, n)
+        if stop < n:                              # extend to the end of the line
+            nl = data.find(b"\n", stop - 1)
+            stop = n if nl < 0 else nl + 1
+        yield view[pos:stop]
+        pos = stop
 
 
 def _check(chord_tol_mm: float, block_bytes: int) -> None:
@@ -58,13 +78,9 @@ def parse_gcode(source: str | bytes | bytearray | memoryview, *, chord_tol_mm: f
     view = memoryview(data).cast("B")
     interp = Interpreter(chord_tol_mm, rows_hint=len(data) // 12)
     n, pos = len(view), 0
-    while pos < n:
-        stop = min(pos + block_bytes, n)
-        if stop < n:                              # extend to the end of the line
-            nl = data.find(b"\n", stop - 1)
-            stop = n if nl < 0 else nl + 1
-        interp.feed(view[pos:stop])
-        pos = stop
+    for lexed in lexed_blocks(_memory_blocks(data, view, block_bytes)):
+        interp.feed_lexed(lexed)
+        pos += len(lexed.block)
         if progress is not None:
             progress(pos / n)
     tp = interp.finish()
@@ -87,9 +103,9 @@ def parse_gcode_file(path: str | os.PathLike[str], *, chord_tol_mm: float = 0.01
     interp = Interpreter(chord_tol_mm, rows_hint=size // 12)      # moves take >= ~12 bytes of text
     done = 0
     with stream:
-        for block in iter_blocks(stream, block_bytes):
-            interp.feed(block)
-            done += len(block)
+        for lexed in lexed_blocks(iter_blocks(stream, block_bytes)):
+            interp.feed_lexed(lexed)
+            done += len(lexed.block)
             if progress is not None:
                 progress(done / max(size, 1))
         stream.seek(0)

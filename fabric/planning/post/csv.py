@@ -5,7 +5,7 @@ from typing import TextIO
 
 import numpy as np
 
-from fabric.planning.post.ahead import ordered_map
+from fabric.ahead import ordered_map
 from fabric.planning.post.common import check_program, row_blocks, write_ascii
 from fabric.planning.post.numtext import FixedColumn, format_rows
 from fabric.motion.program import MOVEL, Program

@@ -36,7 +36,7 @@ from typing import Callable, TextIO
 import numpy as np
 
 from fabric.errors import ValidationError
-from fabric.planning.post.ahead import AHEAD, WORKERS
+from fabric.ahead import AHEAD, WORKERS
 from fabric.planning.post.common import check_program, write_ascii, write_lines
 from fabric.planning.post.numtext import ChoiceColumn, Column, FixedColumn, format_rows, trimmed_text
 from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LayerStart,
