@@ -30,6 +30,7 @@ from fabric.errors import (BadRequest, DecodeError, FabricError, PermissionDenie
                            ValidationError, error_from_code)
 from fabric.schemas.upload import UPLOAD_CHUNK_BYTES, UPLOAD_CHUNK_MAX_BYTES
 from fabric.keys import ALIVE_EVERY_CELL, ENDPOINTS, SERVICES, TOPICS, Keys, parse_alive
+from fabric.qos import BULK_QOS, command_qos
 
 __all__ = ["Client", "Subscription", "AliveSubscription", "wait_connected", "input_size"]
 
@@ -144,16 +145,18 @@ class Client:
 
     def call_raw(self, service: str, command: str, payload: bytes, reply_type: type, timeout: float) -> Any:
         key = self.keys.cmd(service, command)
-        return self._get_one(key, payload, reply_type, timeout, f"{service}/{command}")
+        return self._get_one(key, payload, reply_type, timeout, f"{service}/{command}",
+                             command_qos(ENDPOINTS[(service, command)]))
 
-    def _get_one(self, key: str, payload: bytes | None, reply_type: type, timeout: float, what: str) -> Any:
+    def _get_one(self, key: str, payload: bytes | None, reply_type: type, timeout: float, what: str,
+                 qos: dict[str, Any] = BULK_QOS) -> Any:
         # A get with no matching queryable returns at once; right after a service (or this session)
         # starts, its declaration may still be on the way: retry for a short, bounded window.
         t0 = time.monotonic()
         while True:
             t_get = time.monotonic()
             try:
-                replies = self.session.get(key, payload=payload, timeout=timeout)
+                replies = self.session.get(key, payload=payload, timeout=timeout, **qos)
             except zenoh.ZError as exc:          # this session was closed (e.g. the console is quitting)
                 raise ServiceUnavailable(f"cannot ask {what}: the fabric session is closed ({exc})",
                                          key=key) from None

@@ -38,17 +38,23 @@ TOPICS: dict[tuple[str, str], type] = {
 
 @dataclass(frozen=True)
 class Endpoint:
-    """One queryable: who serves it, what it takes and returns, how long a caller waits."""
+    """One queryable: who serves it, what it takes and returns, how long a caller waits.
+
+    ``bulk``: its request or reply can carry megabytes (models, G-code, exports, meshes); it travels at
+    data priority, batched. Every other command is interactive: sent and answered ahead of telemetry,
+    unbatched (see ``fabric.client`` and ``fabric.runtime``)."""
     service: str
     command: str
     request: type
     reply: type
     timeout_s: float = 5.0
     doc: str = ""
+    bulk: bool = False
 
 
-def _ep(service: str, command: str, req: type, rep: type, timeout_s: float = 5.0, doc: str = "") -> Endpoint:
-    return Endpoint(service, command, req, rep, timeout_s, doc)
+def _ep(service: str, command: str, req: type, rep: type, timeout_s: float = 5.0, doc: str = "",
+        bulk: bool = False) -> Endpoint:
+    return Endpoint(service, command, req, rep, timeout_s, doc, bulk)
 
 
 _TABLE = [
@@ -70,21 +76,23 @@ _TABLE = [
     _ep("station", "events", s.EventsQuery, s.EventList, doc="event history since a sequence number"),
     _ep("station", "overrides", s.Overrides, s.StationState, doc="speed/flow/temperature overrides"),
     _ep("station", "rtf", s.StartRequest, s.StationState, doc="change the simulation's real-time factor live"),
-    _ep("station", "mesh", s.MeshRequest, s.Artifact, 60.0, "as-printed part as STL or GLB"),
+    _ep("station", "mesh", s.MeshRequest, s.Artifact, 60.0, "as-printed part as STL or GLB", bulk=True),
     # slicer
-    _ep("slicer", "slice", s.SliceRequest, s.JobAccepted, 10.0, "start slicing a model (a job)"),
+    _ep("slicer", "slice", s.SliceRequest, s.JobAccepted, 10.0, "start slicing a model (a job)", bulk=True),
     _ep("slicer", "job", s.JobQuery, s.JobStatus, doc="a slicing job's status"),
     _ep("slicer", "result", s.ArtifactQuery, s.SliceResult, doc="summary of a slicing result by G-code id"),
     _ep("slicer", "backends", s.Empty, s.Backends, doc="installed back-ends and profiles"),
-    _ep("slicer", "upload", s.UploadChunk, s.UploadStatus, 30.0, "a large model, in chunks assembled on disk"),
+    _ep("slicer", "upload", s.UploadChunk, s.UploadStatus, 30.0, "a large model, in chunks assembled on disk",
+        bulk=True),
     # planner
-    _ep("planner", "plan", s.PlanRequest, s.JobAccepted, 30.0, "start planning G-code (a job)"),
+    _ep("planner", "plan", s.PlanRequest, s.JobAccepted, 30.0, "start planning G-code (a job)", bulk=True),
     _ep("planner", "job", s.JobQuery, s.JobStatus, doc="a planning job's status"),
     _ep("planner", "summary", s.ArtifactQuery, s.PlanSummary, doc="summary of a planned program"),
-    _ep("planner", "upload", s.UploadChunk, s.UploadStatus, 30.0, "large G-code, in chunks assembled on disk"),
-    _ep("planner", "export", s.ExportRequest, s.Artifact, 300.0, "RAPID / KRL / URScript / CSV"),
+    _ep("planner", "upload", s.UploadChunk, s.UploadStatus, 30.0, "large G-code, in chunks assembled on disk",
+        bulk=True),
+    _ep("planner", "export", s.ExportRequest, s.Artifact, 300.0, "RAPID / KRL / URScript / CSV", bulk=True),
     _ep("planner", "export_chunk", s.ExportChunkRequest, s.ExportChunk, 120.0,
-        "an export streamed in bounded chunks, read in order from offset 0"),
+        "an export streamed in bounded chunks, read in order from offset 0", bulk=True),
     # collision
     _ep("collision", "check", s.CollisionRequest, s.CollisionReport, 300.0, "sweep a program or a move"),
     # artifacts a print job needs are pinned where they live (never evicted while it needs them)
@@ -93,7 +101,7 @@ _TABLE = [
     # supervisor
     _ep("supervisor", "status", s.Empty, s.FabricStatus, doc="services alive and the current job"),
     _ep("supervisor", "submit", s.JobSubmit, s.JobAccepted, 30.0,
-        "queue a print job: slice -> plan -> check -> load (-> start)"),
+        "queue a print job: slice -> plan -> check -> load (-> start)", bulk=True),
     _ep("supervisor", "job", s.JobQuery, s.JobRecord, doc="one print job's whole record"),
     _ep("supervisor", "jobs", s.Empty, s.JobList, doc="every print job: the queue and the history"),
     _ep("supervisor", "job_remove", s.JobQuery, s.Ack, doc="remove a job that is not on the station"),

@@ -26,6 +26,7 @@ import zenoh
 from fabric import codec
 from fabric.errors import FabricError, InternalError, NotFound, StateError, ValidationError
 from fabric.keys import ENDPOINTS, TOPICS, Endpoint, Keys
+from fabric.qos import reply_qos
 from fabric.schemas import Ack, Artifact, ErrorReply, PinRequest
 from fabric.store.artifacts import ArtifactStore
 from fabric.store.records import RecordStore
@@ -155,7 +156,7 @@ class Service:
             payload = query.payload.to_bytes() if query.payload is not None else b""
             req = codec.decode(payload, ep.request)
             reply = fn(req)
-            query.reply(query.key_expr, codec.encode(reply))
+            query.reply(query.key_expr, codec.encode(reply), **reply_qos(ep))
         except FabricError as err:
             self.log.info("%s/%s: %s: %s", self.name, ep.command, err.code, err.message)
             reply_error(query, err)

@@ -283,3 +283,40 @@ def test_events_by_kind_and_overrides_on_record(fabric):
     assert override and override[-1].data == {"speed_r": 1.2}
     with pytest.raises(ValidationError, match="unknown event kinds"):
         client.events(0, kinds=["extruder_on"])
+
+
+def test_extrusion_and_temps_are_published_on_change_pose_at_its_rate(fabric):
+    """The pose stream runs at the pose rate; extrusion comes at every switch of the extruder (and flow or
+    layer change) plus 20 Hz, in its own gap-free sequence; temperatures on a new set point plus 10 Hz."""
+    import time
+    client, _, pid, _ = fabric
+    pose, ext, temps = (client.subscribe("station", t) for t in ("pose", "extrusion", "temps"))
+    events = client.subscribe("station", "events")
+    try:
+        client.load(pid)
+        client.start(rtf=20.0)
+        t0 = time.monotonic()
+        wait_event(events, ("finished",), timeout=120)
+        wall_s = time.monotonic() - t0
+        time.sleep(0.2)
+        poses, exts, ts = _drain(pose), _drain(ext), _drain(temps)
+    finally:
+        for sub in (pose, ext, temps, events):
+            sub.close()
+    assert len(poses) > 0.8 * 100.0 * wall_s                      # 100 Hz
+    assert len(exts) < 0.6 * len(poses) and len(ts) < 0.3 * len(poses)
+    assert [e.seq for e in exts] == list(range(exts[0].seq, exts[0].seq + len(exts)))
+    switches = sum(a.on != b.on for a, b in zip(exts, exts[1:]))
+    assert switches >= 2 and any(e.on for e in exts)               # the extruder went on and off: both seen
+    assert exts[-1].extruded_mm3 > 0 and not exts[-1].on
+    assert any(t.nozzle_target_c == 200.0 for t in ts)
+
+
+def _drain(sub) -> list:
+    import queue
+    out = []
+    while True:
+        try:
+            out.append(sub.get(timeout=0.0))
+        except queue.Empty:
+            return out

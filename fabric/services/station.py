@@ -6,8 +6,10 @@ clock and the fabric. A simulation thread advances the twin by
 advancing in chunks sized to keep each tick near ``TICK_S`` of wall time).
 Simulated time is exact whatever the stepping, because the twin's timeline is
 analytic. Every twin event is published on the lossless ``events`` topic and
-kept for the ``events`` query; pose, extrusion and temperatures are published
-at a fixed wall-clock rate (latest value wins); state on every change.
+kept for the ``events`` query; pose is published at a fixed wall-clock rate
+(latest value wins), extrusion and temperatures on every change of their
+discrete part (extruder on/off, flow, layer; set points) and otherwise at a
+lower rate (:mod:`fabric.services.telemetry_gate`); state on every change.
 
 The station is durable (:mod:`fabric.store.journal`): each tick's events and
 the simulated time reached are written before they are published, and the
@@ -22,6 +24,7 @@ report the station gone.
 from __future__ import annotations
 
 import argparse
+import sys
 import threading
 import time
 import traceback
@@ -37,6 +40,7 @@ from fabric.programs import content_id, program_from_artifact
 from fabric.readiness import ReadyFacts, print_temp_c, ready_report
 from fabric.config import add_cell_argument, service_data_dir
 from fabric.runtime import Service
+from fabric.services.telemetry_gate import ChangeOrPeriod
 from fabric.robot.cell import Cell
 from fabric.robot.frames import T_to_xyzrpy
 from fabric.sim.twin import EVENT_KINDS, Twin
@@ -47,6 +51,9 @@ __all__ = ["StationService", "build", "add_arguments"]
 
 TICK_S = 0.02
 STATE_PERIOD_S = 0.5          # state also re-published at this period (progress)
+EXTRUSION_PERIOD_S = 0.05     # extrusion: on every switch, flow or layer change, else 20 Hz (the running volume)
+TEMPS_PERIOD_S = 0.1          # temperatures: on a new set point, else 10 Hz
+GIL_SWITCH_S = 0.0005         # a command's thread waits at most this long for the clock thread's interpreter lock
 STALL_S = 0.5                 # a tick this late: the process was frozen or starved (time is held, noted)
 STALL_INTERRUPT_S = 2.0       # this late, the fabric has reported the station gone: a print is interrupted
 JOB_EVENTS = ("started", "layer", "paused", "resumed", "recovered", "finished", "stopped", "fault", "interrupted")
@@ -68,6 +75,9 @@ class StationService(Service):
         self.twin, self._backlog = self._restore()
         self.clock_stop = threading.Event()         # set first on close: the clock thread ends
         self._seq_pose = 0
+        self._seq_extrusion = 0
+        self._extrusion_gate = ChangeOrPeriod(EXTRUSION_PERIOD_S)
+        self._temps_gate = ChangeOrPeriod(TEMPS_PERIOD_S)
         self._last_state: tuple = ()
         self._last_state_s = 0.0
         self.pub_pose = self.publisher("pose")
@@ -86,6 +96,9 @@ class StationService(Service):
     rtf = property(lambda self: self.meta.rtf)
 
     def start(self) -> None:
+        # the clock thread runs Python for up to a tick; by default a command's thread could wait 5 ms for
+        # the interpreter lock before being let in (the station is its own process: this is its setting)
+        sys.setswitchinterval(GIL_SWITCH_S)
         super().start()
         self._thread = threading.Thread(target=self._sim_loop, name="station:sim", daemon=True)
         self._thread.start()
@@ -158,8 +171,8 @@ class StationService(Service):
                 backlog = []
                 state = self._state_msg()
                 pose = self._pose_msg() if now >= next_pose else None
-                ext = self._extrusion_msg() if pose else None
-                temps = self._temps_msg() if pose else None
+                ext = self._extrusion_due(now) if pose else None
+                temps = self._temps_due(now) if pose else None
                 self.journal.record_tick(msgs, self.twin.t_sim_s)       # written before it is published
                 key = (state.state, state.reason, state.program_id, state.layer, state.rtf, state.speed_r,
                        state.flow_r, round(state.progress_r, 3))
@@ -172,7 +185,9 @@ class StationService(Service):
             if pose is not None:
                 next_pose = max(next_pose + self.pose_period_s, now)
                 self.pub_pose.send(pose)
+            if ext is not None:
                 self.pub_extrusion.send(ext)
+            if temps is not None:
                 self.pub_temps.send(temps)
 
     # --- message builders (called with the lock held) ---------------------------
@@ -205,14 +220,22 @@ class StationService(Service):
                       xyz_mm=list(map(float, p.xyz_mm)), quat_wxyz=list(map(float, p.quat_wxyz)),
                       base_xyz_mm=list(map(float, p.base_xyz_mm)), wall_time_s=time.time())
 
-    def _extrusion_msg(self) -> s.Extrusion:
+    def _extrusion_due(self, now: float) -> s.Extrusion | None:
+        """The extrusion message if it is to be published now (its own sequence: a gap is a lost message)."""
         e = self.twin.extrusion()
-        return s.Extrusion(seq=self._seq_pose, t_sim_s=self.twin.t_sim_s, on=bool(e.on), flow_mm3_s=float(e.flow_mm3_s),
-                           extruded_mm3=float(e.extruded_mm3), filament_mm=float(e.filament_mm), layer=int(e.layer),
-                           row=int(e.row), gcode_line=int(e.gcode_line), flow_r=float(self.twin.flow_r))
+        key = (bool(e.on), round(float(e.flow_mm3_s), 3), int(e.layer), float(self.twin.flow_r))
+        if not self._extrusion_gate.due(key, now):
+            return None
+        self._seq_extrusion += 1
+        return s.Extrusion(seq=self._seq_extrusion, t_sim_s=self.twin.t_sim_s, on=bool(e.on),
+                           flow_mm3_s=float(e.flow_mm3_s), extruded_mm3=float(e.extruded_mm3),
+                           filament_mm=float(e.filament_mm), layer=int(e.layer), row=int(e.row),
+                           gcode_line=int(e.gcode_line), flow_r=float(self.twin.flow_r))
 
-    def _temps_msg(self) -> s.Temps:
+    def _temps_due(self, now: float) -> s.Temps | None:
         t = self.twin.temps()
+        if not self._temps_gate.due((float(t.nozzle_target_c), float(t.bed_target_c)), now):
+            return None
         return s.Temps(nozzle_c=float(t.nozzle_c), nozzle_target_c=float(t.nozzle_target_c), bed_c=float(t.bed_c),
                        bed_target_c=float(t.bed_target_c), t_sim_s=self.twin.t_sim_s)
 
