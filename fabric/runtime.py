@@ -76,6 +76,7 @@ class Service:
         self.degraded: str | None = None
         self.started_s = time.time()
         self._handlers: dict[str, tuple[Endpoint, Handler]] = {}
+        self._snapshots: dict[str, tuple[Endpoint, Callable[[], bytes]]] = {}
         self._publishers: list[Publisher] = []
         self._queryables: list[Any] = []
         self._threads: list[threading.Thread] = []
@@ -93,6 +94,14 @@ class Service:
         """Serve endpoint ``(self.name, command)`` with ``fn(request) -> reply``."""
         ep = ENDPOINTS[(self.name, command)]
         self._handlers[command] = (ep, fn)
+
+    def handle_snapshot(self, command: str, current: Callable[[], bytes]) -> None:
+        """Serve read-only endpoint ``(self.name, command)`` from a reply the service keeps encoded and
+        current: ``current()`` returns it (a reference read: no lock, no work). Such a query is answered
+        in Zenoh's own thread as it arrives, not handed to a worker thread, so under load it waits for
+        no other thread of the service."""
+        ep = ENDPOINTS[(self.name, command)]
+        self._snapshots[command] = (ep, current)
 
     def publisher(self, topic: str, *, lossless: bool = False) -> Publisher:
         pub = Publisher(self.session, self.keys.topic(self.name, topic), TOPICS[(self.name, topic)], lossless)
@@ -135,6 +144,9 @@ class Service:
                              f"one with another --cell", state="running", command="start", service=self.name)
         for command, (ep, fn) in self._handlers.items():
             self._serve(self.keys.cmd(self.name, command), lambda q, ep=ep, fn=fn: self._answer(q, ep, fn))
+        for command, (ep, current) in self._snapshots.items():
+            self._queryables.append(self.session.declare_queryable(
+                self.keys.cmd(self.name, command), lambda q, ep=ep, current=current: self._answer_snapshot(q, ep, current)))
         self._serve(self.keys.artifact_all(self.name), self._answer_artifact)
         self._token = self.session.liveliness().declare_token(self.keys.alive(self.name))
         self.log.info("%s serving %d commands on %s", self.name, len(self._handlers), self.keys.prefix)
@@ -165,6 +177,15 @@ class Service:
             self.log.error("%s/%s failed:\n%s", self.name, ep.command, traceback.format_exc())
             reply_error(query, InternalError(f"{self.name}/{ep.command} failed: {type(exc).__name__}: {exc}",
                                              service=self.name, command=ep.command))
+
+    def _answer_snapshot(self, query: zenoh.Query, ep: Endpoint, current: Callable[[], bytes]) -> None:
+        """In Zenoh's callback: check the request, reply with the current encoded snapshot. Never blocks."""
+        with query:
+            try:
+                codec.decode(query.payload.to_bytes() if query.payload is not None else b"", ep.request)
+                query.reply(query.key_expr, current(), **reply_qos(ep))
+            except FabricError as err:
+                reply_error(query, err)
 
     def _answer_artifact(self, query: zenoh.Query) -> None:
         try:

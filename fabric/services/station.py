@@ -29,10 +29,12 @@ import threading
 import time
 import traceback
 from pathlib import Path
+from typing import Any, Callable
 
 import numpy as np
 import zenoh
 
+from fabric import codec
 from fabric import schemas as s
 from fabric.client import Client
 from fabric.errors import CollisionError, FabricError, NotFound, StateError, ValidationError
@@ -85,9 +87,11 @@ class StationService(Service):
         self.pub_temps = self.publisher("temps")
         self.pub_state = self.publisher("state", lossless=True)
         self.pub_events = self.publisher("events", lossless=True)
-        for command in ("position", "home", "load", "start", "pause", "resume", "stop", "collisions",
+        self._position = codec.encode(self._pose_msg(self._seq_pose))    # the twin's pose now, encoded
+        self.handle_snapshot("position", lambda: self._position)
+        for command in ("home", "load", "start", "pause", "resume", "stop", "collisions",
                         "calibrate", "ready", "time", "state", "events", "overrides", "rtf", "mesh", "recover"):
-            self.handle(command, getattr(self, f"on_{command}"))
+            self.handle(command, self._then_position(getattr(self, f"on_{command}")))
 
     # The meta's fields, as the rest of this module reads them.
     program_id = property(lambda self: self.meta.program_id)
@@ -170,7 +174,13 @@ class StationService(Service):
                 msgs = [self._event_msg(ev) for ev in backlog + events]
                 backlog = []
                 state = self._state_msg()
-                pose = self._pose_msg() if now >= next_pose else None
+                if now >= next_pose:
+                    self._seq_pose += 1
+                    pose = self._pose_msg(self._seq_pose)
+                    self._position = codec.encode(pose)
+                else:
+                    pose = None
+                    self._position = codec.encode(self._pose_msg(self._seq_pose))
                 ext = self._extrusion_due(now) if pose else None
                 temps = self._temps_due(now) if pose else None
                 self.journal.record_tick(msgs, self.twin.t_sim_s)       # written before it is published
@@ -213,10 +223,11 @@ class StationService(Service):
         return s.Event(seq=ev.seq, t_sim_s=ev.t_sim_s, kind=ev.kind, row=ev.row, gcode_line=ev.gcode_line,
                        layer=ev.layer, data=data)
 
-    def _pose_msg(self) -> s.Pose:
+    def _pose_msg(self, seq: int) -> s.Pose:
+        """The twin's pose now; ``seq``: the pose stream's number (a ``position`` reply carries the last
+        published one)."""
         p = self.twin.pose()
-        self._seq_pose += 1
-        return s.Pose(seq=self._seq_pose, t_sim_s=self.twin.t_sim_s, q_deg=np.degrees(p.q_rad).tolist(),
+        return s.Pose(seq=seq, t_sim_s=self.twin.t_sim_s, q_deg=np.degrees(p.q_rad).tolist(),
                       xyz_mm=list(map(float, p.xyz_mm)), quat_wxyz=list(map(float, p.quat_wxyz)),
                       base_xyz_mm=list(map(float, p.base_xyz_mm)), wall_time_s=time.time())
 
@@ -260,9 +271,16 @@ class StationService(Service):
 
     # --- the paper's commands ----------------------------------------------------
 
-    def on_position(self, _: s.Empty) -> s.Pose:
-        with self.lock:
-            return self._pose_msg()
+    def _then_position(self, handler: Callable[[Any], Any]) -> Callable[[Any], Any]:
+        """``handler``, after which the ``position`` snapshot is brought up to date (a command may have
+        changed the pose now, e.g. a new work object), so ``position`` after a command's reply sees it."""
+        def run(req: Any) -> Any:
+            try:
+                return handler(req)
+            finally:
+                with self.lock:
+                    self._position = codec.encode(self._pose_msg(self._seq_pose))
+        return run
 
     def on_home(self, _: s.Empty) -> s.Ack:
         with self.lock:

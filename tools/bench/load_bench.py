@@ -329,8 +329,9 @@ def _where_the_time_goes(one: dict) -> list[str]:
         f"{hub['p50'] - peer['p50']:.2f} ms at p50 and {hub['p99'] - peer['p99']:.2f} ms at p99.",
         f"* **Queues behind telemetry.** Commands travel at interactive priority, express (`fabric.qos`); the "
         f"same query at telemetry's priority, batched, takes p50 {data['p50']:.2f} ms, p99 {data['p99']:.2f} ms.",
-        f"* **CPU.** Two shared cores run {one['monitors']} monitor processes (each decoding "
-        f"{3 * one['pose_hz_set']:g} messages/s in Python), the hub, the station and the callers: the station "
+        f"* **CPU.** Two shared cores run {one['monitors']} monitor processes (each decoding some "
+        f"{hz + statistics.median(m['extrusion_hz'] for m in one['per_monitor']):.0f} messages/s in Python), the "
+        f"hub, the station and the callers: the station "
         f"publishes {hz:.0f} poses/s of the {one['pose_hz_set']:g} asked, and every design's tail is time waiting "
         f"for a core. The paper's design has one process to be scheduled per request (p50 {paper['p50']:.2f} ms); "
         "the fabric has three (client, hub, station) and, in each, a Zenoh thread handing over to a Python thread.",
