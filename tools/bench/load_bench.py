@@ -334,7 +334,9 @@ def _where_the_time_goes(one: dict) -> list[str]:
         f"hub, the station and the callers: the station "
         f"publishes {hz:.0f} poses/s of the {one['pose_hz_set']:g} asked, and every design's tail is time waiting "
         f"for a core. The paper's design has one process to be scheduled per request (p50 {paper['p50']:.2f} ms); "
-        "the fabric has three (client, hub, station) and, in each, a Zenoh thread handing over to a Python thread.",
+        "the fabric has three (client, hub, station). The station answers `position` in Zenoh's own thread from a "
+        "snapshot it keeps current (no hand-over to a worker thread, no lock), and the client's Zenoh thread hands "
+        "the reply to the calling thread.",
         f"* **Encoding**: decoding and validating the Pose reply takes {one['codec_idle']['decode']['p50']:.3f} ms "
         f"(p50, idle), encoding the request {one['codec_idle']['encode']['p50']:.3f} ms; the paper's design decodes "
         "the same payload with the same codec, so this is in both columns.", "",
