@@ -12,11 +12,8 @@ timeout (or the one given). An error reply raises the matching
 """
 from __future__ import annotations
 
-import hashlib
 import os
 import queue
-import threading
-import uuid
 import time
 from contextlib import contextmanager
 from typing import Any, BinaryIO, Callable, Iterator
@@ -25,89 +22,21 @@ import zenoh
 
 from fabric import codec
 from fabric import schemas as s
-from fabric.config import SessionSettings, zenoh_config
-from fabric.errors import (BadRequest, DecodeError, FabricError, PermissionDenied, ServiceUnavailable,
-                           ValidationError, error_from_code)
-from fabric.schemas.upload import UPLOAD_CHUNK_BYTES, UPLOAD_CHUNK_MAX_BYTES
+from fabric.config import SessionSettings
+from fabric.errors import ServiceUnavailable
+from fabric.job_waits import wait_job, wait_print_job
 from fabric.keys import ALIVE_EVERY_CELL, ENDPOINTS, SERVICES, TOPICS, Keys, parse_alive
 from fabric.qos import BULK_QOS, command_qos
+from fabric.schemas.upload import UPLOAD_CHUNK_BYTES
+from fabric.sessions import CONNECT_WINDOW_S, check_role, error_of, open_session, wait_connected
+from fabric.subscriptions import AliveSubscription, Subscription
+from fabric.transfers import export_to_file, input_size, upload_file
 
 __all__ = ["Client", "Subscription", "AliveSubscription", "wait_connected", "input_size"]
 
 DISCOVERY_WINDOW_S = 1.0   # retry a get that found no queryable for this long (declarations in flight)
-CONNECT_WINDOW_S = 3.0     # how long connect() waits for the first link
 ALIVE_ATTEMPTS = 5         # liveliness queries merged when an answer is incomplete (see Client.alive)
 ALIVE_BACKOFF_S = 0.01     # pause between those attempts
-
-
-def input_size(path: str | os.PathLike[str], max_bytes: int) -> int:
-    """The size of an input file the user named, checked before it is read: BadRequest when it is not
-    there, ValidationError (field ``size``) when it is larger than ``max_bytes``."""
-    try:
-        size = os.stat(path).st_size
-    except OSError:
-        raise BadRequest(f"no such file: {path}", file=str(path)) from None
-    if not os.path.isfile(path):
-        raise BadRequest(f"not a file: {path}", file=str(path))
-    if size > max_bytes:
-        raise ValidationError(f"{path} is {size / 2**20:,.1f} MB, more than the limit of {max_bytes / 2**20:,.0f} MB "
-                              "(--max-size-mb raises it)", field="size", file=str(path), value=size, limit=max_bytes)
-    return size
-
-
-class Subscription:
-    """Decoded messages of one topic; the Zenoh callback only enqueues bytes."""
-
-    def __init__(self, session: zenoh.Session, key: str, msg_type: type, maxsize: int = 100_000) -> None:
-        self.msg_type = msg_type
-        self.dropped = 0
-        self._q: queue.Queue[bytes] = queue.Queue(maxsize)
-        self._sub = session.declare_subscriber(key, self._on_sample)
-
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        try:
-            self._q.put_nowait(sample.payload.to_bytes())
-        except queue.Full:
-            self.dropped += 1  # counted; the consumer can see it fell behind
-
-    def get(self, timeout: float | None = None) -> Any:
-        """The next message (decoded and validated); ``queue.Empty`` after ``timeout``."""
-        return codec.decode(self._q.get(timeout=timeout), self.msg_type)
-
-    def __iter__(self) -> Iterator[Any]:
-        while True:
-            yield self.get()
-
-    def close(self) -> None:
-        self._sub.undeclare()
-
-
-class AliveSubscription:
-    """Liveliness changes of the cell's services: ``get()`` returns ``(service, alive)``.
-
-    The Zenoh callback only parses the key (``keys.parse_alive``) and enqueues, or hands the change
-    to ``on_change`` when one is given (it runs inside the Zenoh callback: it must not block, e.g.
-    post a message to a UI). Changes are hints; the truth at any moment is :meth:`Client.alive`."""
-
-    def __init__(self, session: zenoh.Session, key: str,
-                 on_change: Callable[[str, bool], None] | None = None) -> None:
-        self._q: queue.Queue[tuple[str, bool]] = queue.Queue()
-        self._on_change = on_change
-        self._sub = session.liveliness().declare_subscriber(key, self._on_sample)
-
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        change = (parse_alive(str(sample.key_expr))[1], sample.kind == zenoh.SampleKind.PUT)
-        if self._on_change is not None:
-            self._on_change(*change)
-        else:
-            self._q.put(change)
-
-    def get(self, timeout: float | None = None) -> tuple[str, bool]:
-        """The next change; ``queue.Empty`` after ``timeout``."""
-        return self._q.get(timeout=timeout)
-
-    def close(self) -> None:
-        self._sub.undeclare()
 
 
 class Client:
@@ -124,7 +53,7 @@ class Client:
     def connect(cls, settings: SessionSettings) -> Iterator["Client"]:
         """Open a session from ``settings`` and close it on exit."""
         from fabric.security.zconfigs import role_of_config
-        session = _open(settings)
+        session = open_session(settings)
         try:
             if settings.connect:
                 wait_connected(session, CONNECT_WINDOW_S)
@@ -137,7 +66,7 @@ class Client:
     def call(self, service: str, command: str, request: Any = None, timeout: float | None = None) -> Any:
         ep = ENDPOINTS[(service, command)]
         if self.role is not None:
-            _check_role(self.role, service, command)
+            check_role(self.role, service, command)
         req = request if request is not None else ep.request()
         if not isinstance(req, ep.request):
             raise TypeError(f"{service}/{command} takes {ep.request.TYPE}, not {type(req).__name__}")
@@ -163,7 +92,7 @@ class Client:
             for reply in replies:
                 if reply.ok is not None:
                     return codec.decode(reply.ok.payload.to_bytes(), reply_type)
-                raise _error_of(reply.err.payload.to_bytes(), what, time.monotonic() - t0)
+                raise error_of(reply.err.payload.to_bytes(), what, time.monotonic() - t0)
             waited = time.monotonic() - t0
             timed_out = time.monotonic() - t_get >= 0.9 * timeout
             if timed_out or waited >= min(timeout, DISCOVERY_WINDOW_S):
@@ -250,29 +179,8 @@ class Client:
 
     def wait_job(self, service: str, job_id: str, timeout: float = 600.0,
                  on_progress: Callable[[s.JobStatus], None] | None = None) -> s.JobStatus:
-        """Follow a job (snapshot, then the progress stream) until it ends; raise its error if it failed."""
-        sub = self.subscribe(service, "progress")
-        try:
-            end = time.monotonic() + timeout
-            st = self.call(service, "job", s.JobQuery(job_id=job_id))
-            while st.state in ("queued", "running"):
-                if on_progress:
-                    on_progress(st)
-                left = end - time.monotonic()
-                if left <= 0:
-                    raise ServiceUnavailable(f"{service} job {job_id} still {st.state} after {timeout:g} s")
-                try:
-                    msg = sub.get(timeout=min(left, 2.0))
-                except queue.Empty:  # a missed final message: ask once more (snapshot)
-                    st = self.call(service, "job", s.JobQuery(job_id=job_id))
-                    continue
-                if msg.job_id == job_id:
-                    st = msg
-            if st.state == "failed" and st.error is not None:
-                raise error_from_code(st.error.code, st.error.message, st.error.details)
-            return st
-        finally:
-            sub.close()
+        """Follow a job until it ends; raise its error if it failed (see :func:`fabric.job_waits.wait_job`)."""
+        return wait_job(self, service, job_id, timeout, on_progress)
 
     # --- station: the paper's commands ------------------------------------------
 
@@ -311,25 +219,9 @@ class Client:
     def upload(self, service: str, path: str | os.PathLike[str], max_bytes: int,
                chunk_bytes: int = UPLOAD_CHUNK_BYTES,
                on_progress: Callable[[int, int], None] | None = None) -> str:
-        """Send a file to ``<service>/upload`` in pieces of ``chunk_bytes`` (its size checked against
-        ``max_bytes`` before a byte is read, see :func:`input_size`); returns the upload id to name in the
-        request (``PlanRequest.upload_id``, ``SliceRequest.upload_id``). Memory: one piece."""
-        size = input_size(path, max_bytes)
-        uid = uuid.uuid4().hex
-        digest = hashlib.sha256()
-        offset = 0
-        with open(path, "rb") as f:
-            while True:
-                data = f.read(min(chunk_bytes, UPLOAD_CHUNK_MAX_BYTES))
-                digest.update(data)
-                last = offset + len(data) >= size or not data
-                self.call(service, "upload", s.UploadChunk(upload_id=uid, offset=offset, total_bytes=size, data=data,
-                                                           sha256=digest.hexdigest() if last else ""))
-                offset += len(data)
-                if on_progress is not None:
-                    on_progress(offset, size)
-                if last:
-                    return uid
+        """Send a file in pieces; returns the upload id (see :func:`fabric.transfers.upload_file`)."""
+        return upload_file(self, service, path, max_bytes, chunk_bytes, on_progress)
+
     def plan_summary(self, program_id: str) -> s.PlanSummary:
         return self.call("planner", "summary", s.ArtifactQuery(artifact_id=program_id))
     def export(self, program_id: str, fmt: str, module_targets: int = 5000) -> s.Artifact:
@@ -346,20 +238,9 @@ class Client:
 
     def export_to(self, program_id: str, fmt: str, out: BinaryIO, module_targets: int = 5000,
                   limit_bytes: int = 16 << 20, *, job_id: str = "") -> int:
-        """Stream an export into ``out`` chunk by chunk; returns the bytes written.
+        """Stream an export into ``out``; returns the bytes written (see :func:`fabric.transfers.export_to_file`)."""
+        return export_to_file(self, program_id, fmt, out, module_targets, limit_bytes, job_id=job_id)
 
-        A chunk is what the planner has formatted by the time it is asked, up to ``limit_bytes``. Chunks
-        are written to ``out`` by a helper thread while the next one is fetched (memory: a few chunks).
-        With ``job_id`` (``program_id`` empty) the export of a plan job still running starts as soon as its
-        program is final (an empty chunk meanwhile: asked again)."""
-        offset = 0
-        with _ChunkWriter(out) as writer:
-            while True:
-                chunk = self.export_chunk(program_id, fmt, offset, limit_bytes, module_targets, job_id=job_id)
-                writer.write(chunk.data)
-                offset += len(chunk.data)
-                if chunk.done:
-                    return offset
     def check(self, request: s.CollisionRequest) -> s.CollisionReport: return self.call("collision", "check", request)
     def status(self) -> s.FabricStatus: return self.call("supervisor", "status")
     def submit(self, request: s.JobSubmit) -> s.JobAccepted: return self.call("supervisor", "submit", request)
@@ -377,131 +258,5 @@ class Client:
 
     def wait_print_job(self, job_id: str, done: Callable[[s.JobRecord], bool], timeout: float = 600.0,
                        on_change: Callable[[s.JobRecord], None] | None = None) -> s.JobRecord:
-        """Follow a print job (its record, then the ``jobs`` stream) until ``done(record)`` or its
-        state is final; raise its typed error if it failed."""
-        sub = self.subscribe("supervisor", "jobs")
-        try:
-            end = time.monotonic() + timeout
-            rec = self.job(job_id)
-            while not done(rec) and rec.state not in s.FINAL_JOB_STATES:
-                if on_change:
-                    on_change(rec)
-                left = end - time.monotonic()
-                if left <= 0:
-                    raise ServiceUnavailable(f"print job {job_id} still {rec.state} after {timeout:g} s",
-                                             timeout_s=timeout)
-                try:
-                    msg = sub.get(timeout=min(left, 2.0))
-                except queue.Empty:  # a missed message: ask once more (snapshot)
-                    rec = self.job(job_id)
-                    continue
-                if msg.job_id == job_id:
-                    rec = msg
-            if rec.state == "failed" and rec.error is not None:
-                raise error_from_code(rec.error.code, rec.error.message, rec.error.details)
-            return rec
-        finally:
-            sub.close()
-
-
-class _ChunkWriter:
-    """Writes chunks to a binary stream on a helper thread, at most ``depth`` chunks behind the fetching.
-
-    Writing a large export to disk costs about as much as formatting it (page-cache pages are fresh
-    memory), so the two overlap. A write error is raised by the next :meth:`write` or on exit.
-    """
-
-    def __init__(self, out: BinaryIO, depth: int = 2) -> None:
-        self._out = out
-        self._queue: queue.Queue[bytes | None] = queue.Queue(maxsize=depth)
-        self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, name="export-file-writer", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while True:
-            data = self._queue.get()
-            if data is None:
-                return
-            if self._error is None:
-                try:
-                    self._out.write(data)
-                except BaseException as exc:    # noqa: BLE001 - handed to the fetching thread
-                    self._error = exc
-
-    def write(self, data: bytes) -> None:
-        if self._error is not None:
-            raise self._error
-        self._queue.put(data)
-
-    def __enter__(self) -> "_ChunkWriter":
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, *_: object) -> None:
-        self._queue.put(None)
-        self._thread.join()
-        if exc_type is None and self._error is not None:
-            raise self._error
-
-
-def _open(settings: SessionSettings) -> zenoh.Session:
-    """Open a session; a client that finds no router retries briefly, then says where it looked."""
-    end = time.monotonic() + CONNECT_WINDOW_S
-    first = True
-    while True:
-        try:
-            return zenoh.open(zenoh_config(settings))
-        except zenoh.ZError as exc:
-            last = time.monotonic() >= end
-            if (first and settings.config_file) or last:     # a secured hub that refused us: say why
-                _refused(settings)
-            first = False
-            if last:
-                raise ServiceUnavailable(f"cannot reach the fabric hub at {', '.join(settings.connect)} "
-                                         f"(is 'fabric-cli up' or 'fabric-cli router' running?)",
-                                         connect=settings.connect, reason=str(exc)) from None
-            time.sleep(0.1)
-
-
-def _refused(settings: SessionSettings) -> None:
-    """Raise PermissionDenied with the reason when a secured hub refused these credentials."""
-    from fabric.security.diagnose import explain_refusal
-    why = explain_refusal(settings.config_file, settings.connect)
-    if why is not None:
-        raise PermissionDenied(f"the fabric hub at {', '.join(settings.connect)} refused this session: {why}",
-                               connect=settings.connect, config=settings.config_file)
-
-
-def _check_role(role: str, service: str, command: str) -> None:
-    """Refuse at once what the hub would drop unanswered for this role."""
-    from fabric.security.roles import MONITOR_COMMANDS, may_call
-    if not may_call(role, service, command):
-        allowed = ", ".join(sorted(f"{svc}/{cmd}" for svc, cmd in MONITOR_COMMANDS)) if role == "monitor" else ""
-        raise PermissionDenied(f"the {role} role may not run {service}/{command} (ask an operator)"
-                               + (f"; it may run {allowed}" if allowed else ""),
-                               role=role, service=service, command=command)
-
-
-def wait_connected(session: zenoh.Session, deadline_s: float) -> bool:
-    """Wait (bounded) until the session has a link to a router or a peer; a fresh session's first
-    query could otherwise leave before the link is up and find no one."""
-    end = time.monotonic() + deadline_s
-    while time.monotonic() < end:
-        if list(session.info.routers_zid()) or list(session.info.peers_zid()):
-            return True
-        time.sleep(0.01)
-    return False
-
-
-def _error_of(payload: bytes, what: str, waited_s: float) -> FabricError:
-    """The typed error of an error reply. Zenoh itself answers ``Timeout`` for a queryable that did not
-    reply in time (a frozen or overloaded service): that is ``unavailable``, not a payload to decode."""
-    if payload.strip().lower() == b"timeout":
-        return ServiceUnavailable(f"no reply from {what} within {waited_s:.3g} s (the service is there but did "
-                                  f"not answer: busy, frozen or cut off)", timeout_s=waited_s)
-    try:
-        err = codec.decode(payload, s.ErrorReply)
-    except DecodeError:
-        return DecodeError(f"undecodable error reply from {what}: {payload[:80]!r}")
-    return error_from_code(err.code, err.message, err.details)
-
+        """Follow a print job until ``done(record)`` or a final state (see :func:`fabric.job_waits.wait_print_job`)."""
+        return wait_print_job(self, job_id, done, timeout, on_change)

@@ -1,0 +1,74 @@
+"""Following jobs to their end: a service's job (slicing, planning) and a print job at the supervisor.
+
+Each reads a snapshot first, then the service's stream; a missed final message
+costs a snapshot asked again, never a hang.
+"""
+from __future__ import annotations
+
+import queue
+import time
+from typing import TYPE_CHECKING, Callable
+
+from fabric import schemas as s
+from fabric.errors import ServiceUnavailable, error_from_code
+
+if TYPE_CHECKING:
+    from fabric.client import Client
+
+__all__ = ["wait_job", "wait_print_job"]
+
+
+def wait_job(client: "Client", service: str, job_id: str, timeout: float = 600.0,
+             on_progress: Callable[[s.JobStatus], None] | None = None) -> s.JobStatus:
+    """Follow a job (snapshot, then the progress stream) until it ends; raise its error if it failed."""
+    sub = client.subscribe(service, "progress")
+    try:
+        end = time.monotonic() + timeout
+        st = client.call(service, "job", s.JobQuery(job_id=job_id))
+        while st.state in ("queued", "running"):
+            if on_progress:
+                on_progress(st)
+            left = end - time.monotonic()
+            if left <= 0:
+                raise ServiceUnavailable(f"{service} job {job_id} still {st.state} after {timeout:g} s")
+            try:
+                msg = sub.get(timeout=min(left, 2.0))
+            except queue.Empty:  # a missed final message: ask once more (snapshot)
+                st = client.call(service, "job", s.JobQuery(job_id=job_id))
+                continue
+            if msg.job_id == job_id:
+                st = msg
+        if st.state == "failed" and st.error is not None:
+            raise error_from_code(st.error.code, st.error.message, st.error.details)
+        return st
+    finally:
+        sub.close()
+
+
+def wait_print_job(client: "Client", job_id: str, done: Callable[[s.JobRecord], bool], timeout: float = 600.0,
+                   on_change: Callable[[s.JobRecord], None] | None = None) -> s.JobRecord:
+    """Follow a print job (its record, then the ``jobs`` stream) until ``done(record)`` or its
+    state is final; raise its typed error if it failed."""
+    sub = client.subscribe("supervisor", "jobs")
+    try:
+        end = time.monotonic() + timeout
+        rec = client.job(job_id)
+        while not done(rec) and rec.state not in s.FINAL_JOB_STATES:
+            if on_change:
+                on_change(rec)
+            left = end - time.monotonic()
+            if left <= 0:
+                raise ServiceUnavailable(f"print job {job_id} still {rec.state} after {timeout:g} s",
+                                         timeout_s=timeout)
+            try:
+                msg = sub.get(timeout=min(left, 2.0))
+            except queue.Empty:  # a missed message: ask once more (snapshot)
+                rec = client.job(job_id)
+                continue
+            if msg.job_id == job_id:
+                rec = msg
+        if rec.state == "failed" and rec.error is not None:
+            raise error_from_code(rec.error.code, rec.error.message, rec.error.details)
+        return rec
+    finally:
+        sub.close()
