@@ -149,7 +149,8 @@ class Service:
                 self.keys.cmd(self.name, command), lambda q, ep=ep, current=current: self._answer_snapshot(q, ep, current)))
         self._serve(self.keys.artifact_all(self.name), self._answer_artifact)
         self._token = self.session.liveliness().declare_token(self.keys.alive(self.name))
-        self.log.info("%s serving %d commands on %s", self.name, len(self._handlers), self.keys.prefix)
+        self.log.info("%s serving %d commands on %s", self.name, len(self._handlers) + len(self._snapshots),
+                      self.keys.prefix)
 
     def _serve(self, key: str, answer: Callable[[zenoh.Query], None]) -> None:
         q = self.session.declare_queryable(key, handler=zenoh.handlers.FifoChannel(1024))
