@@ -8,6 +8,7 @@ from typing import Any, Union
 import numpy as np
 
 from fabric.errors import UNREACHABLE_REASONS
+from fabric.services.telemetry_gate import EXTRUSION_PERIOD_S, TEMPS_PERIOD_S
 from fabric.keys import ENDPOINTS, SERVICES, TOPICS
 from fabric.schemas import REGISTRY
 
@@ -125,17 +126,25 @@ def render() -> str:
     intro = INTRO.replace("{services}", ", ".join(f"`{s}`" for s in SERVICES))
     out = [intro.replace("{reasons}", ", ".join(f"`{r}`" for r in UNREACHABLE_REASONS))]
     out.append("## Commands (queryables)\n")
-    out.append("| key | request | reply | timeout | what it does |\n|---|---|---|---|---|")
+    out.append("Commands travel at Zenoh's interactive priority, express (never held back to fill a batch), "
+               "ahead of telemetry; *bulk* commands, whose request or reply can carry megabytes, travel at "
+               "data priority, batched.\n")
+    out.append("| key | request | reply | timeout | priority | what it does |\n|---|---|---|---|---|---|")
     for (svc, cmd), ep in ENDPOINTS.items():
         out.append(f"| `am/<cell>/{svc}/cmd/{cmd}` | `{ep.request.TYPE}` | `{ep.reply.TYPE}` | "
-                   f"{ep.timeout_s:g} s | {ep.doc} |")
+                   f"{ep.timeout_s:g} s | {'data (bulk)' if ep.bulk else 'interactive'} | {ep.doc} |")
     out.append("\n## Telemetry (publications)\n")
     out.append("| key | payload | delivery |\n|---|---|---|")
     lossless = {("station", "state"), ("station", "events"), ("slicer", "progress"), ("planner", "progress"),
                 ("supervisor", "progress")}
+    sampled = {("station", "pose"): "at the station's pose rate (`--pose-hz`)",
+               ("station", "extrusion"): f"on each switch of the extruder and change of flow, layer or flow "
+                                         f"override, else every {EXTRUSION_PERIOD_S:g} s; its own gap-free `seq`",
+               ("station", "temps"): f"on a new set point, else every {TEMPS_PERIOD_S:g} s"}
     for (svc, topic), tp in TOPICS.items():
         how = ("reliable, lossless (congestion control: block)" if (svc, topic) in lossless
-               else "reliable, latest value wins (drop under congestion), fixed wall-clock rate")
+               else "reliable, latest value wins (drop under congestion), "
+               + sampled.get((svc, topic), "fixed wall-clock rate"))
         out.append(f"| `am/<cell>/{svc}/{topic}` | `{tp.TYPE}` | {how} |")
     out.append("\nThe station's event stream has a gap-free `seq`; a monitor that misses messages "
                "asks `station/cmd/events` with `since_seq` for the rest.\n")

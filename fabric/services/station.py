@@ -42,7 +42,7 @@ from fabric.programs import content_id, program_from_artifact
 from fabric.readiness import ReadyFacts, print_temp_c, ready_report
 from fabric.config import add_cell_argument, service_data_dir
 from fabric.runtime import Service
-from fabric.services.telemetry_gate import ChangeOrPeriod
+from fabric.services.telemetry_gate import EXTRUSION_PERIOD_S, TEMPS_PERIOD_S, ChangeOrPeriod
 from fabric.robot.cell import Cell
 from fabric.robot.frames import T_to_xyzrpy
 from fabric.sim.twin import EVENT_KINDS, Twin
@@ -53,8 +53,6 @@ __all__ = ["StationService", "build", "add_arguments"]
 
 TICK_S = 0.02
 STATE_PERIOD_S = 0.5          # state also re-published at this period (progress)
-EXTRUSION_PERIOD_S = 0.05     # extrusion: on every switch, flow or layer change, else 20 Hz (the running volume)
-TEMPS_PERIOD_S = 0.1          # temperatures: on a new set point, else 10 Hz
 GIL_SWITCH_S = 0.0005         # a command's thread waits at most this long for the clock thread's interpreter lock
 STALL_S = 0.5                 # a tick this late: the process was frozen or starved (time is held, noted)
 STALL_INTERRUPT_S = 2.0       # this late, the fabric has reported the station gone: a print is interrupted

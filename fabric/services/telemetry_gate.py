@@ -14,7 +14,10 @@ from __future__ import annotations
 import math
 from collections.abc import Hashable
 
-__all__ = ["ChangeOrPeriod"]
+__all__ = ["ChangeOrPeriod", "EXTRUSION_PERIOD_S", "TEMPS_PERIOD_S"]
+
+EXTRUSION_PERIOD_S = 0.05     # extrusion: on every switch, flow or layer change, else 20 Hz (the running volume)
+TEMPS_PERIOD_S = 0.1          # temperatures: on a new set point, else 10 Hz
 
 
 class ChangeOrPeriod:
