@@ -30,7 +30,7 @@ from fabric.qos import BULK_QOS, command_qos
 from fabric.schemas.upload import UPLOAD_CHUNK_BYTES
 from fabric.sessions import CONNECT_WINDOW_S, check_role, error_of, open_session, wait_connected
 from fabric.subscriptions import AliveSubscription, Subscription
-from fabric.transfers import export_to_file, input_size, upload_file
+from fabric.transfers import EXPORT_CHUNK_BYTES, export_to_file, input_size, upload_file
 
 __all__ = ["Client", "Subscription", "AliveSubscription", "wait_connected", "input_size"]
 
@@ -237,7 +237,7 @@ class Client:
             job_id=job_id))
 
     def export_to(self, program_id: str, fmt: str, out: BinaryIO, module_targets: int = 5000,
-                  limit_bytes: int = 16 << 20, *, job_id: str = "") -> int:
+                  limit_bytes: int = EXPORT_CHUNK_BYTES, *, job_id: str = "") -> int:
         """Stream an export into ``out``; returns the bytes written (see :func:`fabric.transfers.export_to_file`)."""
         return export_to_file(self, program_id, fmt, out, module_targets, limit_bytes, job_id=job_id)
 
