@@ -145,8 +145,8 @@ class Service:
         for command, (ep, fn) in self._handlers.items():
             self._serve(self.keys.cmd(self.name, command), lambda q, ep=ep, fn=fn: self._answer(q, ep, fn))
         for command, (ep, current) in self._snapshots.items():
-            self._queryables.append(self.session.declare_queryable(
-                self.keys.cmd(self.name, command), lambda q, ep=ep, current=current: self._answer_snapshot(q, ep, current)))
+            answer = lambda q, ep=ep, current=current: self._answer_snapshot(q, ep, current)  # noqa: E731
+            self._queryables.append(self.session.declare_queryable(self.keys.cmd(self.name, command), answer))
         self._serve(self.keys.artifact_all(self.name), self._answer_artifact)
         self._token = self.session.liveliness().declare_token(self.keys.alive(self.name))
         self.log.info("%s serving %d commands on %s", self.name, len(self._handlers) + len(self._snapshots),

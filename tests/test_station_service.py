@@ -296,10 +296,10 @@ def test_extrusion_and_temps_are_published_on_change_pose_at_its_rate(fabric):
         client.load(pid)
         client.start(rtf=20.0)
         t0 = time.monotonic()
-        wait_event(events, ("finished",), timeout=120)
+        end = wait_event(events, ("finished",), timeout=120)
         wall_s = time.monotonic() - t0
-        time.sleep(0.2)
-        poses, exts, ts = _drain(pose), _drain(ext), _drain(temps)
+        # the streams of the finishing tick follow its event: take them up to a sample at or after it
+        poses, exts, ts = _until(pose, end.t_sim_s), _until(ext, end.t_sim_s), _drain(temps)
     finally:
         for sub in (pose, ext, temps, events):
             sub.close()
@@ -310,6 +310,14 @@ def test_extrusion_and_temps_are_published_on_change_pose_at_its_rate(fabric):
     assert switches >= 2 and any(e.on for e in exts)               # the extruder went on and off: both seen
     assert exts[-1].extruded_mm3 > 0 and not exts[-1].on
     assert any(t.nozzle_target_c == 200.0 for t in ts)
+
+
+def _until(sub, t_sim_s: float, timeout_s: float = 10.0) -> list:
+    """Messages of ``sub`` up to the first one at or after ``t_sim_s`` (each waited for at most ``timeout_s``)."""
+    out = [sub.get(timeout=timeout_s)]
+    while out[-1].t_sim_s < t_sim_s:
+        out.append(sub.get(timeout=timeout_s))
+    return out
 
 
 def _drain(sub) -> list:
