@@ -57,6 +57,11 @@ class Publisher:
             raise TypeError(f"{self.key} carries {self.msg_type.TYPE}, not {type(msg).__name__}")
         self._pub.put(codec.encode(msg))
 
+    def send_encoded(self, data: bytes) -> None:
+        """Publish a message the caller already encoded (``codec.encode`` of this topic's type), e.g. one
+        it also keeps as a snapshot reply."""
+        self._pub.put(data)
+
     def close(self) -> None:
         self._pub.undeclare()
 

@@ -172,15 +172,13 @@ class StationService(Service):
                 msgs = [self._event_msg(ev) for ev in backlog + events]
                 backlog = []
                 state = self._state_msg()
-                if now >= next_pose:
+                pose_due = now >= next_pose
+                if pose_due:
                     self._seq_pose += 1
-                    pose = self._pose_msg(self._seq_pose)
-                    self._position = codec.encode(pose)
-                else:
-                    pose = None
-                    self._position = codec.encode(self._pose_msg(self._seq_pose))
-                ext = self._extrusion_due(now) if pose else None
-                temps = self._temps_due(now) if pose else None
+                # the pose now: the position reply from this tick on, and the pose sample when one is due
+                position = self._position = codec.encode(self._pose_msg(self._seq_pose))
+                ext = self._extrusion_due(now) if pose_due else None
+                temps = self._temps_due(now) if pose_due else None
                 self.journal.record_tick(msgs, self.twin.t_sim_s)       # written before it is published
                 key = (state.state, state.reason, state.program_id, state.layer, state.rtf, state.speed_r,
                        state.flow_r, round(state.progress_r, 3))
@@ -190,9 +188,9 @@ class StationService(Service):
             if key != self._last_state or now - self._last_state_s >= STATE_PERIOD_S:
                 self._last_state, self._last_state_s = key, now
                 self.pub_state.send(state)
-            if pose is not None:
+            if pose_due:
                 next_pose = max(next_pose + self.pose_period_s, now)
-                self.pub_pose.send(pose)
+                self.pub_pose.send_encoded(position)
             if ext is not None:
                 self.pub_extrusion.send(ext)
             if temps is not None:

@@ -6,8 +6,8 @@ publishing them at the pose rate doubled the messages the hub fans out to every
 monitor for nothing. A :class:`ChangeOrPeriod` gate lets a message through when
 its *key* (the discrete part: extruder on/off, flow, layer; heater set points)
 differs from the last one published, or when ``period_s`` has passed (the
-running values: volume, temperatures). A monitor still sees every switch at
-the tick it happens.
+running values: volume, temperatures). The station asks its gates at every
+pose sample, so a monitor sees each switch with the first pose sample after it.
 """
 from __future__ import annotations
 
