@@ -46,6 +46,7 @@ from fabric.services.telemetry_gate import EXTRUSION_PERIOD_S, TEMPS_PERIOD_S, C
 from fabric.robot.cell import Cell
 from fabric.robot.frames import T_to_xyzrpy
 from fabric.sim.twin import EVENT_KINDS, Twin
+from fabric.sim.types import ExtrusionState
 from fabric.store.journal import DEFAULT_CHECKPOINT_PERIOD_S, StationJournal, StationMeta
 from fabric.store.station import StationStore
 
@@ -171,21 +172,22 @@ class StationService(Service):
                 last = now
                 msgs = [self._event_msg(ev) for ev in backlog + events]
                 backlog = []
-                state = self._state_msg()
+                ext_now = self.twin.extrusion()
+                key = self._state_key(ext_now)
+                state_due = key != self._last_state or now - self._last_state_s >= STATE_PERIOD_S
+                state = self._state_msg(ext_now) if state_due else None       # built only when published
                 pose_due = now >= next_pose
                 if pose_due:
                     self._seq_pose += 1
                 # the pose now: the position reply from this tick on, and the pose sample when one is due
                 position = self._position = codec.encode(self._pose_msg(self._seq_pose))
-                ext = self._extrusion_due(now) if pose_due else None
+                ext = self._extrusion_due(now, ext_now) if pose_due else None
                 temps = self._temps_due(now) if pose_due else None
                 self.journal.record_tick(msgs, self.twin.t_sim_s)       # written before it is published
-                key = (state.state, state.reason, state.program_id, state.layer, state.rtf, state.speed_r,
-                       state.flow_r, round(state.progress_r, 3))
                 self.journal.checkpoint(self.twin, self.meta, force=key[:3] != self._last_state[:3])
             for m in msgs:
                 self.pub_events.send(m)
-            if key != self._last_state or now - self._last_state_s >= STATE_PERIOD_S:
+            if state is not None:
                 self._last_state, self._last_state_s = key, now
                 self.pub_state.send(state)
             if pose_due:
@@ -227,9 +229,8 @@ class StationService(Service):
                       xyz_mm=list(map(float, p.xyz_mm)), quat_wxyz=list(map(float, p.quat_wxyz)),
                       base_xyz_mm=list(map(float, p.base_xyz_mm)), wall_time_s=time.time())
 
-    def _extrusion_due(self, now: float) -> s.Extrusion | None:
+    def _extrusion_due(self, now: float, e: ExtrusionState) -> s.Extrusion | None:
         """The extrusion message if it is to be published now (its own sequence: a gap is a lost message)."""
-        e = self.twin.extrusion()
         key = (bool(e.on), round(float(e.flow_mm3_s), 3), int(e.layer), float(self.twin.flow_r))
         if not self._extrusion_gate.due(key, now):
             return None
@@ -246,13 +247,24 @@ class StationService(Service):
         return s.Temps(nozzle_c=float(t.nozzle_c), nozzle_target_c=float(t.nozzle_target_c), bed_c=float(t.bed_c),
                        bed_target_c=float(t.bed_target_c), t_sim_s=self.twin.t_sim_s)
 
-    def _state_msg(self) -> s.StationState:
-        ti = self.twin.time_info()
-        ext = self.twin.extrusion()
-        planned = self.meta.planned_mm3
-        progress = min(ext.extruded_mm3 / planned, 1.0) if planned > 0 else 0.0
+    def _progress_r(self, ext: ExtrusionState) -> float:
+        """Share of the planned volume deposited (1 once the print has finished)."""
         if self.twin.state == "idle" and self.twin.reason == "finished":
-            progress = 1.0
+            return 1.0
+        planned = self.meta.planned_mm3
+        return min(ext.extruded_mm3 / planned, 1.0) if planned > 0 else 0.0
+
+    def _state_key(self, ext: ExtrusionState) -> tuple:
+        """What a published state says that matters to a watcher (a change is published at once);
+        the first three fields changing also force a checkpoint."""
+        return (self.twin.state, self.twin.reason, self.program_id, int(ext.layer), self.rtf,
+                float(self.twin.speed_r), float(self.twin.flow_r), round(self._progress_r(ext), 3))
+
+    def _state_msg(self, ext: ExtrusionState | None = None) -> s.StationState:
+        ti = self.twin.time_info()
+        ext = self.twin.extrusion() if ext is None else ext
+        planned = self.meta.planned_mm3
+        progress = self._progress_r(ext)
         wobj_xyz, wobj_rpy = T_to_xyzrpy(self.twin.work_object_T)
         return s.StationState(state=self.twin.state, reason=self.twin.reason, program_id=self.program_id,
                               job_id=self.job_id, t_sim_s=float(self.twin.t_sim_s), elapsed_s=float(ti.elapsed_s),
