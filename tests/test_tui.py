@@ -161,7 +161,7 @@ def test_stl_to_finished_print_with_a_pause_an_override_and_the_history(console_
                 await until(pilot, lambda: app.alive.get("slicer") and app.station_state is not None)
                 await pilot.press("2")
                 await pilot.press("a")
-                submit = await dialog(pilot, SubmitDialog, "#submit-path", 30.0)
+                submit = await dialog(pilot, SubmitDialog, "#submit-profile #label", 30.0)   # selects mount last
                 submit.query_one("#submit-path").value = str(sample_model())
                 submit.query_one("#submit-profile").value = "robot-1.2mm"
                 submit.query_one("#submit-rtf").value = "100"

@@ -42,11 +42,10 @@ from fabric.programs import content_id, program_from_artifact
 from fabric.readiness import ReadyFacts, print_temp_c, ready_report
 from fabric.config import add_cell_argument, service_data_dir
 from fabric.runtime import Service
-from fabric.services.telemetry_gate import EXTRUSION_PERIOD_S, TEMPS_PERIOD_S, ChangeOrPeriod
+from fabric.services.station_messages import StationMessages
 from fabric.robot.cell import Cell
 from fabric.robot.frames import T_to_xyzrpy
 from fabric.sim.twin import EVENT_KINDS, Twin
-from fabric.sim.types import ExtrusionState
 from fabric.store.journal import DEFAULT_CHECKPOINT_PERIOD_S, StationJournal, StationMeta
 from fabric.store.station import StationStore
 
@@ -57,7 +56,6 @@ STATE_PERIOD_S = 0.5          # state also re-published at this period (progress
 GIL_SWITCH_S = 0.0005         # a command's thread waits at most this long for the clock thread's interpreter lock
 STALL_S = 0.5                 # a tick this late: the process was frozen or starved (time is held, noted)
 STALL_INTERRUPT_S = 2.0       # this late, the fabric has reported the station gone: a print is interrupted
-JOB_EVENTS = ("started", "layer", "paused", "resumed", "recovered", "finished", "stopped", "fault", "interrupted")
 
 
 class StationService(Service):
@@ -75,10 +73,7 @@ class StationService(Service):
         self.journal = StationJournal(StationStore(self.data_dir / "station.sqlite"), self.artifacts, checkpoint_s)
         self.twin, self._backlog = self._restore()
         self.clock_stop = threading.Event()         # set first on close: the clock thread ends
-        self._seq_pose = 0
-        self._seq_extrusion = 0
-        self._extrusion_gate = ChangeOrPeriod(EXTRUSION_PERIOD_S)
-        self._temps_gate = ChangeOrPeriod(TEMPS_PERIOD_S)
+        self.msgs = StationMessages(self.twin, self.meta)
         self._last_state: tuple = ()
         self._last_state_s = 0.0
         self.pub_pose = self.publisher("pose")
@@ -86,7 +81,7 @@ class StationService(Service):
         self.pub_temps = self.publisher("temps")
         self.pub_state = self.publisher("state", lossless=True)
         self.pub_events = self.publisher("events", lossless=True)
-        self._position = codec.encode(self._pose_msg(self._seq_pose))    # the twin's pose now, encoded
+        self._position = codec.encode(self.msgs.pose())    # the twin's pose now, encoded
         self.handle_snapshot("position", lambda: self._position)
         for command in ("home", "load", "start", "pause", "resume", "stop", "collisions",
                         "calibrate", "ready", "time", "state", "events", "overrides", "rtf", "mesh", "recover"):
@@ -170,19 +165,17 @@ class StationService(Service):
                     spent = time.monotonic() - t0
                     chunk_s = float(np.clip(chunk_s * (TICK_S / max(spent, 1e-4)) ** 0.5, 0.05, 600.0))
                 last = now
-                msgs = [self._event_msg(ev) for ev in backlog + events]
+                msgs = [self.msgs.event(ev) for ev in backlog + events]
                 backlog = []
                 ext_now = self.twin.extrusion()
-                key = self._state_key(ext_now)
+                key = self.msgs.state_key(ext_now)
                 state_due = key != self._last_state or now - self._last_state_s >= STATE_PERIOD_S
-                state = self._state_msg(ext_now) if state_due else None       # built only when published
+                state = self.msgs.state(ext_now) if state_due else None       # built only when published
                 pose_due = now >= next_pose
-                if pose_due:
-                    self._seq_pose += 1
                 # the pose now: the position reply from this tick on, and the pose sample when one is due
-                position = self._position = codec.encode(self._pose_msg(self._seq_pose))
-                ext = self._extrusion_due(now, ext_now) if pose_due else None
-                temps = self._temps_due(now) if pose_due else None
+                position = self._position = codec.encode(self.msgs.pose(sample=pose_due))
+                ext = self.msgs.extrusion_due(now, ext_now) if pose_due else None
+                temps = self.msgs.temps_due(now) if pose_due else None
                 self.journal.record_tick(msgs, self.twin.t_sim_s)       # written before it is published
                 self.journal.checkpoint(self.twin, self.meta, force=key[:3] != self._last_state[:3])
             for m in msgs:
@@ -211,69 +204,6 @@ class StationService(Service):
         if gap_s >= STALL_INTERRUPT_S and self.twin.state in ("printing", "paused"):
             self.twin.interrupt(why + ": recover to go on")
 
-    def _event_msg(self, ev) -> s.Event:
-        """The wire event; a job's events name the job and its simulated time so far."""
-        data = dict(ev.data)
-        if ev.kind in JOB_EVENTS and self.meta.job_id:
-            data.setdefault("job_id", self.meta.job_id)
-            t0 = self.twin.s.t_started_s
-            data.setdefault("elapsed_s", ev.t_sim_s - t0 if t0 is not None else 0.0)
-        return s.Event(seq=ev.seq, t_sim_s=ev.t_sim_s, kind=ev.kind, row=ev.row, gcode_line=ev.gcode_line,
-                       layer=ev.layer, data=data)
-
-    def _pose_msg(self, seq: int) -> s.Pose:
-        """The twin's pose now; ``seq``: the pose stream's number (a ``position`` reply carries the last
-        published one)."""
-        p = self.twin.pose()
-        return s.Pose(seq=seq, t_sim_s=self.twin.t_sim_s, q_deg=np.degrees(p.q_rad).tolist(),
-                      xyz_mm=list(map(float, p.xyz_mm)), quat_wxyz=list(map(float, p.quat_wxyz)),
-                      base_xyz_mm=list(map(float, p.base_xyz_mm)), wall_time_s=time.time())
-
-    def _extrusion_due(self, now: float, e: ExtrusionState) -> s.Extrusion | None:
-        """The extrusion message if it is to be published now (its own sequence: a gap is a lost message)."""
-        key = (bool(e.on), round(float(e.flow_mm3_s), 3), int(e.layer), float(self.twin.flow_r))
-        if not self._extrusion_gate.due(key, now):
-            return None
-        self._seq_extrusion += 1
-        return s.Extrusion(seq=self._seq_extrusion, t_sim_s=self.twin.t_sim_s, on=bool(e.on),
-                           flow_mm3_s=float(e.flow_mm3_s), extruded_mm3=float(e.extruded_mm3),
-                           filament_mm=float(e.filament_mm), layer=int(e.layer), row=int(e.row),
-                           gcode_line=int(e.gcode_line), flow_r=float(self.twin.flow_r))
-
-    def _temps_due(self, now: float) -> s.Temps | None:
-        t = self.twin.temps()
-        if not self._temps_gate.due((float(t.nozzle_target_c), float(t.bed_target_c)), now):
-            return None
-        return s.Temps(nozzle_c=float(t.nozzle_c), nozzle_target_c=float(t.nozzle_target_c), bed_c=float(t.bed_c),
-                       bed_target_c=float(t.bed_target_c), t_sim_s=self.twin.t_sim_s)
-
-    def _progress_r(self, ext: ExtrusionState) -> float:
-        """Share of the planned volume deposited (1 once the print has finished)."""
-        if self.twin.state == "idle" and self.twin.reason == "finished":
-            return 1.0
-        planned = self.meta.planned_mm3
-        return min(ext.extruded_mm3 / planned, 1.0) if planned > 0 else 0.0
-
-    def _state_key(self, ext: ExtrusionState) -> tuple:
-        """What a published state says that matters to a watcher (a change is published at once);
-        the first three fields changing also force a checkpoint."""
-        return (self.twin.state, self.twin.reason, self.program_id, int(ext.layer), self.rtf,
-                float(self.twin.speed_r), float(self.twin.flow_r), round(self._progress_r(ext), 3))
-
-    def _state_msg(self, ext: ExtrusionState | None = None) -> s.StationState:
-        ti = self.twin.time_info()
-        ext = self.twin.extrusion() if ext is None else ext
-        planned = self.meta.planned_mm3
-        progress = self._progress_r(ext)
-        wobj_xyz, wobj_rpy = T_to_xyzrpy(self.twin.work_object_T)
-        return s.StationState(state=self.twin.state, reason=self.twin.reason, program_id=self.program_id,
-                              job_id=self.job_id, t_sim_s=float(self.twin.t_sim_s), elapsed_s=float(ti.elapsed_s),
-                              total_s=float(ti.total_s), remaining_s=float(ti.remaining_s), progress_r=progress,
-                              deposited_mm3=float(ext.extruded_mm3), planned_mm3=planned, layer=int(ext.layer),
-                              layers_total=self.layers_total, rtf=self.rtf, speed_r=float(self.twin.speed_r),
-                              flow_r=float(self.twin.flow_r), wobj_xyz_mm=np.asarray(wobj_xyz).tolist(),
-                              wobj_rpy_deg=np.asarray(wobj_rpy).tolist())
-
     def _ack(self, message: str) -> s.Ack:
         return s.Ack(ok=True, message=message, state=self.twin.state)
 
@@ -287,7 +217,7 @@ class StationService(Service):
                 return handler(req)
             finally:
                 with self.lock:
-                    self._position = codec.encode(self._pose_msg(self._seq_pose))
+                    self._position = codec.encode(self.msgs.pose())
         return run
 
     def on_home(self, _: s.Empty) -> s.Ack:
@@ -437,7 +367,7 @@ class StationService(Service):
 
     def on_state(self, _: s.Empty) -> s.StationState:
         with self.lock:
-            return self._state_msg()
+            return self.msgs.state()
 
     def on_events(self, req: s.EventsQuery) -> s.EventList:
         last = self.journal.last_seq()
@@ -455,14 +385,14 @@ class StationService(Service):
                                        ("bed_c", req.bed_c)) if v is not None}
             self.twin.note("override", given)
             self._checkpoint()
-            return self._state_msg()
+            return self.msgs.state()
 
     def on_rtf(self, req: s.StartRequest) -> s.StationState:
         """Change how fast simulated time runs; the simulation itself is unchanged (time is exact)."""
         with self.lock:
             self._set_rtf(req.rtf)
             self._checkpoint()
-            return self._state_msg()
+            return self.msgs.state()
 
     def on_mesh(self, req: s.MeshRequest) -> s.Artifact:
         with self.lock:

@@ -1,0 +1,100 @@
+"""The station's wire messages, built from its twin and its job's metadata.
+
+:class:`StationMessages` owns what the station's streams carry: the sequence
+numbers of the pose and extrusion streams, the gates that decide when the
+sampled streams are published (:mod:`fabric.services.telemetry_gate`), and the
+state message with the key that decides when it is. Every method is called with
+the station's lock held (the twin is not thread-safe).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from fabric import schemas as s
+from fabric.robot.frames import T_to_xyzrpy
+from fabric.services.telemetry_gate import EXTRUSION_PERIOD_S, TEMPS_PERIOD_S, ChangeOrPeriod
+from fabric.sim.twin import Twin
+from fabric.sim.types import ExtrusionState
+from fabric.store.journal import StationMeta
+
+__all__ = ["StationMessages", "JOB_EVENTS"]
+
+JOB_EVENTS = ("started", "layer", "paused", "resumed", "recovered", "finished", "stopped", "fault", "interrupted")
+
+
+class StationMessages:
+    """Messages of one station's twin (``twin`` and ``meta`` are the station's, for its whole life)."""
+
+    def __init__(self, twin: Twin, meta: StationMeta) -> None:
+        self.twin, self.meta = twin, meta
+        self.seq_pose = 0                    # the last pose sample's number (a position reply carries it)
+        self.seq_extrusion = 0
+        self._extrusion_gate = ChangeOrPeriod(EXTRUSION_PERIOD_S)
+        self._temps_gate = ChangeOrPeriod(TEMPS_PERIOD_S)
+
+    def event(self, ev) -> s.Event:
+        """The wire event; a job's events name the job and its simulated time so far."""
+        data = dict(ev.data)
+        if ev.kind in JOB_EVENTS and self.meta.job_id:
+            data.setdefault("job_id", self.meta.job_id)
+            t0 = self.twin.s.t_started_s
+            data.setdefault("elapsed_s", ev.t_sim_s - t0 if t0 is not None else 0.0)
+        return s.Event(seq=ev.seq, t_sim_s=ev.t_sim_s, kind=ev.kind, row=ev.row, gcode_line=ev.gcode_line,
+                       layer=ev.layer, data=data)
+
+    def pose(self, sample: bool = False) -> s.Pose:
+        """The twin's pose now; ``sample``: it is the pose stream's next sample (numbered)."""
+        if sample:
+            self.seq_pose += 1
+        p = self.twin.pose()
+        return s.Pose(seq=self.seq_pose, t_sim_s=self.twin.t_sim_s, q_deg=np.degrees(p.q_rad).tolist(),
+                      xyz_mm=list(map(float, p.xyz_mm)), quat_wxyz=list(map(float, p.quat_wxyz)),
+                      base_xyz_mm=list(map(float, p.base_xyz_mm)), wall_time_s=time.time())
+
+    def extrusion_due(self, now: float, e: ExtrusionState) -> s.Extrusion | None:
+        """The extrusion message if it is to be published now (its own sequence: a gap is a lost message)."""
+        key = (bool(e.on), round(float(e.flow_mm3_s), 3), int(e.layer), float(self.twin.flow_r))
+        if not self._extrusion_gate.due(key, now):
+            return None
+        self.seq_extrusion += 1
+        return s.Extrusion(seq=self.seq_extrusion, t_sim_s=self.twin.t_sim_s, on=bool(e.on),
+                           flow_mm3_s=float(e.flow_mm3_s), extruded_mm3=float(e.extruded_mm3),
+                           filament_mm=float(e.filament_mm), layer=int(e.layer), row=int(e.row),
+                           gcode_line=int(e.gcode_line), flow_r=float(self.twin.flow_r))
+
+    def temps_due(self, now: float) -> s.Temps | None:
+        """The temperatures if they are to be published now."""
+        t = self.twin.temps()
+        if not self._temps_gate.due((float(t.nozzle_target_c), float(t.bed_target_c)), now):
+            return None
+        return s.Temps(nozzle_c=float(t.nozzle_c), nozzle_target_c=float(t.nozzle_target_c), bed_c=float(t.bed_c),
+                       bed_target_c=float(t.bed_target_c), t_sim_s=self.twin.t_sim_s)
+
+    def progress_r(self, ext: ExtrusionState) -> float:
+        """Share of the planned volume deposited (1 once the print has finished)."""
+        if self.twin.state == "idle" and self.twin.reason == "finished":
+            return 1.0
+        planned = self.meta.planned_mm3
+        return min(ext.extruded_mm3 / planned, 1.0) if planned > 0 else 0.0
+
+    def state_key(self, ext: ExtrusionState) -> tuple:
+        """What a published state says that matters to a watcher (a change is published at once);
+        the first three fields changing also force a checkpoint."""
+        return (self.twin.state, self.twin.reason, self.meta.program_id, int(ext.layer), self.meta.rtf,
+                float(self.twin.speed_r), float(self.twin.flow_r), round(self.progress_r(ext), 3))
+
+    def state(self, ext: ExtrusionState | None = None) -> s.StationState:
+        """The station's whole state (``ext``: the twin's extrusion now, when already read)."""
+        twin, meta = self.twin, self.meta
+        ti = twin.time_info()
+        ext = twin.extrusion() if ext is None else ext
+        wobj_xyz, wobj_rpy = T_to_xyzrpy(twin.work_object_T)
+        return s.StationState(state=twin.state, reason=twin.reason, program_id=meta.program_id,
+                              job_id=meta.job_id, t_sim_s=float(twin.t_sim_s), elapsed_s=float(ti.elapsed_s),
+                              total_s=float(ti.total_s), remaining_s=float(ti.remaining_s),
+                              progress_r=self.progress_r(ext), deposited_mm3=float(ext.extruded_mm3),
+                              planned_mm3=meta.planned_mm3, layer=int(ext.layer), layers_total=meta.layers_total,
+                              rtf=meta.rtf, speed_r=float(twin.speed_r), flow_r=float(twin.flow_r),
+                              wobj_xyz_mm=np.asarray(wobj_xyz).tolist(), wobj_rpy_deg=np.asarray(wobj_rpy).tolist())
