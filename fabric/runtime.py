@@ -27,6 +27,7 @@ from fabric import codec
 from fabric.errors import FabricError, InternalError, NotFound, StateError, ValidationError
 from fabric.keys import ENDPOINTS, TOPICS, Endpoint, Keys
 from fabric.qos import reply_qos
+from fabric.sessions import wait_connected
 from fabric.schemas import Ack, Artifact, ErrorReply, PinRequest
 from fabric.store.artifacts import ArtifactStore
 from fabric.store.records import RecordStore
@@ -34,6 +35,7 @@ from fabric.store.records import RecordStore
 __all__ = ["Service", "Publisher", "reply_error"]
 
 log = logging.getLogger("fabric.runtime")
+LINK_WINDOW_S = 3.0     # how long start() waits for a first link before asking who else serves the cell
 Handler = Callable[[Any], Any]
 
 
@@ -143,6 +145,7 @@ class Service:
     def start(self) -> None:
         """Serve every endpoint, then declare the liveliness token. Refuses (StateError) when another
         service of the same role already serves this cell anywhere on the fabric."""
+        wait_connected(self.session, LINK_WINDOW_S)    # the check asks the fabric: a link must be up first
         others = self.session.liveliness().get(self.keys.alive(self.name), timeout=1.0)
         if any(r.ok is not None for r in others):
             raise StateError(f"a {self.name} is already serving cell {self.cell!r}: stop it first, or run this "
