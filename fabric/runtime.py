@@ -27,6 +27,7 @@ from fabric import codec
 from fabric.errors import FabricError, InternalError, NotFound, StateError, ValidationError
 from fabric.keys import ENDPOINTS, TOPICS, Endpoint, Keys
 from fabric.qos import reply_qos
+from fabric.client import Client
 from fabric.sessions import wait_connected
 from fabric.schemas import Ack, Artifact, ErrorReply, PinRequest
 from fabric.store.artifacts import ArtifactStore
@@ -146,9 +147,9 @@ class Service:
         """Serve every endpoint, then declare the liveliness token. Refuses (StateError) when another
         service of the same role already serves this cell anywhere on the fabric."""
         wait_connected(self.session, LINK_WINDOW_S)    # the check asks the fabric: a link must be up first
-        others = self.session.liveliness().get(self.keys.alive(self.name), timeout=1.0)
-        if any(r.ok is not None for r in others):
-            raise StateError(f"a {self.name} is already serving cell {self.cell!r}: stop it first, or run this "
+        # Client.alive asks again (and merges) when a peer session's answer comes back incomplete
+        if Client(self.session, self.keys.cell).alive(timeout=1.0).get(self.name):
+            raise StateError(f"a {self.name} is already serving cell {self.keys.cell!r}: stop it first, or run this "
                              f"one with another --cell", state="running", command="start", service=self.name)
         for command, (ep, fn) in self._handlers.items():
             self._serve(self.keys.cmd(self.name, command), lambda q, ep=ep, fn=fn: self._answer(q, ep, fn))
