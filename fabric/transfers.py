@@ -23,7 +23,7 @@ if TYPE_CHECKING:
 __all__ = ["input_size", "upload_file", "export_to_file", "EXPORT_CHUNK_BYTES"]
 
 # An export is fetched in chunks of this size: the planner's pieces. 145 MB of bare replies through a
-# hub took a quarter of the CPU in 4 MB replies than in 16 MB ones on this machine class (Zenoh
+# hub took a quarter of the CPU in 4 MB replies that it took in 16 MB ones on this machine class (Zenoh
 # fragments, reassembles and re-fragments each reply at the hub); a whole `plan --csv` is bound by
 # formatting, not by this, and took the same time with either.
 EXPORT_CHUNK_BYTES = 4 << 20

@@ -234,7 +234,7 @@ class PlannerService(Service):
             handoff = self.handoffs.get(req.job_id)
             program_id = handoff.program_id if handoff is not None else ""
             name = f"{handoff.name or 'program'}.{SUFFIX[req.fmt]}" if handoff is not None else name
-        # the pieces are joined once, as the reply is encoded (a chunk is up to limit_bytes: 16 MB)
+        # the pieces are joined once, as the reply is encoded (a chunk is up to limit_bytes, 4 MB by default)
         return s.ExportChunk(program_id=program_id, fmt=req.fmt, offset=req.offset, data=codec.Spliced(data),
                              done=stream.done, name=name, media_type=MEDIA[req.fmt])
 

@@ -385,7 +385,7 @@ of the runs after the first is {cli_median['csv']:.1f}x and {cli_median['rapid']
 worker thread) and the export. The CLI asks for the export by job id at once, so the planner formats RAPID
 as soon as the joint program is final (while the cycle time is computed and the program is hashed and
 written to disk from its own columns, never copied whole) and the CSV once its times are; the formatting
-runs on two threads (numpy lets go of the interpreter lock), the pieces travel as 16 MB chunks through the
+runs on two threads (numpy lets go of the interpreter lock), the pieces travel as 4 MB chunks through the
 hub, and the CLI writes them to disk on a helper thread. The first command against a fresh planner
 process (run 1) also pays for the first touch of the planner's memory (peak
 {cli['planner_peak_rss_mb']:.0f} MB); the planner keeps that memory afterwards, so later commands do not.
