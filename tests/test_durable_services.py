@@ -27,21 +27,23 @@ def serve(settings, name: str, data_dir, log) -> subprocess.Popen:
 
 
 def test_a_second_service_of_the_same_role_refuses_to_start(hub, settings, tmp_path):
-    first = serve(settings, "station", tmp_path / "a", tmp_path / "first.log")
+    procs = [serve(settings, "station", tmp_path / "a", tmp_path / "first.log")]
     try:
         with Client.connect(settings) as client:
             client.wait_alive(("station",), deadline_s=60)
-        same_dir = serve(settings, "station", tmp_path / "a", tmp_path / "same.log")
-        other_dir = serve(settings, "station", tmp_path / "b", tmp_path / "other.log")
+        procs.append(serve(settings, "station", tmp_path / "a", tmp_path / "same.log"))
+        procs.append(serve(settings, "station", tmp_path / "b", tmp_path / "other.log"))
+        first, same_dir, other_dir = procs
         assert same_dir.wait(timeout=60) == 2 and other_dir.wait(timeout=60) == 2
         assert "already running on this host" in (tmp_path / "same.log").read_text()
-        assert "already serving cell" in (tmp_path / "other.log").read_text()
+        assert f"already serving cell '{settings.cell}'" in (tmp_path / "other.log").read_text()
         assert first.poll() is None                                  # the first one keeps serving
         with Client.connect(settings) as client:
             assert client.position().seq >= 0
     finally:
-        first.terminate()
-        first.wait(timeout=20)
+        for proc in procs:                                           # none is left behind, whatever failed
+            proc.terminate()
+            proc.wait(timeout=20)
 
 
 def test_a_frozen_station_is_gone_within_a_second_and_time_does_not_jump(hub, session, settings, tmp_path):

@@ -207,7 +207,12 @@ def test_stl_to_finished_print_with_a_pause_an_override_and_the_history(console_
                 shown = events.query_one("#events-table")
                 await until(pilot, lambda: 0 < shown.row_count < len(events.rows), what="search")
                 assert {shown.get_row_at(i)[2] for i in range(shown.row_count)} == {"override"}
-    asyncio.run(scenario())
+    try:
+        asyncio.run(scenario())
+    except BaseException:
+        rec.kill()                       # the print did not end: the recorder would wait for it forever
+        rec.communicate(timeout=20)
+        raise
     out, err = rec.communicate(timeout=60)
     assert rec.returncode == 0, err
     assert '"end":"finished"' in out
