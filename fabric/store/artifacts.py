@@ -75,16 +75,7 @@ class ArtifactStore:
         if content_id(artifact.data) != artifact.artifact_id:
             raise ValidationError("artifact id is not the sha256 of its data", field="artifact_id",
                                   artifact_id=artifact.artifact_id)
-        path = self._path(artifact.artifact_id)
-        with self._lock:
-            if not path.exists():
-                _write_atomic(path, [codec.encode(artifact)])
-            size = path.stat().st_size
-            with self._db:
-                self._db.execute("INSERT OR REPLACE INTO artifacts VALUES (?, ?, ?)",
-                                 (artifact.artifact_id, size, time.time()))
-            self._evict()
-        return artifact.artifact_id
+        return self.put_encoded(artifact.artifact_id, codec.encode_pieces(artifact))
 
     def put_encoded(self, artifact_id: str, pieces: list[codec.Buffer]) -> str:
         """Store an artifact given as the pieces of its encoded message (``codec.encode_pieces`` of an
