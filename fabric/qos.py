@@ -6,6 +6,13 @@ and its reply travel at interactive priority and express (sent at once, never
 held back to fill a batch), so under load a ``position`` or a ``stop`` does not
 queue behind the pose stream in the hub. Bulk endpoints (models, G-code,
 exports: megabytes) keep the data priority, so they never hold up commands.
+
+A command's reply is handed to the caller the moment it arrives. Zenoh's
+default consolidation (latest per key) holds every reply until the query's
+final message has come back through each hop; a command has one answering
+service and one reply, so there is nothing to consolidate, and waiting for the
+final only adds its own trip (under load, one more wait for a core in each
+process it passes).
 """
 from __future__ import annotations
 
@@ -17,7 +24,8 @@ from fabric.keys import Endpoint
 
 __all__ = ["command_qos", "reply_qos", "BULK_QOS", "INTERACTIVE_QOS"]
 
-INTERACTIVE_QOS: dict[str, Any] = {"priority": zenoh.Priority.INTERACTIVE_HIGH, "express": True}
+INTERACTIVE_QOS: dict[str, Any] = {"priority": zenoh.Priority.INTERACTIVE_HIGH, "express": True,
+                                   "consolidation": zenoh.ConsolidationMode.NONE}
 BULK_QOS: dict[str, Any] = {}
 
 

@@ -236,3 +236,29 @@ def test_a_failed_job_carries_a_typed_error_the_client_raises_again():
         assert broken.state == "failed" and broken.error.code == "internal" and "KeyError" in broken.message
     finally:
         runner.close()
+
+
+def test_a_command_reply_is_used_before_the_service_finishes_the_query(session, client):
+    """The reply is handed over on arrival, not held until the query's final message (the service here
+    keeps the query open until the caller has its answer: held replies would mean a timeout)."""
+    answered, finished = threading.Event(), threading.Event()
+    q = session.declare_queryable(client.keys.cmd("station", "position"), handler=zenoh.handlers.FifoChannel(8))
+    pose = s.Pose(seq=7, t_sim_s=0.0, q_deg=[0.0] * 6, xyz_mm=[1.0, 2.0, 3.0], quat_wxyz=[1.0, 0.0, 0.0, 0.0],
+                  base_xyz_mm=[1.0, 2.0, 3.0])
+
+    def serve() -> None:
+        query = q.recv()
+        query.reply(query.key_expr, codec.encode(pose), express=True)
+        answered.wait(10.0)                 # the query stays open until the caller has its answer
+        finished.set()
+        query.drop()
+    t = threading.Thread(target=serve, daemon=True)
+    t.start()
+    try:
+        got = client.call("station", "position", timeout=30.0)
+        assert not finished.is_set()
+        assert (got.seq, got.xyz_mm) == (7, [1.0, 2.0, 3.0])
+    finally:
+        answered.set()
+        t.join(10.0)
+        q.undeclare()
