@@ -128,7 +128,9 @@ def render() -> str:
     out.append("## Commands (queryables)\n")
     out.append("Commands travel at Zenoh's interactive priority, express (never held back to fill a batch), "
                "ahead of telemetry; *bulk* commands, whose request or reply can carry megabytes, travel at "
-               "data priority, batched.\n")
+               "data priority, batched. A command has one answering service and one reply: the client asks "
+               "with no consolidation (`ConsolidationMode.NONE`) and takes the reply as it arrives, without "
+               "waiting for the query's final message.\n")
     out.append("| key | request | reply | timeout | priority | what it does |\n|---|---|---|---|---|---|")
     for (svc, cmd), ep in ENDPOINTS.items():
         out.append(f"| `am/<cell>/{svc}/cmd/{cmd}` | `{ep.request.TYPE}` | `{ep.reply.TYPE}` | "

@@ -37,6 +37,7 @@ import tempfile
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Callable
 
 import zenoh
 
@@ -44,8 +45,13 @@ from fabric import codec
 from fabric import schemas as s
 from fabric.client import Client
 from fabric.config import SessionSettings, zenoh_config
+from fabric.qos import INTERACTIVE_QOS
 
 HERE = Path(__file__).resolve()
+HUB, PEER, PAPER = ("fabric client (via hub)", "fabric peer (direct)",
+                    "paper: asyncio TCP, new connection per request")
+HELD = "client, reply held for the query's final (Zenoh's default consolidation)"
+DATA = "client, query at data priority (batched)"
 
 
 def free_port() -> int:
@@ -179,6 +185,16 @@ class Bench:
     """Hub and stations as processes; programs served from in-process planners (one per cell)."""
 
     def __init__(self, tmp: Path, cells: list[str], pose_hz: float) -> None:
+        self.procs: list[subprocess.Popen] = []
+        self.planners: list = []
+        self.session = None
+        try:
+            self._start(tmp, cells, pose_hz)
+        except BaseException:
+            self.close()                # no hub or station left behind
+            raise
+
+    def _start(self, tmp: Path, cells: list[str], pose_hz: float) -> None:
         from fabric.demo import sample_model
         from fabric.planning import PlanOptions, plan_gcode
         from fabric.programs import program_artifact
@@ -186,7 +202,6 @@ class Bench:
         from fabric.services.planner import PlannerService
         from fabric.slicing import load_profile, slice_model
         self.endpoint = f"tcp/127.0.0.1:{free_port()}"
-        self.procs: list[subprocess.Popen] = []
         hub = self._spawn("router", "--listen", self.endpoint)
         assert b"listening" in hub.stdout.readline()
         robot_cell = Cell.builtin("irb140")
@@ -195,7 +210,6 @@ class Bench:
         program = program_artifact(plan_gcode(sliced.gcode, robot_cell, PlanOptions()).program)
         self.settings = {c: SessionSettings(connect=[self.endpoint], cell=c) for c in cells}
         self.session = zenoh.open(zenoh_config(SessionSettings(connect=[self.endpoint])))
-        self.planners = []
         for cell in cells:
             planner = PlannerService(self.session, cell, robot_cell)
             self.program_id = planner.store_artifact(program)
@@ -214,10 +228,15 @@ class Bench:
     def close(self) -> None:
         for planner in self.planners:
             planner.close()
-        self.session.close()
+        if self.session is not None:
+            self.session.close()
         for proc in reversed(self.procs):
             proc.terminate()
-            proc.wait(timeout=30)
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
 
 
 def print_window(client: Client, rtf: float) -> tuple[int, float]:
@@ -260,12 +279,15 @@ def one_cell(tmp: Path, monitors: int, pose_hz: float, calls: int, print_s: floa
             fab.wait_alive(("station",), deadline_s=30)
             key, empty = fab.keys.cmd("station", "position"), codec.encode(s.Empty())
 
-            def data_position() -> s.Pose:          # the same query at telemetry's priority, batched
-                for reply in fab.session.get(key, payload=empty, timeout=5.0):
-                    return codec.decode(reply.ok.payload.to_bytes(), s.Pose)
-            designs = {"fabric client (via hub)": fab.position, "fabric peer (direct)": peer.position,
-                       "client, query at data priority (batched)": data_position,
-                       "paper: asyncio TCP, new connection per request": lambda: paper_position(port)}
+            def variant(**qos) -> Callable[[], s.Pose]:     # the same query with one setting changed
+                def call() -> s.Pose:
+                    for reply in fab.session.get(key, payload=empty, timeout=5.0, **qos):
+                        return codec.decode(reply.ok.payload.to_bytes(), s.Pose)
+                return call
+            designs = {HUB: fab.position, PEER: peer.position,
+                       HELD: variant(**{**INTERACTIVE_QOS, "consolidation": zenoh.ConsolidationMode.AUTO}),
+                       DATA: variant(**{**INTERACTIVE_QOS, "priority": zenoh.Priority.DATA, "express": False}),
+                       PAPER: lambda: paper_position(port)}
             idle = round_trips(designs, calls)
             pose_bytes = payload.read_bytes()
             codec_ms = round_trips({"decode": lambda: codec.decode(pose_bytes, s.Pose),
@@ -317,9 +339,7 @@ def _spread(rows: list[dict], key: str) -> str:
 def _where_the_time_goes(one: dict) -> list[str]:
     """The round trip taken apart, from the designs measured side by side."""
     u = one["under_load"]
-    hub, peer = u["fabric client (via hub)"], u["fabric peer (direct)"]
-    data = u["client, query at data priority (batched)"]
-    paper = u["paper: asyncio TCP, new connection per request"]
+    hub, peer, held, data, paper = u[HUB], u[PEER], u[HELD], u[DATA], u[PAPER]
     hz = statistics.median(m["pose_hz"] for m in one["per_monitor"])
     return [
         "### Where the time goes", "",
@@ -327,16 +347,20 @@ def _where_the_time_goes(one: dict) -> list[str]:
         f"{peer['p50']:.2f} ms, p99 {peer['p99']:.2f} ms, against {hub['p50']:.2f} / {hub['p99']:.2f} ms through "
         f"the hub: the hub, which is also fanning pose, extrusion and events out to every monitor, costs "
         f"{hub['p50'] - peer['p50']:.2f} ms at p50 and {hub['p99'] - peer['p99']:.2f} ms at p99.",
-        f"* **Queues behind telemetry.** Commands travel at interactive priority, express (`fabric.qos`); the "
-        f"same query at telemetry's priority, batched, takes p50 {data['p50']:.2f} ms, p99 {data['p99']:.2f} ms.",
+        f"* **Waiting for the query's final message.** Zenoh's default consolidation holds a reply until the "
+        f"query's final message has come back through every hop; the fabric's client takes the reply as it arrives "
+        f"(`fabric.qos`). Held for the final, the same call takes p50 {held['p50']:.2f} ms, p99 {held['p99']:.2f} ms.",
+        f"* **Queues behind telemetry.** Commands travel at interactive priority, express; the same query at "
+        f"telemetry's priority, batched, takes p50 {data['p50']:.2f} ms, p99 {data['p99']:.2f} ms.",
         f"* **CPU.** Two shared cores run {one['monitors']} monitor processes (each decoding some "
         f"{hz + statistics.median(m['extrusion_hz'] for m in one['per_monitor']):.0f} messages/s in Python), the "
         f"hub, the station and the callers: the station "
         f"publishes {hz:.0f} poses/s of the {one['pose_hz_set']:g} asked, and every design's tail is time waiting "
-        f"for a core. The paper's design has one process to be scheduled per request (p50 {paper['p50']:.2f} ms); "
-        "the fabric has three (client, hub, station). The station answers `position` in Zenoh's own thread from a "
-        "snapshot it keeps current (no hand-over to a worker thread, no lock), and the client's Zenoh thread hands "
-        "the reply to the calling thread.",
+        f"for a core. The paper's design has one process to be scheduled per request (p50 {paper['p50']:.2f} ms), "
+        "and its client sleeps once; the fabric passes three processes (client, hub, station), and in each a "
+        "message is read by one Zenoh thread and written by another, and the caller's thread is woken by its "
+        "Zenoh thread. The station answers `position` in Zenoh's own thread from a snapshot it keeps current (no "
+        "hand-over to a worker thread, no lock).",
         f"* **Encoding**: decoding and validating the Pose reply takes {one['codec_idle']['decode']['p50']:.3f} ms "
         f"(p50, idle), encoding the request {one['codec_idle']['encode']['p50']:.3f} ms; the paper's design decodes "
         "the same payload with the same codec, so this is in both columns.", "",
@@ -344,6 +368,17 @@ def _where_the_time_goes(one: dict) -> list[str]:
         f"extrusion messages per s "
         f"for {hz:.0f} poses: extrusion is published on each switch of the extruder and otherwise at 20 Hz "
         "(it was published with every pose), temperatures on a new set point and otherwise at 10 Hz.", "",
+        "Tried in separate runs, not kept (each within this benchmark's run-to-run noise, which is some 30 % "
+        "at p99):", "",
+        "* timestamps in the station's reply: the station itself takes 0.02 ms at p50; the time is in the two "
+        "legs, each p99 3-6 ms through the hub and 2-4 ms direct;",
+        "* answering `position` from Zenoh's own cache (an advanced publisher's cache, Rust, no Python): about "
+        "10 % off p99, within the noise;",
+        "* more Zenoh threads in the hub (`ZENOH_RUNTIME`, 2 or 3 for sending and receiving): no change;",
+        "* sessions (Linux groups CPU time by session, and here every process shares the benchmark's): with the "
+        "hub, the station and the paper's server each in a session of its own, p99 ratio 1.62 against 1.98 in the "
+        "same pair of runs; with the caller also apart from the monitors, 2.48. Which processes share a session "
+        "moves the ratio more than anything tried in the fabric.", "",
         "What remains: the hop through the hub. On an open fabric a long-lived caller can take it away with a "
         "peer session (the row above); on a secured fabric the hop stays, since access control lives in the hub.",
         ""]
@@ -368,8 +403,7 @@ def report(r: dict) -> str:
     for name in one["idle"]:
         i, u = one["idle"][name], one["under_load"][name]
         lines.append(f"| {name} | {i['p50']:.3f} | {i['p99']:.3f} | {u['p50']:.3f} | {u['p99']:.3f} |")
-    paper = one["under_load"]["paper: asyncio TCP, new connection per request"]["p99"]
-    fab = one["under_load"]["fabric client (via hub)"]["p99"]
+    paper, fab = one["under_load"][PAPER]["p99"], one["under_load"][HUB]["p99"]
     lines += ["", f"Under load, fabric client p99 / paper design p99: **{fab / paper:.2f}** (goal: at most 1).", ""]
     lines += _where_the_time_goes(one)
     if "cells" in r:
