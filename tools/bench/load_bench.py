@@ -368,12 +368,11 @@ def _where_the_time_goes(one: dict) -> list[str]:
         f"extrusion messages per s "
         f"for {hz:.0f} poses: extrusion is published on each switch of the extruder and otherwise at 20 Hz "
         "(it was published with every pose), temperatures on a new set point and otherwise at 10 Hz.", "",
-        "Tried in separate runs, not kept (each within this benchmark's run-to-run noise, which is some 30 % "
-        "at p99):", "",
+        "Measured in separate runs (this benchmark's p99 varies some 30 % from run to run), nothing of it kept:", "",
         "* timestamps in the station's reply: the station itself takes 0.02 ms at p50; the time is in the two "
         "legs, each p99 3-6 ms through the hub and 2-4 ms direct;",
         "* answering `position` from Zenoh's own cache (an advanced publisher's cache, Rust, no Python): about "
-        "10 % off p99, within the noise;",
+        "10 % off p99, within the noise, for a second key and access rule per cell;",
         "* more Zenoh threads in the hub (`ZENOH_RUNTIME`, 2 or 3 for sending and receiving): no change;",
         "* sessions (Linux groups CPU time by session, and here every process shares the benchmark's): with the "
         "hub, the station and the paper's server each in a session of its own, p99 ratio 1.62 against 1.98 in the "
