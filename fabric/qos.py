@@ -11,8 +11,7 @@ A command's reply is handed to the caller the moment it arrives. Zenoh's
 default consolidation (latest per key) holds every reply until the query's
 final message has come back through each hop; a command has one answering
 service and one reply, so there is nothing to consolidate, and waiting for the
-final only adds its own trip (under load, one more wait for a core in each
-process it passes).
+final would only add its trip back through each hop.
 """
 from __future__ import annotations
 

@@ -240,7 +240,7 @@ def test_a_failed_job_carries_a_typed_error_the_client_raises_again():
 
 def test_a_command_reply_is_used_before_the_service_finishes_the_query(session, client):
     """The reply is handed over on arrival, not held until the query's final message (the service here
-    keeps the query open until the caller has its answer: held replies would mean a timeout)."""
+    keeps the query open until the caller has its answer: a held reply would come only when it closes)."""
     answered, finished = threading.Event(), threading.Event()
     q = session.declare_queryable(client.keys.cmd("station", "position"), handler=zenoh.handlers.FifoChannel(8))
     pose = s.Pose(seq=7, t_sim_s=0.0, q_deg=[0.0] * 6, xyz_mm=[1.0, 2.0, 3.0], quat_wxyz=[1.0, 0.0, 0.0, 0.0],
