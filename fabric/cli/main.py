@@ -56,6 +56,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="TLS, passwords and roles; credentials from 'fabric-cli auth init DIR'")
     p.set_defaults(local=_cmd_router)
 
+    p = sub.add_parser("relay", parents=[common],
+                       help="a router linked to the hub that dashboards connect to, so that the hub does not "
+                            "fan telemetry out to each of them")
+    p.add_argument("--secure", type=Path, default=None, metavar="DIR", help=argparse.SUPPRESS)
+    p.set_defaults(local=_cmd_relay)
+
     station_cmds.register(sub, common)
     pipeline_cmds.register(sub, common)
     job_cmds.register(sub, common)
@@ -115,7 +121,6 @@ def _cmd_up(a: argparse.Namespace) -> int:
 
 
 def _cmd_router(a: argparse.Namespace) -> int:
-    import zenoh
     from fabric.cli.up import hub_settings
     from fabric.config import zenoh_config
     st = hub_settings(settings_from_args(a))
@@ -126,12 +131,40 @@ def _cmd_router(a: argparse.Namespace) -> int:
         creds = Credentials(a.secure.resolve()).check()
         st.listen = list(a.listen or creds.listen_endpoints())
         conf = hub_zenoh_config(creds, st, st.listen)
+    secured = " (TLS, passwords, roles)" if a.secure is not None else ""
+    return _run_router(conf, f"fabric hub listening on {', '.join(st.listen)}{secured}")
+
+
+def _cmd_relay(a: argparse.Namespace) -> int:
+    """A router that listens for dashboards and links to the hub: telemetry crosses to it once and is fanned
+    out here, so the hub (and the commands it carries) does not do that work for every dashboard."""
+    from dataclasses import replace
+
+    from fabric.config import DEFAULT_HUB, zenoh_config
+    from fabric.errors import ConfigError
+    if a.secure is not None:
+        raise ConfigError("a relay on a secured fabric is not supported: dashboards connect to the hub with "
+                          "the monitor config", field="--secure")
+    st = settings_from_args(a)
+    if not st.listen:
+        raise ConfigError("a relay needs --listen ENDPOINT: where dashboards connect to it", field="--listen")
+    hub = list(a.connect or [DEFAULT_HUB])
+    if set(hub) & set(st.listen):
+        raise ConfigError(f"a relay listens elsewhere than the hub it links to ({', '.join(hub)})",
+                          field="--listen", value=st.listen)
+    conf = zenoh_config(replace(st, mode="router", connect=hub))
+    return _run_router(conf, f"fabric relay listening on {', '.join(st.listen)}, linked to the hub at "
+                             f"{', '.join(hub)}")
+
+
+def _run_router(conf, what: str) -> int:
+    """Open router session ``conf``, say ``what`` it is, and serve until SIGINT or SIGTERM."""
+    import zenoh
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
     with zenoh.open(conf):
-        secured = " (TLS, passwords, roles)" if a.secure is not None else ""
-        print(f"fabric hub listening on {', '.join(st.listen)}{secured} (Ctrl-C stops it)", flush=True)
+        print(f"{what} (Ctrl-C stops it)", flush=True)
         stop.wait()
     return 0
 

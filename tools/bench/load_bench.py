@@ -16,6 +16,9 @@ Under that load, in the same run and alternating call by call, the ``position`` 
   ``position`` with the same payload (the station's msgpack Pose), a new connection per request, the
   reply decoded and validated by the same codec.
 
+The same print again with the monitors connected to a relay (``fabric-cli relay``, a router linked to the
+hub): the hub then carries each message across once instead of fanning it out to every monitor.
+
 Then ``--cells`` cells print at once on one hub, each with its own station and ``--cell-monitors``
 monitor processes: lost events, pose rate and latency per monitor, ``position`` round trip per cell.
 
@@ -186,6 +189,7 @@ class Bench:
     def __init__(self, tmp: Path, cells: list[str], pose_hz: float) -> None:
         self.procs: list[subprocess.Popen] = []
         self.planners: list = []
+        self.relay_endpoint: str | None = None
         self.session = None
         try:
             self._start(tmp, cells, pose_hz)
@@ -219,6 +223,14 @@ class Bench:
         self.clients = {c: Client(self.session, c) for c in cells}
         for client in self.clients.values():
             client.wait_alive(("station", "planner"), deadline_s=120)
+
+    def relay(self) -> str:
+        """Start a relay linked to the hub (once); the endpoint dashboards connect to."""
+        if self.relay_endpoint is None:
+            self.relay_endpoint = f"tcp/127.0.0.1:{free_port()}"
+            proc = self._spawn("relay", "--listen", self.relay_endpoint, "--connect", self.endpoint)
+            assert b"fabric relay listening" in proc.stdout.readline()
+        return self.relay_endpoint
 
     def _spawn(self, *args: str) -> subprocess.Popen:
         self.procs.append(subprocess.Popen([sys.executable, "-m", "fabric.cli.main", *args], stdout=subprocess.PIPE))
@@ -261,7 +273,8 @@ def wait_finished(client: Client, since_seq: int, timeout_s: float = 900.0) -> t
     return t_end, {ev.seq for ev in log if ev.seq >= since_seq}
 
 
-def one_cell(tmp: Path, monitors: int, pose_hz: float, calls: int, print_s: float) -> dict:
+def one_cell(tmp: Path, monitors: int, pose_hz: float, calls: int, print_s: float, relay: bool = False) -> dict:
+    """The print under load; with ``relay`` the monitors connect to a ``fabric-cli relay`` linked to the hub."""
     bench = Bench(tmp, ["load"], pose_hz)
     try:
         client = bench.clients["load"]
@@ -291,7 +304,7 @@ def one_cell(tmp: Path, monitors: int, pose_hz: float, calls: int, print_s: floa
             pose_bytes = payload.read_bytes()
             codec_ms = round_trips({"decode": lambda: codec.decode(pose_bytes, s.Pose),
                                     "encode": lambda: codec.encode(s.Empty())}, calls)
-            mons = [Monitor.start(bench.endpoint, "load") for _ in range(monitors)]
+            mons = [Monitor.start(bench.relay() if relay else bench.endpoint, "load") for _ in range(monitors)]
             for m in mons:
                 m.ready()
             since, t0 = print_window(client, rtf=info.estimate_s / print_s)
@@ -299,7 +312,8 @@ def one_cell(tmp: Path, monitors: int, pose_hz: float, calls: int, print_s: floa
             t1, expected = wait_finished(client, since)
             per_monitor = [m.finish((t0, t1), expected) for m in mons]
         peer.session.close()
-        return {"monitors": monitors, "pose_hz_set": pose_hz, "calls": calls, "print_wall_s": t1 - t0,
+        return {"monitors": monitors, "relay": relay, "pose_hz_set": pose_hz, "calls": calls,
+                "print_wall_s": t1 - t0,
                 "events_in_print": len(expected), "codec_idle": codec_ms, "idle": idle, "under_load": loaded,
                 "per_monitor": per_monitor}
     finally:
@@ -342,11 +356,16 @@ def main(argv: list[str]) -> int:
     p.add_argument("--cells", type=int, default=10, help="cells printing at once in the second part (0: skip)")
     p.add_argument("--cell-monitors", type=int, default=3)
     p.add_argument("--cells-pose-hz", type=float, default=50.0)
+    p.add_argument("--no-relay", dest="relay", action="store_false",
+                   help="skip the second print, with the monitors on a relay")
     p.add_argument("--out", type=Path, default=Path("docs/bench"))
     a = p.parse_args(argv)
     result = {"python": platform.python_version(), "cpus": os.cpu_count()}
     with tempfile.TemporaryDirectory(prefix="load-bench-") as tmp:
         result["one_cell"] = one_cell(Path(tmp) / "one", a.monitors, a.pose_hz, a.calls, a.print_s)
+        if a.relay:
+            result["one_cell_relay"] = one_cell(Path(tmp) / "relay", a.monitors, a.pose_hz, a.calls, a.print_s,
+                                                relay=True)
         if a.cells:
             result["cells"] = many_cells(Path(tmp) / "many", a.cells, a.cell_monitors, a.cells_pose_hz, 300,
                                          a.print_s)

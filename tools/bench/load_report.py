@@ -63,19 +63,15 @@ def _where_the_time_goes(one: dict) -> list[str]:
         "hub, the station and the paper's server each in a session of its own, p99 ratio 1.62 against 1.98 in the "
         "same pair of runs; with the caller also apart from the monitors, 2.48. Which processes share a session "
         "moves the ratio more than anything tried in the fabric.", "",
-        "What remains: the hop through the hub. On an open fabric a long-lived caller can take it away with a "
-        "peer session (the row above); on a secured fabric the hop stays, since access control lives in the hub.",
+        "What remains: the hop through the hub, and the hub's fan-out to every monitor. On an open fabric a "
+        "long-lived caller can take the hop away with a peer session (the row above), and dashboards can be moved "
+        "to a relay (next section); on a secured fabric the hop stays, since access control lives in the hub.",
         ""]
 
 
-def report(r: dict) -> str:
-    one = r["one_cell"]
-    lines = [f"# Load: {one['monitors']} monitors on a printing cell, command round trips against the paper's "
-             "design", "",
-             f"Python {r['python']}, {r['cpus']} CPUs (shared); `tools/bench/load_bench.py`; one run. The hub "
-             f"(`fabric-cli router`), the station and every monitor are processes of their own.", "",
-             f"## One cell, {one['monitors']} monitor processes, pose at {one['pose_hz_set']:g} Hz", "",
-             f"Each monitor is plain `zenoh` + `msgpack` (a client of the hub) subscribed to pose, extrusion and "
+def _print_under_load(one: dict, where: str) -> list[str]:
+    """The monitors' figures and the round trips of every design, idle and under load."""
+    lines = [f"Each monitor is plain `zenoh` + `msgpack` ({where}) subscribed to pose, extrusion and "
              f"events while the station prints the sample part ({one['print_wall_s']:.1f} s wall, "
              f"{one['events_in_print']} events).", "",
              "| per monitor (min / median / max) | value |", "|---|---|",
@@ -88,9 +84,36 @@ def report(r: dict) -> str:
     for name in one["idle"]:
         i, u = one["idle"][name], one["under_load"][name]
         lines.append(f"| {name} | {i['p50']:.3f} | {i['p99']:.3f} | {u['p50']:.3f} | {u['p99']:.3f} |")
-    paper, fab = one["under_load"][PAPER]["p99"], one["under_load"][HUB]["p99"]
-    lines += ["", f"Under load, fabric client p99 / paper design p99: **{fab / paper:.2f}** (goal: at most 1).", ""]
+    lines += ["", f"Under load, fabric client p99 / paper design p99: **{_ratio(one):.2f}** (goal: at most 1).", ""]
+    return lines
+
+
+def _ratio(one: dict) -> float:
+    return one["under_load"][HUB]["p99"] / one["under_load"][PAPER]["p99"]
+
+
+def _relay_section(one: dict, relayed: dict) -> list[str]:
+    hub, via = one["under_load"][HUB], relayed["under_load"][HUB]
+    return [f"## The same print, the {relayed['monitors']} monitors on a relay", "",
+            "A relay (`fabric-cli relay --listen EP --connect HUB`) is a router linked to the hub: telemetry "
+            "crosses to it once and it fans out to the dashboards, so the hub carrying the commands does not.", "",
+            *_print_under_load(relayed, "a client of the relay"),
+            f"Through the hub, `position` under load: p50 {hub['p50']:.2f} -> {via['p50']:.2f} ms, p99 "
+            f"{hub['p99']:.2f} -> {via['p99']:.2f} ms with the monitors moved to the relay; the ratio to the paper's "
+            f"design, measured in the same print, {_ratio(one):.2f} -> {_ratio(relayed):.2f}.", ""]
+
+
+def report(r: dict) -> str:
+    one = r["one_cell"]
+    lines = [f"# Load: {one['monitors']} monitors on a printing cell, command round trips against the paper's "
+             "design", "",
+             f"Python {r['python']}, {r['cpus']} CPUs (shared); `tools/bench/load_bench.py`; one run. The hub "
+             f"(`fabric-cli router`), the station and every monitor are processes of their own.", "",
+             f"## One cell, {one['monitors']} monitor processes on the hub, pose at {one['pose_hz_set']:g} Hz", "",
+             *_print_under_load(one, "a client of the hub")]
     lines += _where_the_time_goes(one)
+    if "one_cell_relay" in r:
+        lines += _relay_section(one, r["one_cell_relay"])
     if "cells" in r:
         many = r["cells"]
         rows = [m for c in many["by_cell"].values() for m in c["per_monitor"]]
