@@ -76,7 +76,7 @@ def test_a_dashboard_on_the_relay_gets_telemetry_and_answers(session, settings, 
 @pytest.mark.parametrize("args, says", [
     ((), "a relay needs --listen ENDPOINT"),
     (("--listen", "tcp/127.0.0.1:7447", "--connect", "tcp/127.0.0.1:7447"), "listens elsewhere than the hub"),
-    (("--listen", "tcp/127.0.0.1:7448", "--secure", "creds"), "not supported"),
+    (("--listen", "tls/127.0.0.1:7448", "--secure", "no-such-dir"), "make the folder with 'fabric-cli auth init"),
 ])
 def test_a_relay_refuses_what_it_cannot_be(args, says):
     out = subprocess.run(relay_cli(*args), capture_output=True, text=True, timeout=60)

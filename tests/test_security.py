@@ -214,3 +214,43 @@ def test_a_rotated_password_replaces_the_old_one(tmp_path) -> None:
             zenoh.open(zenoh.Config.from_file(str(old)))
         with open_as(creds, "monitor") as mon:
             assert len(list(mon.info.routers_zid())) == 1
+
+
+@pytest.fixture(scope="module")
+def secured_relay(secured_cell, creds):
+    """``fabric-cli relay --secure``: a router for dashboards, joined to the secured hub as monitor."""
+    ep = f"tls/127.0.0.1:{free_port()}"
+    proc = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "relay", "--secure", str(creds.root),
+                             "--listen", ep], stdout=subprocess.PIPE, text=True)
+    try:
+        assert "fabric relay listening on" in proc.stdout.readline()
+        yield ep
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+@pytest.mark.parametrize("role", ["monitor", "operator"])
+def test_a_secured_relay_carries_a_monitors_rights_and_no_more(secured_cell, creds, secured_relay, role) -> None:
+    """Through the relay a dashboard gets telemetry, liveliness and the read-only queries; no command and no
+    put reaches a service, whatever role connects to it (the relay itself is a monitor to the hub)."""
+    keys = Keys(secured_cell.settings.cell)
+    with open_as(creds, "service") as svc, open_as(creds, role, **{"connect/endpoints": [secured_relay]}) as dash:
+        seen = svc.declare_subscriber(f"{keys.prefix}/**", zenoh.handlers.FifoChannel(1024))
+        poses = dash.declare_subscriber(keys.topic("station", "pose"), zenoh.handlers.FifoChannel(256))
+        deadline = time.monotonic() + 30
+        while not replies(dash, keys.cmd("station", "position")) and time.monotonic() < deadline:
+            pass                          # until the relay has learnt where the station answers
+        for service, command in ENDPOINTS:
+            got = replies(dash, keys.cmd(service, command), b"")
+            if (service, command) in MONITOR_COMMANDS:
+                assert got, f"{role} via the relay refused read-only {service}/{command}"
+            else:
+                assert got == [], f"{role} via the relay got an answer from {service}/{command}"
+            dash.put(keys.cmd(service, command), b"x")
+        assert replies(svc, keys.cmd("station", "position"))[0].ok is not None   # the puts have had their time
+        while (sample := seen.try_recv()) is not None:
+            assert sample.payload.to_bytes() != b"x", f"a put via the relay reached {sample.key_expr}"
+        assert len(codec.decode(poses.recv().payload.to_bytes(), s.Pose).q_deg) == 6
+        assert {str(r.ok.key_expr) for r in dash.liveliness().get(keys.alive_all(), timeout=2.0) if r.ok} == {
+            keys.alive(n) for n in secured_cell.services}

@@ -59,7 +59,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("relay", parents=[common],
                        help="a router linked to the hub that dashboards connect to, so that the hub does not "
                             "fan telemetry out to each of them")
-    p.add_argument("--secure", type=Path, default=None, metavar="DIR", help=argparse.SUPPRESS)
+    p.add_argument("--secure", type=Path, default=None, metavar="DIR",
+                   help="a relay of a secured fabric (TLS, passwords): it joins the hub as monitor, and whoever "
+                        "connects to it has a monitor's rights")
     p.set_defaults(local=_cmd_relay)
 
     station_cmds.register(sub, common)
@@ -142,18 +144,25 @@ def _cmd_relay(a: argparse.Namespace) -> int:
 
     from fabric.config import DEFAULT_HUB, zenoh_config
     from fabric.errors import ConfigError
-    if a.secure is not None:
-        raise ConfigError("a relay on a secured fabric is not supported: dashboards connect to the hub with "
-                          "the monitor config", field="--secure")
     st = settings_from_args(a)
     if not st.listen:
         raise ConfigError("a relay needs --listen ENDPOINT: where dashboards connect to it", field="--listen")
-    hub = list(a.connect or [DEFAULT_HUB])
+    if a.secure is None:
+        hub = list(a.connect or [DEFAULT_HUB])
+    else:
+        from fabric.security.credentials import Credentials
+        creds = Credentials(a.secure.resolve()).check()
+        hub = list(a.connect or creds.hub_endpoints())
     if set(hub) & set(st.listen):
         raise ConfigError(f"a relay listens elsewhere than the hub it links to ({', '.join(hub)})",
                           field="--listen", value=st.listen)
-    conf = zenoh_config(replace(st, mode="router", connect=hub))
-    return _run_router(conf, f"fabric relay listening on {', '.join(st.listen)}, linked to the hub at "
+    if a.secure is None:
+        conf = zenoh_config(replace(st, mode="router", connect=hub))
+    else:
+        from fabric.security.relay import relay_zenoh_config
+        conf = relay_zenoh_config(creds, st.listen, hub)
+    secured = " (TLS, passwords; monitor rights)" if a.secure is not None else ""
+    return _run_router(conf, f"fabric relay listening on {', '.join(st.listen)}{secured}, linked to the hub at "
                              f"{', '.join(hub)}")
 
 

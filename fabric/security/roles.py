@@ -19,7 +19,7 @@ from typing import Any
 
 from fabric.keys import ENDPOINTS, EVERY_KEY, TOPICS, Keys
 
-__all__ = ["ROLES", "MONITOR_COMMANDS", "may_call", "permissions", "access_control"]
+__all__ = ["ROLES", "MONITOR_COMMANDS", "may_call", "permissions", "access_control", "relay_access_control"]
 
 ROLES = ("operator", "monitor", "service")
 
@@ -78,13 +78,28 @@ def access_control() -> dict[str, Any]:
         _rule("telemetry_out", ["egress"], ["put", "delete"], telemetry),
         _rule("operator_commands", ["ingress", "egress"], ["query", "reply"], commands + artifacts),
         _rule("read_only_queries", ["ingress", "egress"], ["query", "reply"], read_only),
+        # where those queries are answered: a relay (a router) routes a dashboard's query by it
+        _rule("read_only_routes", ["egress"], ["declare_queryable"], read_only),
     ]
     subjects = [{"id": role, "usernames": [role], "cert_common_names": [role]} for role in ROLES]
     reader = ["watch", "liveliness", "liveliness_out", "telemetry_out"]
     policies = [
         {"rules": ["service_all"], "subjects": ["service"]},
         {"rules": reader + ["operator_commands"], "subjects": ["operator"]},
-        {"rules": reader + ["read_only_queries"], "subjects": ["monitor"]},
+        {"rules": reader + ["read_only_queries", "read_only_routes"], "subjects": ["monitor"]},
     ]
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
             "policies": policies}
+
+
+def relay_access_control() -> dict[str, Any]:
+    """A relay's ``access_control`` section: the hub (its certificate's name) may do anything; every role
+    connecting to the relay has a monitor's rights. The relay itself joins the hub as ``monitor``, so the
+    hub holds it to those rights whatever is configured here."""
+    acl = access_control()
+    acl["subjects"].append({"id": "hub", "cert_common_names": ["hub"]})
+    monitor = next(p["rules"] for p in acl["policies"] if p["subjects"] == ["monitor"])
+    acl["policies"] = [{"rules": ["service_all"], "subjects": ["hub"]},
+                       {"rules": monitor, "subjects": list(ROLES)}]
+    return acl
+

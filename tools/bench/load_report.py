@@ -63,9 +63,10 @@ def _where_the_time_goes(one: dict) -> list[str]:
         "hub, the station and the paper's server each in a session of its own, p99 ratio 1.62 against 1.98 in the "
         "same pair of runs; with the caller also apart from the monitors, 2.48. Which processes share a session "
         "moves the ratio more than anything tried in the fabric.", "",
-        "What remains: the hop through the hub, and the hub's fan-out to every monitor. On an open fabric a "
-        "long-lived caller can take the hop away with a peer session (the row above), and dashboards can be moved "
-        "to a relay (next section); on a secured fabric the hop stays, since access control lives in the hub.",
+        "What remains: the hop through the hub, and the hub's fan-out to every monitor. Dashboards can be moved "
+        "to a relay (next section; open or secured fabric). On an open fabric a long-lived caller can also take "
+        "the hop away with a peer session (the row above); on a secured fabric the hop stays, since access "
+        "control lives in the hub.",
         ""]
 
 
