@@ -309,7 +309,11 @@ def one_cell(tmp: Path, monitors: int, pose_hz: float, calls: int, print_s: floa
                 m.ready()
             since, t0 = print_window(client, rtf=info.estimate_s / print_s)
             loaded = round_trips(designs, calls)
+            calls_end = time.time()
             t1, expected = wait_finished(client, since)
+            if calls_end > t1:
+                raise RuntimeError(f"the print ended {calls_end - t1:.1f} s before the calls under load did: "
+                                   "give it more --print-s or fewer --calls")
             per_monitor = [m.finish((t0, t1), expected) for m in mons]
         peer.session.close()
         return {"monitors": monitors, "relay": relay, "pose_hz_set": pose_hz, "calls": calls,
@@ -351,8 +355,8 @@ def main(argv: list[str]) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--monitors", type=int, default=50)
     p.add_argument("--pose-hz", type=float, default=250.0)
-    p.add_argument("--calls", type=int, default=1000)
-    p.add_argument("--print-s", type=float, default=40.0, help="wall seconds the print should last")
+    p.add_argument("--calls", type=int, default=3000, help="round trips of each design, idle and under load")
+    p.add_argument("--print-s", type=float, default=60.0, help="wall seconds the print should last")
     p.add_argument("--cells", type=int, default=10, help="cells printing at once in the second part (0: skip)")
     p.add_argument("--cell-monitors", type=int, default=3)
     p.add_argument("--cells-pose-hz", type=float, default=50.0)
