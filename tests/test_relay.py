@@ -6,6 +6,7 @@ import queue
 import subprocess
 import sys
 import time
+import uuid
 
 import msgpack
 import pytest
@@ -39,6 +40,14 @@ def relay(hub, settings):
     finally:
         proc.terminate()
         proc.wait(timeout=30)
+
+
+def router(endpoint: str) -> subprocess.Popen:
+    """``fabric-cli router``: a hub as a process of its own (so that it can be killed)."""
+    hub = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "router", "--listen", endpoint],
+                           stdout=subprocess.PIPE, text=True)
+    assert "fabric hub listening" in hub.stdout.readline()
+    return hub
 
 
 def plain_monitor(endpoint: str) -> zenoh.Session:
@@ -81,3 +90,28 @@ def test_a_dashboard_on_the_relay_gets_telemetry_and_answers(session, settings, 
 def test_a_relay_refuses_what_it_cannot_be(args, says):
     out = subprocess.run(relay_cli(*args), capture_output=True, text=True, timeout=60)
     assert out.returncode == 1 and says in out.stderr + out.stdout
+
+
+def test_a_relay_links_again_to_a_restarted_hub(tmp_path):
+    """The hub is killed (-9) and started again: the relay rejoins it by itself, and a dashboard that stayed
+    connected to the relay sees the services that joined the new hub."""
+    hub_ep, relay_ep = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
+    cell = f"r{uuid.uuid4().hex[:8]}"
+    hub = router(hub_ep)
+    relay = subprocess.Popen(relay_cli("--listen", relay_ep, "--connect", hub_ep), stdout=subprocess.PIPE, text=True)
+    supervisor = None
+    try:
+        assert "fabric relay listening on" in relay.stdout.readline()
+        with Client.connect(SessionSettings(connect=[relay_ep], cell=cell)) as dash:
+            hub.kill()
+            hub.wait()
+            hub = router(hub_ep)
+            supervisor = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "serve", "supervisor",
+                                           "--connect", hub_ep, "--cell", cell, "--data-dir", str(tmp_path)])
+            dash.wait_alive(("supervisor",), deadline_s=30)
+            assert dash.call("supervisor", "jobs").jobs == []
+    finally:
+        for proc in (supervisor, relay, hub):
+            if proc is not None:
+                proc.terminate()
+                proc.wait(timeout=30)
