@@ -1,9 +1,12 @@
 """Shared fixtures: Zenoh sessions on free loopback ports (scouting off) and the whole cell as processes."""
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import socket
+import subprocess
+import sys
 import tempfile
 import uuid
 from pathlib import Path
@@ -32,6 +35,19 @@ def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+@contextlib.contextmanager
+def relay_process(*args: str):
+    """``fabric-cli relay ARGS`` as a process of its own, up when entered, stopped on exit."""
+    proc = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "relay", *args], stdout=subprocess.PIPE,
+                            text=True)
+    try:
+        assert "fabric relay listening on" in proc.stdout.readline()
+        yield proc
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
 
 
 def make_settings() -> SessionSettings:

@@ -18,7 +18,7 @@ from fabric.client import Client
 from fabric.config import SessionSettings
 from fabric.services.supervisor import SupervisorService
 
-from conftest import free_port
+from conftest import free_port, relay_process
 
 POSE = s.Pose(seq=1, t_sim_s=2.0, q_deg=[0.0] * 6, xyz_mm=[1.0, 2.0, 3.0], quat_wxyz=[1.0, 0.0, 0.0, 0.0],
               base_xyz_mm=[4.0, 5.0, 6.0])
@@ -32,14 +32,8 @@ def relay_cli(*args: str) -> list[str]:
 def relay(hub, settings):
     """A relay process listening on a free port, linked to the test's hub."""
     ep = f"tcp/127.0.0.1:{free_port()}"
-    proc = subprocess.Popen(relay_cli("--listen", ep, "--connect", settings.connect[0]), stdout=subprocess.PIPE,
-                            text=True)
-    try:
-        assert "fabric relay listening on" in proc.stdout.readline()
+    with relay_process("--listen", ep, "--connect", settings.connect[0]):
         yield ep
-    finally:
-        proc.terminate()
-        proc.wait(timeout=30)
 
 
 def router(endpoint: str) -> subprocess.Popen:
@@ -98,11 +92,10 @@ def test_a_relay_links_again_to_a_restarted_hub(tmp_path):
     hub_ep, relay_ep = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
     cell = f"r{uuid.uuid4().hex[:8]}"
     hub = router(hub_ep)
-    relay = subprocess.Popen(relay_cli("--listen", relay_ep, "--connect", hub_ep), stdout=subprocess.PIPE, text=True)
     supervisor = None
     try:
-        assert "fabric relay listening on" in relay.stdout.readline()
-        with Client.connect(SessionSettings(connect=[relay_ep], cell=cell)) as dash:
+        with relay_process("--listen", relay_ep, "--connect", hub_ep), \
+                Client.connect(SessionSettings(connect=[relay_ep], cell=cell)) as dash:
             hub.kill()
             hub.wait()
             hub = router(hub_ep)
@@ -111,7 +104,7 @@ def test_a_relay_links_again_to_a_restarted_hub(tmp_path):
             dash.wait_alive(("supervisor",), deadline_s=30)
             assert dash.call("supervisor", "jobs").jobs == []
     finally:
-        for proc in (supervisor, relay, hub):
+        for proc in (supervisor, hub):
             if proc is not None:
                 proc.terminate()
                 proc.wait(timeout=30)

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from conftest import free_port
+from conftest import free_port, relay_process
 from fabric import codec
 from fabric import schemas as s
 from fabric.cli.up import CellProcesses
@@ -220,14 +220,8 @@ def test_a_rotated_password_replaces_the_old_one(tmp_path) -> None:
 def secured_relay(secured_cell, creds):
     """``fabric-cli relay --secure``: a router for dashboards, joined to the secured hub as monitor."""
     ep = f"tls/127.0.0.1:{free_port()}"
-    proc = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "relay", "--secure", str(creds.root),
-                             "--listen", ep], stdout=subprocess.PIPE, text=True)
-    try:
-        assert "fabric relay listening on" in proc.stdout.readline()
+    with relay_process("--secure", str(creds.root), "--listen", ep):
         yield ep
-    finally:
-        proc.terminate()
-        proc.wait(timeout=30)
 
 
 @pytest.mark.parametrize("role", ["monitor", "operator"])
