@@ -76,6 +76,12 @@ def test_a_dashboard_on_the_relay_gets_telemetry_and_answers(session, settings, 
         supervisor.close()
 
 
+def test_a_relay_on_a_taken_port_says_so_in_one_line(relay):
+    out = subprocess.run(relay_cli("--listen", relay), capture_output=True, text=True, timeout=60)
+    assert out.returncode == 1 and "cannot start the router" in out.stderr and "Address already in use" in out.stderr
+    assert "Traceback" not in out.stderr
+
+
 @pytest.mark.parametrize("args, says", [
     ((), "a relay needs --listen ENDPOINT"),
     (("--listen", "tcp/127.0.0.1:7447", "--connect", "tcp/127.0.0.1:7447"), "listens elsewhere than the hub"),

@@ -147,21 +147,19 @@ def _cmd_relay(a: argparse.Namespace) -> int:
     st = settings_from_args(a)
     if not st.listen:
         raise ConfigError("a relay needs --listen ENDPOINT: where dashboards connect to it", field="--listen")
-    if a.secure is None:
-        hub = list(a.connect or [DEFAULT_HUB])
-    else:
+    creds = None
+    if a.secure is not None:
         from fabric.security.credentials import Credentials
         creds = Credentials(a.secure.resolve()).check()
-        hub = list(a.connect or creds.hub_endpoints())
+    hub = list(a.connect or (creds.hub_endpoints() if creds else [DEFAULT_HUB]))
     if set(hub) & set(st.listen):
         raise ConfigError(f"a relay listens elsewhere than the hub it links to ({', '.join(hub)})",
                           field="--listen", value=st.listen)
-    if a.secure is None:
-        conf = zenoh_config(replace(st, mode="router", connect=hub))
+    if creds is None:
+        conf, secured = zenoh_config(replace(st, mode="router", connect=hub)), ""
     else:
         from fabric.security.relay import relay_zenoh_config
-        conf = relay_zenoh_config(creds, st.listen, hub)
-    secured = " (TLS, passwords; monitor rights)" if a.secure is not None else ""
+        conf, secured = relay_zenoh_config(creds, st.listen, hub), " (TLS, passwords; monitor rights)"
     return _run_router(conf, f"fabric relay listening on {', '.join(st.listen)}{secured}, linked to the hub at "
                              f"{', '.join(hub)}")
 
@@ -172,7 +170,13 @@ def _run_router(conf, what: str) -> int:
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    with zenoh.open(conf):
+    try:
+        session = zenoh.open(conf)
+    except zenoh.ZError as exc:             # e.g. the port is taken: say so in one line, not a traceback
+        from fabric.errors import ConfigError
+        reason = str(exc).split(" at /")[0]
+        raise ConfigError(f"cannot start the router: {reason}", field="--listen") from None
+    with session:
         print(f"{what} (Ctrl-C stops it)", flush=True)
         stop.wait()
     return 0
