@@ -76,7 +76,10 @@ def test_concurrent_submits_queue_and_never_overwrite(tmp_path):
             ids = [j.job_id for j in client.jobs().jobs]          # queue order: the order they arrived in
             assert len(ids) == 3
             first = wait_state(client, ids[0], ("finished",), 180.0)
-            others = [client.wait_print_job(j, lambda r: r.waiting_for != "", timeout=180) for j in ids[1:]]
+            # the second job waits for the station until the supervisor has seen the first finish, then for the
+            # plate (the first part is still on it); the third waits for the queue
+            others = [client.wait_print_job(j, lambda r: r.waiting_for in ("plate", "queue"), timeout=180)
+                      for j in ids[1:]]
             assert [(r.state, r.waiting_for) for r in others] == [("queued", "plate"), ("queued", "queue")]
             assert "job next" in others[0].stage
             assert client.state().program_id == first.program_id          # the station kept the first job
