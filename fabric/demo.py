@@ -20,9 +20,9 @@ from pathlib import Path
 from fabric import schemas as s
 from fabric.cli.up import CellProcesses
 from fabric.client import Client
-from fabric.config import SessionSettings
-from fabric.errors import FabricError
-from fabric.follow import follow_print
+from fabric.wire.config import SessionSettings
+from fabric.wire.errors import FabricError
+from fabric.client.follow import follow_print
 from fabric.programs import program_from_artifact
 from fabric.viz import toolpath_png
 

@@ -5,9 +5,9 @@ import hashlib
 
 import numpy as np
 
-from fabric import codec
+from fabric.wire import codec
 from fabric import schemas as s
-from fabric.errors import DecodeError, ValidationError
+from fabric.wire.errors import DecodeError, ValidationError
 from fabric.motion.program import COLUMNS, Program
 
 __all__ = ["program_to_msg", "program_from_msg", "program_artifact", "program_artifact_pieces",

@@ -15,7 +15,7 @@ import pytest
 import zenoh
 
 from fabric.client import wait_connected
-from fabric.config import DATA_ROOT_ENV, SessionSettings, zenoh_config
+from fabric.wire.config import DATA_ROOT_ENV, SessionSettings, zenoh_config
 from fabric.cli.up import CellProcesses, hub_settings
 
 

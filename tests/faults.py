@@ -18,8 +18,8 @@ import numpy as np
 from fabric import schemas as s
 from fabric.cli.up import CellProcesses
 from fabric.client import Client
-from fabric.config import SessionSettings
-from fabric.errors import FabricError
+from fabric.wire.config import SessionSettings
+from fabric.wire.errors import FabricError
 from fabric.demo import sample_model
 from fabric.programs import program_from_artifact
 from fabric.robot.cell import Cell

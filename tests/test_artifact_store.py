@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fabric.errors import NotFound, ValidationError
+from fabric.wire.errors import NotFound, ValidationError
 from fabric.programs import content_id
 from fabric.schemas import Artifact
 from fabric.store.artifacts import ArtifactStore

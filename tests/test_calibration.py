@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fabric.errors import ConfigError, StateError, ValidationError
+from fabric.wire.errors import ConfigError, StateError, ValidationError
 from fabric.sim.calibration import calibrate_plate
 from fabric.robot.cell import Cell
 from fabric.robot.frames import inv_T, xyzrpy_to_T

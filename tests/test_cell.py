@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from fabric.errors import ConfigError, NotFound
+from fabric.wire.errors import ConfigError, NotFound
 from fabric.robot.cell import CELLS_DIR, Cell
 from fabric.robot.path_ik import solve_path
 from fabric.robot.kinematics import IK_OK

@@ -11,12 +11,12 @@ import pytest
 import zenoh
 
 from conftest import make_settings
-from fabric import codec
+from fabric.wire import codec
 from fabric import schemas as s
 from fabric.cli.up import CellProcesses, hub_settings
 from fabric.client import Client
-from fabric.config import zenoh_config
-from fabric.keys import Keys, parse_alive
+from fabric.wire.config import zenoh_config
+from fabric.wire.keys import Keys, parse_alive
 
 pytestmark = pytest.mark.timeout(180)
 CELLS = 10

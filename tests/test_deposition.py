@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.sim.deposition import Deposition, bead_area_mm2
 from fabric.motion.program import MOVEL, Program
 

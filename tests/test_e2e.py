@@ -13,12 +13,12 @@ import msgpack
 import pytest
 import zenoh
 
-from fabric import codec
+from fabric.wire import codec
 from fabric import schemas as s
 from fabric.client import Client
 from fabric.demo import sample_model
-from fabric.follow import follow_print
-from fabric.keys import ENDPOINTS, SERVICES
+from fabric.client.follow import follow_print
+from fabric.wire.keys import ENDPOINTS, SERVICES
 
 pytestmark = pytest.mark.timeout(300)
 

@@ -7,7 +7,7 @@ from hypothesis import given, settings as hsettings, strategies as st
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.errors import UnreachableError, ValidationError
+from fabric.wire.errors import UnreachableError, ValidationError
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.envelope import ENV_BELOW_PLATE, ENV_OFF_PLATE, envelope_status
 from fabric.robot.cell import Cell

@@ -7,7 +7,7 @@ import pytest
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.errors import BadRequest, FabricError, NotFound, UnreachableError, ValidationError
+from fabric.wire.errors import BadRequest, FabricError, NotFound, UnreachableError, ValidationError
 from fabric.planning.post.atomic import AtomicFiles
 from fabric.planning.post.stream import ExportStream
 from fabric.robot.cell import Cell

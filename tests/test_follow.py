@@ -9,8 +9,8 @@ import pytest
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.follow import follow_print
-from fabric.runtime import Service
+from fabric.client.follow import follow_print
+from fabric.server.service import Service
 
 pytestmark = pytest.mark.timeout(60)
 

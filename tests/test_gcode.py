@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fabric.errors import GcodeError, ValidationError
+from fabric.wire.errors import GcodeError, ValidationError
 from fabric.gcode import (EV_BED_TEMP, EV_DWELL, EV_EXTRUDE, EV_FAN, EV_FW_RETRACT,
                           EV_FW_UNRETRACT, EV_NOZZLE_TEMP, WAIT_ANY, WAIT_HEAT, WAIT_NONE,
                           parse_gcode, parse_gcode_file)

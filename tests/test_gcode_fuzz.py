@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from fabric.errors import GcodeError
+from fabric.wire.errors import GcodeError
 from fabric.gcode import Toolpath, parse_gcode
 
 SEED = (

@@ -12,7 +12,7 @@ from conftest import free_port
 from fabric import schemas as s
 from fabric.cli.up import CellProcesses
 from fabric.client import Client
-from fabric.config import SessionSettings
+from fabric.wire.config import SessionSettings
 from fabric.demo import sample_model
 from fabric.security.credentials import Credentials
 

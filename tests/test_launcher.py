@@ -12,7 +12,7 @@ from dataclasses import replace
 import pytest
 
 from fabric.client import Client
-from fabric.keys import SERVICES
+from fabric.wire.keys import SERVICES
 
 from conftest import make_settings
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fabric.errors import GcodeError, ProfileError, ValidationError
+from fabric.wire.errors import GcodeError, ProfileError, ValidationError
 from fabric.gcode import parse_gcode, parse_gcode_file
 from fabric.gcode.material import HEAD_BYTES, Material, read_material
 from fabric.planning import PlanOptions, plan_gcode

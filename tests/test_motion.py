@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fabric.errors import UnreachableError, ValidationError
+from fabric.wire.errors import UnreachableError, ValidationError
 from fabric.robot.frames import make_T
 from fabric.motion.timing import StartState, stop_timeline, time_program
 from fabric.motion.validate import validate_program

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fabric.errors import UnreachableError, ValidationError
+from fabric.wire.errors import UnreachableError, ValidationError
 from fabric.planning import PlanOptions, plan_gcode, plan_gcode_file
 from fabric.robot.cell import Cell
 from fabric.robot.kinematics import IK_OK

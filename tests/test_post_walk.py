@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.motion.program import BED, MOVEJ, MOVEL, NOZZLE, PRINT, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
 from fabric.planning.post.walk import (BED_HEATER, NOZZLE_HEATER, Block, ExtruderOff, ExtruderOn, ExtruderRate,
                                        JointMove, LayerStart, LinearMove, LinearRun, Retract, RowWalker, SetTemp, Wait,

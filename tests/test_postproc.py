@@ -8,7 +8,7 @@ import re
 import numpy as np
 import pytest
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.post import (CSV_COLUMNS, RapidOptions, export_program, write_csv, write_export, write_krl,
                                   write_rapid, write_urscript)

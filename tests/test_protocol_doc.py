@@ -1,7 +1,7 @@
 """docs/protocol.md is generated from the key table and schemas: it must be current."""
 from pathlib import Path
 
-from fabric.keys import ENDPOINTS, TOPICS
+from fabric.wire.keys import ENDPOINTS, TOPICS
 from fabric.protocol_doc import render
 from fabric.schemas import REGISTRY
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 from dataclasses import replace
 
 from fabric import schemas as s
-from fabric.keys import SERVICES
+from fabric.wire.keys import SERVICES
 from fabric.motion.program import BED, NOZZLE, SET_TEMP, Program
-from fabric.readiness import ReadyFacts, print_temp_c, ready_report
+from fabric.services.readiness import ReadyFacts, print_temp_c, ready_report
 
 ALL_ALIVE = {name: True for name in SERVICES}
 CLEAR = s.CollisionReport(collision_free=True, checked_configs=100, min_distance_mm=12.34)

@@ -12,10 +12,10 @@ import msgpack
 import pytest
 import zenoh
 
-from fabric import codec
+from fabric.wire import codec
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.config import SessionSettings
+from fabric.wire.config import SessionSettings
 from fabric.services.supervisor import SupervisorService
 
 from conftest import free_port, relay_process

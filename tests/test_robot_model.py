@@ -5,7 +5,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from fabric.errors import ConfigError, NotFound, ValidationError
+from fabric.wire.errors import ConfigError, NotFound, ValidationError
 from fabric.robot import frames
 from fabric.robot.kinematics import IRB140_ARM
 from fabric.robot.model import ACC_PER_S, IRB140_URDF, JERK_PER_S2, RobotModel, ToolGeometry

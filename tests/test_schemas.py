@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from fabric import codec
-from fabric.errors import DecodeError, ValidationError
+from fabric.wire import codec
+from fabric.wire.errors import DecodeError, ValidationError
 from fabric.schemas import REGISTRY
 
 SCHEMAS = sorted(REGISTRY.items())
@@ -196,7 +196,7 @@ def test_nested_schema_is_validated_with_its_dotted_path():
 
 
 def test_unreachable_reason_is_one_word_of_the_vocabulary():
-    from fabric.errors import UNREACHABLE_REASONS, UnreachableError, error_from_code
+    from fabric.wire.errors import UNREACHABLE_REASONS, UnreachableError, error_from_code
     from fabric.robot.kinematics import IK_OK, IK_REASONS, ik_reason
     err = UnreachableError("far", reason="out of reach", gcode_line=6)
     assert err.details == {"reason": "out of reach", "gcode_line": 6}

@@ -12,13 +12,13 @@ import pytest
 import zenoh
 
 from conftest import free_port, relay_process
-from fabric import codec
+from fabric.wire import codec
 from fabric import schemas as s
 from fabric.cli.up import CellProcesses
 from fabric.client import Client
-from fabric.config import SessionSettings
-from fabric.errors import PermissionDenied
-from fabric.keys import ENDPOINTS, Keys
+from fabric.wire.config import SessionSettings
+from fabric.wire.errors import PermissionDenied
+from fabric.wire.keys import ENDPOINTS, Keys
 from fabric.security.credentials import Credentials
 from fabric.security.hub import hub_zenoh_config
 from fabric.security.roles import MONITOR_COMMANDS, ROLES, may_call

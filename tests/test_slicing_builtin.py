@@ -209,7 +209,7 @@ def test_slice_result_figures(box_result) -> None:
 
 
 def test_part_thinner_than_a_bead_is_refused() -> None:
-    from fabric.errors import MeshError
+    from fabric.wire.errors import MeshError
     with pytest.raises(MeshError, match="nothing to print") as err:
         slice_model(to_stl_bytes(box((0.3, 0.3, 0.3))), "speck.stl", TAZ)
     assert err.value.details["reason"] == "too-small"

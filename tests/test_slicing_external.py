@@ -7,7 +7,7 @@ import shutil
 import numpy as np
 import pytest
 
-from fabric.errors import NotFound, SlicerError
+from fabric.wire.errors import NotFound, SlicerError
 from fabric.slicing import (
     Placement,
     available_backends,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from fabric.errors import MeshError, NotFound, PlacementError, ProfileError
+from fabric.wire.errors import MeshError, NotFound, PlacementError, ProfileError
 from fabric.slicing import (
     Placement,
     list_profiles,

@@ -12,7 +12,7 @@ import pytest
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.errors import StateError
+from fabric.wire.errors import StateError
 from fabric.motion.testprog import square_program
 from fabric.programs import program_artifact
 from fabric.robot.cell import Cell

@@ -6,7 +6,7 @@ import pytest
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.errors import NotFound, StateError, ValidationError
+from fabric.wire.errors import NotFound, StateError, ValidationError
 from fabric.programs import program_artifact
 from fabric.services.collision import CollisionService
 from fabric.services.planner import PlannerService

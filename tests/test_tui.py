@@ -13,7 +13,7 @@ from conftest import make_settings
 from fabric.cli.up import CellProcesses
 from fabric.client import Client
 from fabric.demo import sample_model
-from fabric.keys import SERVICES
+from fabric.wire.keys import SERVICES
 from fabric.tui.app import FabricConsole
 from fabric.tui.screens.cells import CellsDialog
 from fabric.tui.screens.confirm import ConfirmDialog
@@ -253,7 +253,7 @@ def test_switching_cells(console_cell):
 
 def test_console_follows_services_coming_and_going(hub, session, settings):
     """Liveliness changes reach the console through the client's subscription (no polling)."""
-    from fabric.keys import Keys
+    from fabric.wire.keys import Keys
 
     async def scenario() -> None:
         with Client.connect(replace(settings, mode="client")) as client:

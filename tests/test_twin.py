@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fabric.errors import CollisionError, StateError, UnreachableError, ValidationError
+from fabric.wire.errors import CollisionError, StateError, UnreachableError, ValidationError
 from fabric.robot.cell import Cell
 from fabric.motion.program import BED, Program
 from fabric.motion.testprog import square_program

@@ -6,8 +6,8 @@ from collections.abc import Callable
 
 import pytest
 
-from fabric.codec import pack
-from fabric.errors import FabricError, StateError, ValidationError
+from fabric.wire.codec import pack
+from fabric.wire.errors import FabricError, StateError, ValidationError
 from fabric.motion.program import Program
 from fabric.motion.testprog import square_program
 from fabric.robot.cell import Cell

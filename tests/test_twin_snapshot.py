@@ -6,8 +6,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from fabric.codec import pack, unpack
-from fabric.errors import ValidationError
+from fabric.wire.codec import pack, unpack
+from fabric.wire.errors import ValidationError
 from fabric.motion.program import Program
 from fabric.motion.testprog import square_program
 from fabric.robot.cell import Cell

@@ -11,12 +11,12 @@ import trimesh
 from fabric import schemas as s
 from fabric.cli.inputs import LIMIT_ENV, LargeInput, gcode_source, read_input, read_whole
 from fabric.client import Client, input_size
-from fabric.errors import BadRequest, ConfigError, NotFound, ValidationError
+from fabric.wire.errors import BadRequest, ConfigError, NotFound, ValidationError
 from fabric.robot.cell import Cell
 from fabric.schemas.upload import INLINE_MAX_BYTES, UPLOAD_CHUNK_MAX_BYTES
 from fabric.services.planner import PlannerService
 from fabric.services.slicer import SlicerService
-from fabric.uploads import UploadStore
+from fabric.server.uploads import UploadStore
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from fabric.client import Client, input_size
-from fabric.errors import ConfigError
+from fabric.wire.errors import ConfigError
 from fabric.schemas.upload import INLINE_MAX_BYTES, MAX_GCODE_BYTES, MAX_MODEL_BYTES
 
 __all__ = ["LargeInput", "read_input", "read_whole", "input_limit", "gcode_source", "model_source", "GCODE_SUFFIXES",

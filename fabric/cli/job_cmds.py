@@ -12,7 +12,7 @@ from fabric.cli.output import emit
 from fabric.cli.inputs import read_whole
 from fabric.cli.pipeline_cmds import parse_sets
 from fabric.client import Client
-from fabric.follow import follow_print
+from fabric.client.follow import follow_print
 
 __all__ = ["register"]
 

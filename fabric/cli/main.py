@@ -11,9 +11,9 @@ from pathlib import Path
 from fabric.cli import auth_cmds, job_cmds, pipeline_cmds, station_cmds
 from fabric.cli.output import emit, fail
 from fabric.client import Client
-from fabric.config import add_cell_argument, add_data_argument, add_session_args, settings_from_args
-from fabric.errors import FabricError
-from fabric.keys import SERVICES
+from fabric.wire.config import add_cell_argument, add_data_argument, add_session_args, settings_from_args
+from fabric.wire.errors import FabricError
+from fabric.wire.keys import SERVICES
 
 # Building the parser and running a query import only the client and the schemas (numpy, zenoh, msgpack).
 # The heavy modules (services, twin, robot model: scipy, trimesh, pinocchio) are imported inside the
@@ -124,7 +124,7 @@ def _cmd_up(a: argparse.Namespace) -> int:
 
 def _cmd_router(a: argparse.Namespace) -> int:
     from fabric.cli.up import hub_settings
-    from fabric.config import zenoh_config
+    from fabric.wire.config import zenoh_config
     st = hub_settings(settings_from_args(a))
     conf = zenoh_config(st)
     if a.secure is not None:
@@ -142,8 +142,8 @@ def _cmd_relay(a: argparse.Namespace) -> int:
     out here, so the hub (and the commands it carries) does not do that work for every dashboard."""
     from dataclasses import replace
 
-    from fabric.config import DEFAULT_HUB, zenoh_config
-    from fabric.errors import ConfigError
+    from fabric.wire.config import DEFAULT_HUB, zenoh_config
+    from fabric.wire.errors import ConfigError
     st = settings_from_args(a)
     if not st.listen:
         raise ConfigError("a relay needs --listen ENDPOINT: where dashboards connect to it", field="--listen")
@@ -173,7 +173,7 @@ def _run_router(conf, what: str) -> int:
     try:
         session = zenoh.open(conf)
     except zenoh.ZError as exc:             # e.g. the port is taken: say so in one line, not a traceback
-        from fabric.errors import ConfigError
+        from fabric.wire.errors import ConfigError
         reason = str(exc).split(" at /")[0]
         raise ConfigError(f"cannot start the router: {reason}", field="--listen") from None
     with session:

@@ -11,7 +11,7 @@ from fabric import schemas as s
 from fabric.cli.output import emit
 from fabric.client import Client
 from fabric.cli.inputs import gcode_source, model_source, read_input
-from fabric.errors import BadRequest
+from fabric.wire.errors import BadRequest
 
 __all__ = ["register", "parse_sets", "read_input"]
 

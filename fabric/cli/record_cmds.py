@@ -15,7 +15,7 @@ from typing import Any
 
 from fabric.cli.output import emit
 from fabric.client import Client
-from fabric.errors import BadRequest, FabricError
+from fabric.wire.errors import BadRequest, FabricError
 
 __all__ = ["register", "sample_row", "write_table", "read_table", "RECORD_TOPICS"]
 

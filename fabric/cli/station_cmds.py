@@ -8,8 +8,8 @@ from pathlib import Path
 from fabric import schemas as s
 from fabric.cli.output import emit
 from fabric.client import Client
-from fabric.errors import BadRequest, FabricError
-from fabric.keys import SERVICES
+from fabric.wire.errors import BadRequest, FabricError
+from fabric.wire.keys import SERVICES
 
 __all__ = ["register"]
 

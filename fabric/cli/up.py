@@ -26,9 +26,9 @@ from pathlib import Path
 import zenoh
 
 from fabric.client import Client
-from fabric.config import SessionSettings, zenoh_config
-from fabric.errors import FabricError, ServiceUnavailable
-from fabric.keys import SERVICES, Keys
+from fabric.wire.config import SessionSettings, zenoh_config
+from fabric.wire.errors import FabricError, ServiceUnavailable
+from fabric.wire.keys import SERVICES, Keys
 from fabric.security.credentials import Credentials
 from fabric.security.hub import hub_zenoh_config, role_settings
 

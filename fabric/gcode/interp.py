@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fabric.errors import GcodeError
+from fabric.wire.errors import GcodeError
 from fabric.gcode import arcs
 from fabric.gcode.commands import KNOWN, LENGTH_COLS, PARAMS
 from fabric.gcode.events import ExtrudeOnly, command_events

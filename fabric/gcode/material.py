@@ -16,7 +16,7 @@ A list (several extruders: ``2.85,2.85``, ``2.85|2.85``, ``PLA;PLA``) gives its
 first value; a density of 0 (PrusaSlicer's "not set") is no statement. The
 first statement found wins, the head before the tail. A stated value that is
 not a number, or is out of range, is a
-:class:`~fabric.errors.GcodeError` naming the line.
+:class:`~fabric.wire.errors.GcodeError` naming the line.
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ import math
 import re
 from dataclasses import dataclass
 
-from fabric.errors import GcodeError
+from fabric.wire.errors import GcodeError
 
 __all__ = ["Material", "read_material", "header_lines", "HEAD_BYTES", "FILAMENT_DIAMETER_RANGE_MM",
            "DENSITY_RANGE_G_CM3", "MIN_EXTRUDE_TEMP_RANGE_C"]

@@ -6,7 +6,7 @@ from collections.abc import Callable, Iterator
 from typing import BinaryIO
 
 from fabric.ahead import ordered_map
-from fabric.errors import NotFound, ValidationError
+from fabric.wire.errors import NotFound, ValidationError
 from fabric.gcode.dialects import detect_slicer
 from fabric.gcode.interp import Interpreter, LexedBlock, lex_and_tabulate
 from fabric.gcode.material import HEAD_BYTES, read_material

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.errors import UnreachableError
+from fabric.wire.errors import UnreachableError
 from fabric.sim.deposition import bead_area_mm2
 from fabric.robot.frames import inv_T, make_T, quat_from_R, rot_x
 from fabric.robot.kinematics import IK_OK, IK_SINGULAR, ik_reason

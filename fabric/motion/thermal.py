@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 
 __all__ = ["HeaterParams", "HeaterState", "Thermal", "AMBIENT_C", "HEATER_NAMES"]
 

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from ruckig import InputParameter, Result, Ruckig, Trajectory
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.motion.lookahead import EPS_MM, PathSteps, linear_profiles
 from fabric.motion.program import MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
 from fabric.motion.thermal import Thermal

@@ -5,7 +5,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.errors import UnreachableError, ValidationError
+from fabric.wire.errors import UnreachableError, ValidationError
 from fabric.motion.program import MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
 
 __all__ = ["validate_program"]

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.gcode.toolpath import (EV_BED_TEMP, EV_DWELL, EV_EXTRUDE, EV_FAN, EV_FW_RETRACT,
                                    EV_FW_UNRETRACT, EV_NOZZLE_TEMP, WAIT_NONE, Toolpath)
 from fabric.planning.options import PlanOptions

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.gcode.material import FILAMENT_DIAMETER_RANGE_MM
 from fabric.planning.material import ASSUMED_FILAMENT_DIAMETER_MM
 

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.errors import UnreachableError
+from fabric.wire.errors import UnreachableError
 from fabric.gcode.material import Material
 from fabric.gcode.toolpath import Toolpath
 from fabric.planning.material import ResolvedMaterial, resolve_material

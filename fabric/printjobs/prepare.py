@@ -19,7 +19,7 @@ from collections.abc import Callable
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.errors import CollisionError, FabricError, NotFound, ServiceUnavailable, UnreachableError
+from fabric.wire.errors import CollisionError, FabricError, NotFound, ServiceUnavailable, UnreachableError
 from fabric.store.artifacts import ArtifactStore
 
 __all__ = ["Preparer", "PrepareCancelled", "RETRY_BUDGET_S"]

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.errors import ConfigError, NotFound, ValidationError
+from fabric.wire.errors import ConfigError, NotFound, ValidationError
 from fabric.robot import frames
 from fabric.robot.model import RobotModel, ToolGeometry
 

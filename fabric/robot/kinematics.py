@@ -64,7 +64,7 @@ IK_REASONS: dict[int, str] = {
 
 
 def ik_reason(status: int | np.integer) -> str:
-    """The ``UnreachableError`` reason (``fabric.errors.UNREACHABLE_REASONS``) of a failing IK status."""
+    """The ``UnreachableError`` reason (``fabric.wire.errors.UNREACHABLE_REASONS``) of a failing IK status."""
     code = int(status)
     if code == IK_OK or code not in IK_REASONS:
         raise ValueError(f"IK status {code} is not a failure (statuses: {IK_REASONS})")

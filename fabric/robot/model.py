@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from fabric.errors import ConfigError, NotFound, ValidationError
+from fabric.wire.errors import ConfigError, NotFound, ValidationError
 from fabric.robot import frames
 from fabric.robot.closed_form import ClosedFormIK
 from fabric.robot.kinematics import IRB140_ARM

@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.robot import frames
 
 __all__ = ["NozzleFrames", "FrameCols", "unit_axes"]

@@ -45,7 +45,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.robot.joint_jumps import joint_jumps
 from fabric.robot.kinematics import IK_JUMP, IK_OK
 from fabric.robot.model import RobotModel

@@ -7,7 +7,7 @@ fields are annotated with plain types (``int``, ``float``, ``str``, ``bool``,
 Ranges, choices and array dtypes/shapes are declared with :func:`f`.
 
 Validation turns a plain decoded mapping into the dataclass, checking every
-field and raising :class:`~fabric.errors.ValidationError` whose
+field and raising :class:`~fabric.wire.errors.ValidationError` whose
 ``details['field']`` is the dotted path of the offending field.
 """
 from __future__ import annotations
@@ -21,7 +21,7 @@ from typing import Any, Callable, TypeVar, Union
 
 import numpy as np
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 
 __all__ = ["schema", "f", "REGISTRY", "validate_into", "to_plain"]
 

@@ -5,7 +5,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.errors import UNREACHABLE_REASONS
+from fabric.wire.errors import UNREACHABLE_REASONS
 from fabric.schemas.base import f, schema
 from fabric.schemas.common import ErrorReply
 

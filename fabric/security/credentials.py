@@ -16,7 +16,7 @@ import secrets
 from dataclasses import dataclass
 from pathlib import Path
 
-from fabric.errors import ConfigError
+from fabric.wire.errors import ConfigError
 from fabric.security import pki
 from fabric.security.roles import ROLES, access_control
 from fabric.security.zconfigs import client_config, hub_config, read_json5, write_json5

@@ -16,7 +16,7 @@ from typing import Any
 
 import zenoh
 
-from fabric.errors import ConfigError
+from fabric.wire.errors import ConfigError
 from fabric.security.zconfigs import read_json5
 
 __all__ = ["explain_refusal"]

@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import zenoh
 
-from fabric.config import SessionSettings, zenoh_config
+from fabric.wire.config import SessionSettings, zenoh_config
 from fabric.security.credentials import Credentials
 
 __all__ = ["hub_zenoh_config", "role_settings"]

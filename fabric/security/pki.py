@@ -13,7 +13,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from fabric.errors import ConfigError
+from fabric.wire.errors import ConfigError
 
 __all__ = ["make_ca", "issue", "subject_alt_names"]
 

@@ -11,7 +11,7 @@ import json
 
 import zenoh
 
-from fabric.config import SessionSettings
+from fabric.wire.config import SessionSettings
 from fabric.security.credentials import Credentials
 from fabric.security.hub import hub_zenoh_config
 from fabric.security.roles import relay_access_control

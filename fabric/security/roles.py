@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from fabric.keys import ENDPOINTS, EVERY_KEY, TOPICS, Keys
+from fabric.wire.keys import ENDPOINTS, EVERY_KEY, TOPICS, Keys
 
 __all__ = ["ROLES", "MONITOR_COMMANDS", "may_call", "permissions", "access_control", "relay_access_control"]
 

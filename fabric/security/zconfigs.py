@@ -12,8 +12,8 @@ import os
 from pathlib import Path
 from typing import Any
 
-from fabric.config import DEFAULT_LEASE_MS, KEEP_ALIVE_PER_LEASE
-from fabric.errors import ConfigError
+from fabric.wire.config import DEFAULT_LEASE_MS, KEEP_ALIVE_PER_LEASE
+from fabric.wire.errors import ConfigError
 
 __all__ = ["client_config", "hub_config", "write_json5", "read_json5", "role_of_config", "ROLE_METADATA"]
 

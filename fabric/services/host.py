@@ -9,8 +9,8 @@ import threading
 
 import zenoh
 
-from fabric.config import SessionSettings, zenoh_config
-from fabric.errors import FabricError
+from fabric.wire.config import SessionSettings, zenoh_config
+from fabric.wire.errors import FabricError
 from fabric.services import SERVICE_MODULES
 
 __all__ = ["serve", "setup_logging"]

@@ -14,7 +14,7 @@ from typing import Callable
 import numpy as np
 
 from fabric import schemas as s
-from fabric.errors import FabricError, UnreachableError
+from fabric.wire.errors import FabricError, UnreachableError
 from fabric.motion.program import Program
 
 __all__ = ["PlanHandoff"]

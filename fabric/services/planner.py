@@ -25,16 +25,16 @@ from typing import Callable, TextIO
 import numpy as np
 import zenoh
 
-from fabric import codec
+from fabric.wire import codec
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.errors import BadRequest, FabricError, InternalError, NotFound, UnreachableError, error_from_code
-from fabric.jobs import Job, JobRunner
+from fabric.wire.errors import BadRequest, FabricError, InternalError, NotFound, UnreachableError, error_from_code
+from fabric.server.jobs import Job, JobRunner
 from fabric.programs import content_id, program_artifact_pieces, program_from_artifact
-from fabric.config import add_cell_argument, service_data_dir
-from fabric.runtime import Service
+from fabric.wire.config import add_cell_argument, service_data_dir
+from fabric.server.service import Service
 from fabric.schemas.upload import MAX_GCODE_BYTES
-from fabric.uploads import UploadStore
+from fabric.server.uploads import UploadStore
 from fabric.robot.cell import Cell
 from fabric.robot.frames import xyzrpy_to_T
 from fabric.motion.program import Program

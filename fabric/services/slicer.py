@@ -8,13 +8,13 @@ from pathlib import Path
 import zenoh
 
 from fabric import schemas as s
-from fabric.errors import NotFound
-from fabric.jobs import Job, JobRunner
+from fabric.wire.errors import NotFound
+from fabric.server.jobs import Job, JobRunner
 from fabric.programs import content_id
-from fabric.config import add_cell_argument, service_data_dir
-from fabric.runtime import Service
+from fabric.wire.config import add_cell_argument, service_data_dir
+from fabric.server.service import Service
 from fabric.schemas.upload import MAX_MODEL_BYTES
-from fabric.uploads import UploadStore
+from fabric.server.uploads import UploadStore
 from fabric.robot.cell import Cell
 from fabric.slicing import Placement, available_backends, list_profiles, load_profile, slice_model
 

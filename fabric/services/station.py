@@ -34,14 +34,14 @@ from typing import Any, Callable
 import numpy as np
 import zenoh
 
-from fabric import codec
+from fabric.wire import codec
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.errors import CollisionError, FabricError, NotFound, StateError, ValidationError
+from fabric.wire.errors import CollisionError, FabricError, NotFound, StateError, ValidationError
 from fabric.programs import content_id, program_from_artifact
-from fabric.readiness import ReadyFacts, print_temp_c, ready_report
-from fabric.config import add_cell_argument, service_data_dir
-from fabric.runtime import Service
+from fabric.services.readiness import ReadyFacts, print_temp_c, ready_report
+from fabric.wire.config import add_cell_argument, service_data_dir
+from fabric.server.service import Service
 from fabric.services.station_messages import StationMessages
 from fabric.robot.cell import Cell
 from fabric.robot.frames import T_to_xyzrpy

@@ -29,13 +29,13 @@ import zenoh
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.config import service_data_dir
-from fabric.errors import FabricError, NotFound, StateError, ValidationError
-from fabric.keys import SERVICES, parse_alive
+from fabric.wire.config import service_data_dir
+from fabric.wire.errors import FabricError, NotFound, StateError, ValidationError
+from fabric.wire.keys import SERVICES, parse_alive
 from fabric.printjobs.events import apply_event, job_id_of_event
 from fabric.printjobs.prepare import PrepareCancelled, Preparer
 from fabric.programs import content_id
-from fabric.runtime import Service
+from fabric.server.service import Service
 from fabric.store.jobs import JobStore
 
 __all__ = ["SupervisorService", "build", "add_arguments"]

@@ -5,7 +5,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.codec import pack
+from fabric.wire.codec import pack
 from fabric.motion.program import Program
 from fabric.motion.timeline import Timeline
 from fabric.motion.program import mini_program

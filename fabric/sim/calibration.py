@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from fabric.errors import ConfigError
+from fabric.wire.errors import ConfigError
 from fabric.robot.frames import T_to_xyzrpy, inv_T, xyzrpy_to_T
 
 __all__ = ["CalibrationResult", "ProbePlan", "probe_plan", "simulate_touches", "fit_plate", "top_plane_frame",

@@ -5,7 +5,7 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.motion.timing import DEFAULT_ACCEL_MM_S2, DEFAULT_RETRACT_SPEED_MM_S
 
 __all__ = ["TwinConfig"]

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.motion.program import MOVEL, Program
 
 __all__ = ["Deposition", "VolumeReport", "bead_area_mm2"]

@@ -22,7 +22,7 @@ from typing import Any, Union
 
 import numpy as np
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.motion.program import MOVEL, RETRACT, SET_TEMP, WAIT_TEMP
 from fabric.motion.thermal import HeaterParams, HeaterState, Thermal
 from fabric.motion.timeline import Timeline

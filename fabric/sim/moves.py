@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.errors import UnreachableError, ValidationError
+from fabric.wire.errors import UnreachableError, ValidationError
 from fabric.motion.program import BED, MOVEJ, MOVEL, NOZZLE, RETRACT, SET_TEMP, WAIT, WAIT_TEMP
 from fabric.motion.timing import stop_timeline
 from fabric.robot.kinematics import ik_reason

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.motion.program import Program
 from fabric.motion.thermal import Thermal
 from fabric.sim.deposition import Deposition

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.errors import CollisionError, FabricError, StateError, UnreachableError, ValidationError
+from fabric.wire.errors import CollisionError, FabricError, StateError, UnreachableError, ValidationError
 from fabric.motion.program import Program
 from fabric.motion.thermal import Thermal
 from fabric.motion.validate import validate_program
@@ -73,7 +73,7 @@ class Twin:
 
     def snapshot(self, with_beads: bool = True) -> dict[str, Any]:
         """The twin's settings and whole state as plain values and arrays (msgpack-able with
-        :func:`fabric.codec.pack`). The loaded program is named by its row count only; ``with_beads``
+        :func:`fabric.wire.codec.pack`). The loaded program is named by its row count only; ``with_beads``
         False leaves out the bead arrays (kept apart by a checkpoint that stores them incrementally)."""
         return {"config": self.config.to_dict(), "state": self.s.to_dict(with_beads)}
 

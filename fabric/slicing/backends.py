@@ -15,7 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import metadata
 
-from fabric.errors import NotFound
+from fabric.wire.errors import NotFound
 from fabric.slicing.builtin.slicer import slice_mesh
 from fabric.slicing.external import EXTERNAL, external_version, run_external
 from fabric.slicing.gcode_stats import gcode_stats

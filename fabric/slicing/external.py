@@ -28,7 +28,7 @@ from pathlib import Path
 
 import trimesh
 
-from fabric.errors import NotFound, SlicerError
+from fabric.wire.errors import NotFound, SlicerError
 from fabric.slicing.profile import Profile
 
 __all__ = ["EXTERNAL", "external_version", "run_external", "prusaslicer_ini", "slic3r_ini"]

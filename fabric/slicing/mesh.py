@@ -21,7 +21,7 @@ from pathlib import PurePath
 import numpy as np
 import trimesh
 
-from fabric.errors import MeshError
+from fabric.wire.errors import MeshError
 from fabric.slicing.mesh3mf import read_3mf
 
 __all__ = ["load_mesh", "repair_mesh", "MAX_HOLE_EDGES"]

@@ -14,7 +14,7 @@ import zipfile
 
 import numpy as np
 
-from fabric.errors import MeshError
+from fabric.wire.errors import MeshError
 
 __all__ = ["read_3mf"]
 

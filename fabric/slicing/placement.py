@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from fabric.errors import PlacementError
+from fabric.wire.errors import PlacementError
 
 __all__ = ["Placement", "place_mesh"]
 

@@ -20,7 +20,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
-from fabric.errors import NotFound, ProfileError
+from fabric.wire.errors import NotFound, ProfileError
 
 __all__ = ["Profile", "load_profile", "list_profiles", "PROFILE_DIR"]
 

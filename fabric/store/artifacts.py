@@ -24,8 +24,8 @@ import threading
 import time
 from pathlib import Path
 
-from fabric import codec
-from fabric.errors import DecodeError, NotFound, ValidationError
+from fabric.wire import codec
+from fabric.wire.errors import DecodeError, NotFound, ValidationError
 from fabric.programs import content_id
 from fabric.schemas import Artifact
 from fabric.store.sqlite import open_db

@@ -14,9 +14,9 @@ from __future__ import annotations
 import threading
 from pathlib import Path
 
-from fabric import codec
+from fabric.wire import codec
 from fabric import schemas as s
-from fabric.errors import NotFound, ValidationError
+from fabric.wire.errors import NotFound, ValidationError
 from fabric.store.sqlite import open_db
 
 __all__ = ["JobStore"]

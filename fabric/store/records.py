@@ -5,7 +5,7 @@ import threading
 from pathlib import Path
 from typing import TypeVar
 
-from fabric import codec
+from fabric.wire import codec
 from fabric.store.sqlite import open_db
 
 __all__ = ["RecordStore"]

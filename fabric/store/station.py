@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric import codec
+from fabric.wire import codec
 from fabric import schemas as s
 from fabric.store.sqlite import open_db
 

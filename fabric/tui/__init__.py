@@ -4,8 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fabric.config import add_session_args, settings_from_args
-from fabric.errors import FabricError
+from fabric.wire.config import add_session_args, settings_from_args
+from fabric.wire.errors import FabricError
 
 __all__ = ["main"]
 

@@ -12,7 +12,7 @@ from textual.reactive import reactive
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.errors import FabricError
+from fabric.wire.errors import FabricError
 from fabric.tui.commands import COMMANDS, describe
 from fabric.tui.link import CellLink
 from fabric.tui.messages import CellsListed, JobsListed, LimitsReady, Liveliness, ProgramReady, Reply, Telemetry

@@ -10,7 +10,7 @@ from typing import Callable
 from textual.message import Message
 
 from fabric.client import AliveSubscription, Client, Subscription
-from fabric.errors import FabricError
+from fabric.wire.errors import FabricError
 from fabric.tui.messages import JobsListed, Liveliness, ProgramReady, Telemetry
 
 __all__ = ["CellLink", "STREAMS"]

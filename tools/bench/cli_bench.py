@@ -48,7 +48,7 @@ import zenoh
 
 from fabric.cli.up import hub_settings
 from fabric.client import Client
-from fabric.config import SessionSettings, zenoh_config
+from fabric.wire.config import SessionSettings, zenoh_config
 
 TARGET_RATIO = 3.0
 BASELINE = "import zenoh, msgpack, numpy"
@@ -60,7 +60,7 @@ t0 = time.perf_counter()
 import zenoh
 from fabric.cli.main import build_parser
 from fabric.client import Client, wait_connected
-from fabric.config import settings_from_args, zenoh_config
+from fabric.wire.config import settings_from_args, zenoh_config
 t1 = time.perf_counter()
 args = build_parser().parse_args(sys.argv[1:])
 settings = settings_from_args(args, default_mode="client")

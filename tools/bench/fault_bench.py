@@ -30,7 +30,7 @@ from conftest import make_settings  # noqa: E402
 from faults import SupervisedCell, read_csv, reference_beads, run_with_fault, same_beads  # noqa: E402
 
 from fabric.client import Client  # noqa: E402
-from fabric.errors import FabricError  # noqa: E402
+from fabric.wire.errors import FabricError  # noqa: E402
 
 SERVICES = ("station", "supervisor", "planner", "slicer")
 

@@ -44,11 +44,11 @@ from typing import Callable
 
 import zenoh
 
-from fabric import codec
+from fabric.wire import codec
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.config import SessionSettings, zenoh_config
-from fabric.qos import INTERACTIVE_QOS
+from fabric.wire.config import SessionSettings, zenoh_config
+from fabric.wire.qos import INTERACTIVE_QOS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from load_report import DATA, HELD, HUB, PAPER, PEER, report  # noqa: E402  (a sibling script, not a package)

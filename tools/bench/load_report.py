@@ -34,7 +34,7 @@ def _where_the_time_goes(one: dict) -> list[str]:
         f"{hub['p50'] - peer['p50']:.2f} ms at p50 and {hub['p99'] - peer['p99']:.2f} ms at p99.",
         f"* **Waiting for the query's final message.** Zenoh's default consolidation holds a reply until the "
         f"query's final message has come back through every hop; the fabric's client takes the reply as it arrives "
-        f"(`fabric.qos`). Held for the final, the same call takes p50 {held['p50']:.2f} ms, p99 {held['p99']:.2f} ms.",
+        f"(`fabric.wire.qos`). Held for the final, the same call takes p50 {held['p50']:.2f} ms, p99 {held['p99']:.2f} ms.",
         f"* **Queues behind telemetry.** Commands travel at interactive priority, express; the same query at "
         f"telemetry's priority, batched, takes p50 {data['p50']:.2f} ms, p99 {data['p99']:.2f} ms.",
         f"* **CPU.** Two shared cores run {one['monitors']} monitor processes (each decoding some "

@@ -36,7 +36,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from fabric.cli.up import CellProcesses                       # noqa: E402
-from fabric.config import SessionSettings                   # noqa: E402
+from fabric.wire.config import SessionSettings                   # noqa: E402
 from fabric.gcode import parse_gcode_file                   # noqa: E402
 from fabric.planning import PlanOptions, plan_gcode_file    # noqa: E402
 from fabric.robot.cell import Cell                            # noqa: E402

@@ -38,7 +38,7 @@ import zenoh
 
 from fabric.cli.up import CellProcesses, hub_settings
 from fabric.client import Client
-from fabric.config import SessionSettings, zenoh_config
+from fabric.wire.config import SessionSettings, zenoh_config
 from fabric.demo import sample_model
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.programs import program_artifact

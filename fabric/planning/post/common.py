@@ -6,7 +6,7 @@ from typing import TextIO
 
 import numpy as np
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.robot.frames import R_from_quat
 from fabric.motion.program import MOVEL, Program
 

@@ -6,7 +6,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.planning.post.csv import write_csv
 from fabric.planning.post.krl import write_krl
 from fabric.planning.post.names import program_name

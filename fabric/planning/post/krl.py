@@ -20,7 +20,7 @@ from typing import TextIO
 
 import numpy as np
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.planning.post.common import (R_to_zyx_deg, check_program, extrusion_rate, quat_to_zyx_deg, write_ascii,
                                          write_lines)
 from fabric.planning.post.numtext import ChoiceColumn, Column, FixedColumn, format_rows

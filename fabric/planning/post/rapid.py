@@ -35,7 +35,7 @@ from typing import Callable, TextIO
 
 import numpy as np
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.ahead import AHEAD, WORKERS
 from fabric.planning.post.common import check_program, write_ascii, write_lines
 from fabric.planning.post.numtext import ChoiceColumn, Column, FixedColumn, format_rows, trimmed_text

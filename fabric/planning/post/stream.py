@@ -14,7 +14,7 @@ import queue
 import threading
 from typing import Callable, TextIO
 
-from fabric.errors import BadRequest, FabricError, InternalError, ServiceUnavailable
+from fabric.wire.errors import BadRequest, FabricError, InternalError, ServiceUnavailable
 
 __all__ = ["ExportStream", "PIECE_BYTES"]
 

@@ -19,7 +19,7 @@ from typing import TextIO
 
 import numpy as np
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.planning.post.common import check_program, extrusion_rate, quat_to_rotvec, write_ascii, write_lines
 from fabric.planning.post.numtext import Column, FixedColumn, format_rows
 from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LinearMove,

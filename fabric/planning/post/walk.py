@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fabric.errors import ValidationError
+from fabric.wire.errors import ValidationError
 from fabric.planning.post.common import BLOCK_ROWS, extrusion_rate, row_blocks
 from fabric.motion.program import BED, MOVEJ, MOVEL, PRINT, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
 

@@ -22,7 +22,7 @@ import numpy as np
 import shapely
 import trimesh
 
-from fabric.errors import MeshError
+from fabric.wire.errors import MeshError
 from fabric.slicing.builtin.infill import chain_segments, extend_to, scan_segments
 from fabric.slicing.builtin.layers import (
     layer_heights,

@@ -8,7 +8,7 @@ from textual.screen import ModalScreen
 from textual.widgets import Label, OptionList
 from textual.widgets.option_list import Option
 
-from fabric.keys import SERVICES
+from fabric.wire.keys import SERVICES
 
 
 class CellsDialog(ModalScreen[str | None]):

@@ -11,7 +11,7 @@ from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Header, Input, Label, Select
 
 from fabric import schemas as s
-from fabric.errors import FabricError
+from fabric.wire.errors import FabricError
 from fabric.sim.types import EVENT_KINDS
 
 HISTORY_EVENTS = 5000      # the newest this many events are fetched

@@ -7,7 +7,7 @@ from rich.text import Text
 from textual.reactive import reactive
 from textual.widgets import Static
 
-from fabric.keys import SERVICES
+from fabric.wire.keys import SERVICES
 
 
 class ExtruderPanel(Static):

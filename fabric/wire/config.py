@@ -16,7 +16,7 @@ from pathlib import Path
 
 import zenoh
 
-from fabric.errors import ConfigError
+from fabric.wire.errors import ConfigError
 
 __all__ = ["SessionSettings", "DEFAULT_HUB", "add_data_argument", "default_data_root", "service_data_dir",
            "add_session_args", "add_cell_argument", "settings_from_args", "zenoh_config"]

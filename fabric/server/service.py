@@ -1,12 +1,12 @@
 """Service runtime: queryables served from channels by worker threads, typed error replies, liveliness.
 
 Every service subclasses :class:`Service`. Its constructor registers handlers
-with :meth:`Service.handle` (one per endpoint of ``fabric.keys.ENDPOINTS``)
+with :meth:`Service.handle` (one per endpoint of ``fabric.wire.keys.ENDPOINTS``)
 and publishers with :meth:`Service.publisher`; :meth:`Service.start`
 declares the queryables, then the liveliness token (so "alive" means "ready
 to serve"). Queries arrive in a FIFO channel and are answered by a worker
 thread: nothing runs inside a Zenoh callback. A handler returns the reply
-message or raises a :class:`~fabric.errors.FabricError`, which becomes a
+message or raises a :class:`~fabric.wire.errors.FabricError`, which becomes a
 ``reply_err`` with a code, a message and details. Any other exception is logged
 with its traceback, answered as ``internal`` and marks the service degraded.
 """
@@ -23,19 +23,19 @@ from typing import IO, Any, Callable
 
 import zenoh
 
-from fabric import codec
-from fabric.errors import FabricError, InternalError, NotFound, StateError, ValidationError
-from fabric.keys import ENDPOINTS, TOPICS, Endpoint, Keys
-from fabric.qos import reply_qos
+from fabric.wire import codec
+from fabric.wire.errors import FabricError, InternalError, NotFound, StateError, ValidationError
+from fabric.wire.keys import ENDPOINTS, TOPICS, Endpoint, Keys
+from fabric.wire.qos import reply_qos
 from fabric.client import Client
-from fabric.sessions import wait_connected
+from fabric.client.sessions import wait_connected
 from fabric.schemas import Ack, Artifact, ErrorReply, PinRequest
 from fabric.store.artifacts import ArtifactStore
 from fabric.store.records import RecordStore
 
 __all__ = ["Service", "Publisher", "reply_error"]
 
-log = logging.getLogger("fabric.runtime")
+log = logging.getLogger("fabric.server.service")
 LINK_WINDOW_S = 3.0     # how long start() waits for a first link before asking who else serves the cell
 Handler = Callable[[Any], Any]
 

@@ -10,8 +10,8 @@ from typing import Any, Callable, Iterator
 
 import zenoh
 
-from fabric import codec
-from fabric.keys import parse_alive
+from fabric.wire import codec
+from fabric.wire.keys import parse_alive
 
 __all__ = ["Subscription", "AliveSubscription"]
 

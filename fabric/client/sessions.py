@@ -5,10 +5,10 @@ import time
 
 import zenoh
 
-from fabric import codec
+from fabric.wire import codec
 from fabric import schemas as s
-from fabric.config import SessionSettings, zenoh_config
-from fabric.errors import DecodeError, FabricError, PermissionDenied, ServiceUnavailable, error_from_code
+from fabric.wire.config import SessionSettings, zenoh_config
+from fabric.wire.errors import DecodeError, FabricError, PermissionDenied, ServiceUnavailable, error_from_code
 
 __all__ = ["open_session", "wait_connected", "check_role", "error_of", "CONNECT_WINDOW_S"]
 

@@ -16,7 +16,7 @@ import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fabric.errors import BadRequest, NotFound, ValidationError
+from fabric.wire.errors import BadRequest, NotFound, ValidationError
 from fabric.schemas.upload import UPLOAD_CHUNK_MAX_BYTES, UPLOAD_ID_PATTERN, UploadChunk, UploadStatus
 
 __all__ = ["UploadStore"]

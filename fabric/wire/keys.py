@@ -42,7 +42,7 @@ class Endpoint:
 
     ``bulk``: its request or reply can carry megabytes (models, G-code, exports, meshes); it travels at
     data priority, batched. Every other command is interactive: sent and answered ahead of telemetry,
-    unbatched (see ``fabric.client`` and ``fabric.runtime``)."""
+    unbatched (see ``fabric.client`` and ``fabric.server.service``)."""
     service: str
     command: str
     request: type

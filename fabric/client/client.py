@@ -7,8 +7,8 @@
 
 Every call is a Zenoh ``get`` on the endpoint's key with the endpoint's
 timeout (or the one given). An error reply raises the matching
-:class:`~fabric.errors.FabricError` subclass; no reply raises
-:class:`~fabric.errors.ServiceUnavailable`.
+:class:`~fabric.wire.errors.FabricError` subclass; no reply raises
+:class:`~fabric.wire.errors.ServiceUnavailable`.
 """
 from __future__ import annotations
 
@@ -20,17 +20,17 @@ from typing import Any, BinaryIO, Callable, Iterator
 
 import zenoh
 
-from fabric import codec
+from fabric.wire import codec
 from fabric import schemas as s
-from fabric.config import SessionSettings
-from fabric.errors import ServiceUnavailable
-from fabric.job_waits import wait_job, wait_print_job
-from fabric.keys import ALIVE_EVERY_CELL, ENDPOINTS, SERVICES, TOPICS, Keys, parse_alive
-from fabric.qos import BULK_QOS, command_qos
+from fabric.wire.config import SessionSettings
+from fabric.wire.errors import ServiceUnavailable
+from fabric.client.job_waits import wait_job, wait_print_job
+from fabric.wire.keys import ALIVE_EVERY_CELL, ENDPOINTS, SERVICES, TOPICS, Keys, parse_alive
+from fabric.wire.qos import BULK_QOS, command_qos
 from fabric.schemas.upload import UPLOAD_CHUNK_BYTES
-from fabric.sessions import CONNECT_WINDOW_S, check_role, error_of, open_session, wait_connected
-from fabric.subscriptions import AliveSubscription, Subscription
-from fabric.transfers import EXPORT_CHUNK_BYTES, export_to_file, input_size, upload_file
+from fabric.client.sessions import CONNECT_WINDOW_S, check_role, error_of, open_session, wait_connected
+from fabric.client.subscriptions import AliveSubscription, Subscription
+from fabric.client.transfers import EXPORT_CHUNK_BYTES, export_to_file, input_size, upload_file
 
 __all__ = ["Client", "Subscription", "AliveSubscription", "wait_connected", "input_size"]
 
@@ -179,7 +179,7 @@ class Client:
 
     def wait_job(self, service: str, job_id: str, timeout: float = 600.0,
                  on_progress: Callable[[s.JobStatus], None] | None = None) -> s.JobStatus:
-        """Follow a job until it ends; raise its error if it failed (see :func:`fabric.job_waits.wait_job`)."""
+        """Follow a job until it ends; raise its error if it failed (see :func:`fabric.client.job_waits.wait_job`)."""
         return wait_job(self, service, job_id, timeout, on_progress)
 
     # --- station: the paper's commands ------------------------------------------
@@ -219,7 +219,7 @@ class Client:
     def upload(self, service: str, path: str | os.PathLike[str], max_bytes: int,
                chunk_bytes: int = UPLOAD_CHUNK_BYTES,
                on_progress: Callable[[int, int], None] | None = None) -> str:
-        """Send a file in pieces; returns the upload id (see :func:`fabric.transfers.upload_file`)."""
+        """Send a file in pieces; returns the upload id (see :func:`fabric.client.transfers.upload_file`)."""
         return upload_file(self, service, path, max_bytes, chunk_bytes, on_progress)
 
     def plan_summary(self, program_id: str) -> s.PlanSummary:
@@ -238,7 +238,7 @@ class Client:
 
     def export_to(self, program_id: str, fmt: str, out: BinaryIO, module_targets: int = 5000,
                   limit_bytes: int = EXPORT_CHUNK_BYTES, *, job_id: str = "") -> int:
-        """Stream an export into ``out``; returns the bytes written (see :func:`fabric.transfers.export_to_file`)."""
+        """Stream an export into ``out``; returns the bytes written (see :func:`fabric.client.transfers.export_to_file`)."""
         return export_to_file(self, program_id, fmt, out, module_targets, limit_bytes, job_id=job_id)
 
     def check(self, request: s.CollisionRequest) -> s.CollisionReport: return self.call("collision", "check", request)
@@ -258,5 +258,5 @@ class Client:
 
     def wait_print_job(self, job_id: str, done: Callable[[s.JobRecord], bool], timeout: float = 600.0,
                        on_change: Callable[[s.JobRecord], None] | None = None) -> s.JobRecord:
-        """Follow a print job until ``done(record)`` or a final state (see :func:`fabric.job_waits.wait_print_job`)."""
+        """Follow a print job until ``done(record)`` or a final state (see :func:`fabric.client.job_waits.wait_print_job`)."""
         return wait_print_job(self, job_id, done, timeout, on_change)

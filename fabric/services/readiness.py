@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fabric import schemas as s
-from fabric.keys import SERVICES
+from fabric.wire.keys import SERVICES
 from fabric.motion.program import NOZZLE, SET_TEMP, Program
 
 __all__ = ["ReadyFacts", "ready_report", "print_temp_c", "TEMP_TOLERANCE_C"]

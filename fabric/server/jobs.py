@@ -16,13 +16,13 @@ import traceback
 import uuid
 from typing import Callable
 
-from fabric.errors import FabricError, InternalError, NotFound
-from fabric.runtime import Publisher
+from fabric.wire.errors import FabricError, InternalError, NotFound
+from fabric.server.service import Publisher
 from fabric.schemas import ErrorReply, JobStatus
 
 __all__ = ["Job", "JobRunner"]
 
-log = logging.getLogger("fabric.jobs")
+log = logging.getLogger("fabric.server.jobs")
 PROGRESS_PERIOD_S = 0.1
 
 

@@ -10,7 +10,7 @@ import time
 from typing import TYPE_CHECKING, Callable
 
 from fabric import schemas as s
-from fabric.errors import ServiceUnavailable, error_from_code
+from fabric.wire.errors import ServiceUnavailable, error_from_code
 
 if TYPE_CHECKING:
     from fabric.client import Client

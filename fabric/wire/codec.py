@@ -13,7 +13,7 @@ from typing import Any, TypeVar
 import msgpack
 import numpy as np
 
-from fabric.errors import DecodeError
+from fabric.wire.errors import DecodeError
 from fabric.schemas.base import REGISTRY, to_plain, validate_into
 
 __all__ = ["encode", "encode_pieces", "Spliced", "decode", "decode_any", "pack", "unpack", "MAX_ARRAY_BYTES"]

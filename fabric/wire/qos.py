@@ -19,7 +19,7 @@ from typing import Any
 
 import zenoh
 
-from fabric.keys import Endpoint
+from fabric.wire.keys import Endpoint
 
 __all__ = ["command_qos", "reply_qos", "BULK_QOS", "INTERACTIVE_QOS"]
 

@@ -14,7 +14,7 @@ import uuid
 from typing import TYPE_CHECKING, BinaryIO, Callable
 
 from fabric import schemas as s
-from fabric.errors import BadRequest, ValidationError
+from fabric.wire.errors import BadRequest, ValidationError
 from fabric.schemas.upload import UPLOAD_CHUNK_BYTES, UPLOAD_CHUNK_MAX_BYTES
 
 if TYPE_CHECKING:

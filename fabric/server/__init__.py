@@ -1,0 +1,1 @@
+"""What every service is built on: the service runtime, its single writer, health, jobs and uploads."""

@@ -1,0 +1,5 @@
+"""The wire: key expressions and the endpoint table, the msgpack codec, typed errors, QoS, session config.
+
+What every participant of the fabric needs, a plain monitor included; imports nothing heavy
+(zenoh, msgpack and numpy only). The messages themselves are in :mod:`fabric.schemas`.
+"""
