@@ -1,6 +1,6 @@
 """All message schemas; importing this package registers every type in ``REGISTRY``."""
 from fabric.schemas.base import REGISTRY, f, schema, to_plain, validate_into
-from fabric.schemas.common import (Ack, Artifact, ArtifactQuery, Empty, ErrorReply, JobAccepted,
+from fabric.schemas.common import (Ack, Artifact, ArtifactQuery, Empty, ErrorReply, Health, JobAccepted,
                                    JobQuery, JobStatus, PinRequest)
 from fabric.schemas.pipeline import (FINAL_JOB_STATES, ON_STATION_JOB_STATES, PRINT_JOB_STATES, Backends,
                                      CollisionHit, CollisionReport, CollisionRequest, ExportRequest,
@@ -15,7 +15,7 @@ from fabric.schemas.station import (CalibrationReport, Check, Event, EventList, 
 
 __all__ = [
     "REGISTRY", "f", "schema", "to_plain", "validate_into",
-    "Ack", "Artifact", "ArtifactQuery", "Empty", "ErrorReply", "JobAccepted", "JobQuery", "JobStatus",
+    "Ack", "Artifact", "ArtifactQuery", "Empty", "ErrorReply", "Health", "JobAccepted", "JobQuery", "JobStatus",
     "PinRequest",
     "FINAL_JOB_STATES", "ON_STATION_JOB_STATES", "PRINT_JOB_STATES",
     "Backends", "CollisionHit", "CollisionReport", "CollisionRequest", "ExportRequest", "FabricStatus", "JobList",

@@ -47,7 +47,7 @@ class JobStatus:
     job_id: str
     kind: str
     state: str = f(choices=JOB_STATES)
-    progress_r: float = f(0.0, ge=0.0, le=1.0)
+    progress_r: float = f(default=0.0, ge=0.0, le=1.0)
     stage: str = ""
     message: str = ""
     result_id: str = ""
@@ -65,7 +65,7 @@ class ArtifactQuery:
 class PinRequest:
     """Keep an artifact from eviction while ``owner`` (a print job) needs it, or release the owner's pins."""
     owner: str = f(max_len=128)
-    artifact_id: str = f("", max_len=128)
+    artifact_id: str = f(default="", max_len=128)
     pinned: bool = True
 
 
@@ -76,3 +76,17 @@ class Artifact:
     name: str
     media_type: str
     data: bytes
+
+
+HEALTH_STATES = ("ok", "degraded")
+
+
+@schema("common.Health")
+class Health:
+    """A service's view of itself (``<service>/cmd/health``): ``ok``, or ``degraded`` with the reasons,
+    each ``source: reason`` (``handler:load: KeyError ...``, ``clock: ...``), since ``since_s`` (wall-clock
+    epoch seconds of the oldest reason; 0 when ok)."""
+    service: str
+    state: str = f(default="ok", choices=HEALTH_STATES)
+    reasons: list[str] = f(factory=list)
+    since_s: float = 0.0

@@ -1,14 +1,16 @@
 """Service runtime: queryables served from channels by worker threads, typed error replies, liveliness.
 
 Every service subclasses :class:`Service`. Its constructor registers handlers
-with :meth:`Service.handle` (one per endpoint of ``fabric.wire.keys.ENDPOINTS``)
-and publishers with :meth:`Service.publisher`; :meth:`Service.start`
+with :meth:`Service.handle` (one per endpoint of ``fabric.wire.keys.ENDPOINTS``
+for that service; :meth:`Service.start` refuses to start when one is missing or
+unknown) and publishers with :meth:`Service.publisher`; :meth:`Service.start`
 declares the queryables, then the liveliness token (so "alive" means "ready
-to serve"). Queries arrive in a FIFO channel and are answered by a worker
+to serve"). Every service answers ``health`` (:mod:`fabric.server.health`). Queries arrive in a FIFO channel and are answered by a worker
 thread: nothing runs inside a Zenoh callback. A handler returns the reply
 message or raises a :class:`~fabric.wire.errors.FabricError`, which becomes a
 ``reply_err`` with a code, a message and details. Any other exception is logged
-with its traceback, answered as ``internal`` and marks the service degraded.
+with its traceback, answered as ``internal`` and marks the service degraded
+(its ``health`` says which command failed and how).
 """
 from __future__ import annotations
 
@@ -25,7 +27,8 @@ import zenoh
 
 from fabric.wire import codec
 from fabric.wire.errors import FabricError, InternalError, NotFound, StateError, ValidationError
-from fabric.wire.keys import ENDPOINTS, TOPICS, Endpoint, Keys
+from fabric.server.health import Health
+from fabric.wire.keys import ENDPOINTS, SERVICES, TOPICS, Endpoint, Keys, endpoints_of
 from fabric.wire.qos import reply_qos
 from fabric.client import Client
 from fabric.client.sessions import wait_connected
@@ -74,14 +77,16 @@ class Service:
 
     name = "service"
 
-    def __init__(self, session: zenoh.Session, cell: str, data_dir: str | Path | None = None) -> None:
-        """``data_dir``: this service's folder of durable state (artifacts, its database); None: a
-        temporary folder removed on :meth:`close` (tests, throw-away runs)."""
+    def __init__(self, session: zenoh.Session, cell_id: str, data_dir: str | Path | None = None) -> None:
+        """``cell_id``: the cell's name on the fabric; ``data_dir``: this service's folder of durable state
+        (artifacts, its database); None: a temporary folder removed on :meth:`close` (tests, throw-away runs)."""
+        if self.name not in SERVICES:
+            raise TypeError(f"service class {type(self).__name__} names {self.name!r}, not one of {SERVICES}")
         self.session = session
-        self.cell = cell
-        self.keys = Keys(cell)
+        self.cell_id = cell_id
+        self.keys = Keys(cell_id)
         self.log = logging.getLogger(f"fabric.{self.name}")
-        self.degraded: str | None = None
+        self.health = Health(self.name)
         self.started_s = time.time()
         self._handlers: dict[str, tuple[Endpoint, Handler]] = {}
         self._snapshots: dict[str, tuple[Endpoint, Callable[[], bytes]]] = {}
@@ -91,10 +96,16 @@ class Service:
         self._token: Any = None
         self._tmp = tempfile.TemporaryDirectory(prefix=f"am-fabric-{self.name}-") if data_dir is None else None
         self.data_dir = Path(self._tmp.name if self._tmp is not None else data_dir)
-        self._dir_lock = _lock_dir(self.data_dir, self.name, cell)
+        self._dir_lock = _lock_dir(self.data_dir, self.name, cell_id)
         self.artifacts = ArtifactStore(self.data_dir / "artifacts")
         self.records = RecordStore(self.data_dir / "records.sqlite")
         self.closed = threading.Event()
+        self.handle("health", lambda _: self.health.report())
+
+    @property
+    def degraded(self) -> str | None:
+        """Why the service is degraded (None when healthy)."""
+        return self.health.degraded
 
     # --- declaration -------------------------------------------------------
 
@@ -148,6 +159,7 @@ class Service:
         service of the same role already serves this cell anywhere on the fabric."""
         wait_connected(self.session, LINK_WINDOW_S)    # the check asks the fabric: a link must be up first
         # Client.alive asks again (and merges) when a peer session's answer comes back incomplete
+        self._check_handlers()
         if Client(self.session, self.keys.cell).alive(timeout=1.0).get(self.name):
             raise StateError(f"a {self.name} is already serving cell {self.keys.cell!r}: stop it first, or run this "
                              f"one with another --cell", state="running", command="start", service=self.name)
@@ -160,6 +172,17 @@ class Service:
         self._token = self.session.liveliness().declare_token(self.keys.alive(self.name))
         self.log.info("%s serving %d commands on %s", self.name, len(self._handlers) + len(self._snapshots),
                       self.keys.prefix)
+
+    def _check_handlers(self) -> None:
+        """Every endpoint of this service in the table has exactly one handler, and nothing else does."""
+        declared = {e.command for e in endpoints_of(self.name)}
+        served = list(self._handlers) + list(self._snapshots)
+        missing, extra = declared - set(served), set(served) - declared
+        twice = set(self._handlers) & set(self._snapshots)
+        if missing or extra or twice:
+            raise TypeError(f"{self.name} serves {sorted(served)} but the endpoint table declares "
+                            f"{sorted(declared)} (missing {sorted(missing)}, unknown {sorted(extra)}, "
+                            f"twice {sorted(twice)})")
 
     def _serve(self, key: str, answer: Callable[[zenoh.Query], None]) -> None:
         q = self.session.declare_queryable(key, handler=zenoh.handlers.FifoChannel(1024))
@@ -183,7 +206,7 @@ class Service:
             self.log.info("%s/%s: %s: %s", self.name, ep.command, err.code, err.message)
             reply_error(query, err)
         except Exception as exc:  # a bug: answer, log the traceback, mark degraded, keep serving
-            self.degraded = f"{ep.command}: {type(exc).__name__}: {exc}"
+            self.health.degrade(f"handler:{ep.command}", f"{type(exc).__name__}: {exc}")
             self.log.error("%s/%s failed:\n%s", self.name, ep.command, traceback.format_exc())
             reply_error(query, InternalError(f"{self.name}/{ep.command} failed: {type(exc).__name__}: {exc}",
                                              service=self.name, command=ep.command))

@@ -1,9 +1,4 @@
-"""The five services, one module each; ``SERVICE_MODULES`` maps a service name to its module."""
+"""The five services, one module each: ``fabric.services.<name>`` for each name of ``fabric.wire.keys.SERVICES``."""
+from fabric.wire.keys import SERVICES
 
-SERVICE_MODULES = {
-    "station": "fabric.services.station",
-    "slicer": "fabric.services.slicer",
-    "planner": "fabric.services.planner",
-    "collision": "fabric.services.collision",
-    "supervisor": "fabric.services.supervisor",
-}
+SERVICE_MODULES = {name: f"fabric.services.{name}" for name in SERVICES}

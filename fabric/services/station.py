@@ -11,6 +11,13 @@ kept for the ``events`` query; pose is published at a fixed wall-clock rate
 discrete part (extruder on/off, flow, layer; set points) and otherwise at a
 lower rate (:mod:`fabric.services.telemetry_gate`); state on every change.
 
+Every change of the twin happens on one thread, the clock's: a command is a
+step of the station's writer (:mod:`fabric.server.writer`), run between two
+ticks; a command that needs a collision check first reads the move in one step,
+checks it in its own thread, and acts in a second step only if the twin has not
+changed meanwhile. Reads (``state``, ``time``, ``ready``) are steps too, so
+they see one consistent twin; ``position`` is a snapshot the clock keeps.
+
 The station is durable (:mod:`fabric.store.journal`): each tick's events and
 the simulated time reached are written before they are published, and the
 twin is checkpointed at a bounded cadence and after every command. A station
@@ -41,10 +48,14 @@ from fabric.wire.errors import CollisionError, FabricError, NotFound, StateError
 from fabric.programs import content_id, program_from_artifact
 from fabric.services.readiness import ReadyFacts, print_temp_c, ready_report
 from fabric.wire.config import add_cell_argument, service_data_dir
+from fabric.wire.keys import endpoints_of
+from fabric.server.health import Backoff
 from fabric.server.service import Service
+from fabric.server.writer import Stale, Writer
 from fabric.services.station_messages import StationMessages
 from fabric.robot.cell import Cell
 from fabric.robot.frames import T_to_xyzrpy
+from fabric.sim.deposition import Deposition
 from fabric.sim.twin import EVENT_KINDS, Twin
 from fabric.store.journal import DEFAULT_CHECKPOINT_PERIOD_S, StationJournal, StationMeta
 from fabric.store.station import StationStore
@@ -56,6 +67,8 @@ STATE_PERIOD_S = 0.5          # state also re-published at this period (progress
 GIL_SWITCH_S = 0.0005         # a command's thread waits at most this long for the clock thread's interpreter lock
 STALL_S = 0.5                 # a tick this late: the process was frozen or starved (time is held, noted)
 STALL_INTERRUPT_S = 2.0       # this late, the fabric has reported the station gone: a print is interrupted
+STEP_TIMEOUT_S = 4.0          # a command's step not begun by then is dropped (under the 5 s a caller waits)
+CLOCK_HEALTHY_S = 30.0        # a clock that failed and has run this long since is healthy again
 
 
 class StationService(Service):
@@ -67,13 +80,14 @@ class StationService(Service):
         self.cell = cell
         self.client = Client(session, cell_id)
         self.pose_period_s = 1.0 / pose_hz
-        self.lock = threading.RLock()
+        self.writer = Writer(self.name)             # the one thread that touches the twin: the clock's
         self.meta = StationMeta()
         self.collision_report: s.CollisionReport | None = None
         self.journal = StationJournal(StationStore(self.data_dir / "station.sqlite"), self.artifacts, checkpoint_s)
         self.twin, self._backlog = self._restore()
         self.clock_stop = threading.Event()         # set first on close: the clock thread ends
         self.msgs = StationMessages(self.twin, self.meta)
+        self._generation = 0                        # counts the commands that changed the twin (compare-and-set)
         self._last_state: tuple = ()
         self._last_state_s = 0.0
         self.pub_pose = self.publisher("pose")
@@ -83,9 +97,9 @@ class StationService(Service):
         self.pub_events = self.publisher("events", lossless=True)
         self._position = codec.encode(self.msgs.pose())    # the twin's pose now, encoded
         self.handle_snapshot("position", lambda: self._position)
-        for command in ("home", "load", "start", "pause", "resume", "stop", "collisions",
-                        "calibrate", "ready", "time", "state", "events", "overrides", "rtf", "mesh", "recover"):
-            self.handle(command, self._then_position(getattr(self, f"on_{command}")))
+        for ep in endpoints_of(self.name):
+            if ep.command not in ("position", "health"):
+                self.handle(ep.command, getattr(self, f"on_{ep.command}"))
 
     # The meta's fields, as the rest of this module reads them.
     program_id = property(lambda self: self.meta.program_id)
@@ -98,17 +112,17 @@ class StationService(Service):
         # the interpreter lock before being let in (the station is its own process: this is its setting)
         sys.setswitchinterval(GIL_SWITCH_S)
         super().start()
-        self._thread = threading.Thread(target=self._sim_loop, name="station:sim", daemon=True)
+        self._thread = threading.Thread(target=self._sim_loop, name="station:clock", daemon=True)
         self._thread.start()
 
     def close(self) -> None:
         self.clock_stop.set()                        # the clock stops publishing before anything is undeclared
         if hasattr(self, "_thread"):                 # not there when start was refused
             self._thread.join(timeout=5.0)
+        self.writer.close()
         super().close()
-        with self.lock:
-            self.journal.checkpoint(self.twin, self.meta, force=True)
-            self.journal.store.close()
+        self.journal.checkpoint(self.twin, self.meta, force=True)     # the writer has ended: this thread may
+        self.journal.store.close()
 
     def _restore(self) -> tuple[Twin, list]:
         """The twin as the last run left it (interrupted if it was printing), or a fresh one."""
@@ -128,56 +142,87 @@ class StationService(Service):
         self.meta = restored.meta
         return restored.twin, restored.events
 
-    def _checkpoint(self) -> None:
-        """Save the twin now (after a command; the lock is held)."""
+    # --- the writer: every change of the twin is a step on the clock's thread ----------
+
+    def _step(self, fn: Callable[[], Any]) -> Any:
+        """Run ``fn`` as a step of the writer; a step that changes the twin calls :meth:`_changed`."""
+        return self.writer.call(fn, timeout_s=STEP_TIMEOUT_S)
+
+    def _changed(self) -> None:
+        """After a command changed the twin (on the writer): checkpoint it, bring the ``position`` snapshot up
+        to date (so ``position`` after the reply sees e.g. a new work object) and count the change."""
+        self._generation += 1
         self.journal.checkpoint(self.twin, self.meta, force=True)
+        self._position = codec.encode(self.msgs.pose())
+
+    def _stamp(self) -> tuple:
+        """What a long command's second step compares with its first: no command in between, same state, the
+        robot where it was."""
+        return (self._generation, self.twin.state, np.round(self.twin.pose().q_rad, 6).tobytes())
+
+    def _still(self, stamp: tuple, what: str, command: str) -> None:
+        """Compare-and-set: refuse (changing nothing) when the twin moved on while ``what`` was checked."""
+        if self._stamp() != stamp:
+            raise Stale(f"the station changed while {what} was being checked (it is now {self.twin.state}); "
+                        f"nothing was done: ask again", state=self.twin.state, command=command)
 
     # --- simulation clock ------------------------------------------------------
 
     def _sim_loop(self) -> None:
-        """Run the clock; a failure inside the simulation faults the twin and is logged, never silent."""
+        """Run the clock. A failure inside it faults the print, marks the station degraded and is logged; a
+        clock that keeps failing backs off (up to seconds between tries) instead of spinning."""
+        backoff = Backoff(healthy_s=CLOCK_HEALTHY_S)
         while not self.clock_stop.is_set():
             try:
                 self._run_clock()
-            except Exception as exc:  # a bug in the simulation: fault the job, keep the station serving
-                self.degraded = f"simulation: {type(exc).__name__}: {exc}"
-                self.log.error("simulation failed:\n%s", traceback.format_exc())
-                with self.lock:
-                    self.twin.trip(f"simulation error: {type(exc).__name__}: {exc}")
+            except Exception as exc:  # a bug or a full disk: fault the print, say why, try again later
+                pause_s = backoff.failed()
+                why = f"{type(exc).__name__}: {exc}"
+                self.health.degrade("clock", f"{why} (failed {backoff.failures}x; next try in {pause_s:.2f} s)")
+                self.log.error("simulation failed (%d in a row; next try in %.2f s):\n%s", backoff.failures,
+                               pause_s, traceback.format_exc())
+                if self.twin.state in ("printing", "paused"):
+                    self.twin.trip(f"station error: {why}")
+                resume_at = time.monotonic() + pause_s
+                while not self.clock_stop.is_set() and time.monotonic() < resume_at:   # commands still run
+                    self.writer.run_pending(min(TICK_S, max(resume_at - time.monotonic(), 0.0)))
 
     def _run_clock(self) -> None:
         last = time.monotonic()
         next_pose = last
         chunk_s = 1.0
         backlog, self._backlog = self._backlog, []
-        while not self.clock_stop.wait(timeout=max(0.0, min(TICK_S, next_pose - time.monotonic()))):
+        ok_since = time.monotonic()
+        while not self.clock_stop.is_set():
+            self.writer.run_pending(max(0.0, min(TICK_S, next_pose - time.monotonic())))
+            if self.clock_stop.is_set():
+                return
             now = time.monotonic()
-            with self.lock:
-                if now - last > STALL_S:
-                    self._stalled(now - last)
-                    last = now
-                if self.rtf > 0 or self.twin.state != "printing":
-                    events = self.twin.advance((now - last) * (self.rtf if self.rtf > 0 else 1.0))
-                else:  # as fast as possible: whole chunks until this tick's wall budget is spent
-                    events, t0 = [], time.monotonic()
-                    while self.twin.state == "printing" and time.monotonic() - t0 < TICK_S:
-                        events += self.twin.advance(chunk_s)
-                    spent = time.monotonic() - t0
-                    chunk_s = float(np.clip(chunk_s * (TICK_S / max(spent, 1e-4)) ** 0.5, 0.05, 600.0))
+            if now - last > STALL_S:
+                self._stalled(now - last)
                 last = now
-                msgs = [self.msgs.event(ev) for ev in backlog + events]
-                backlog = []
-                ext_now = self.twin.extrusion()
-                key = self.msgs.state_key(ext_now)
-                state_due = key != self._last_state or now - self._last_state_s >= STATE_PERIOD_S
-                state = self.msgs.state(ext_now) if state_due else None       # built only when published
-                pose_due = now >= next_pose
-                # the pose now: the position reply from this tick on, and the pose sample when one is due
-                position = self._position = codec.encode(self.msgs.pose(sample=pose_due))
-                ext = self.msgs.extrusion_due(now, ext_now) if pose_due else None
-                temps = self.msgs.temps_due(now) if pose_due else None
-                self.journal.record_tick(msgs, self.twin.t_sim_s)       # written before it is published
-                self.journal.checkpoint(self.twin, self.meta, force=key[:3] != self._last_state[:3])
+            if self.rtf > 0 or self.twin.state != "printing":
+                events = self.twin.advance((now - last) * (self.rtf if self.rtf > 0 else 1.0))
+            else:  # as fast as possible: whole chunks until this tick's wall budget is spent
+                events, t0 = [], time.monotonic()
+                while self.twin.state == "printing" and time.monotonic() - t0 < TICK_S:
+                    events += self.twin.advance(chunk_s)
+                spent = time.monotonic() - t0
+                chunk_s = float(np.clip(chunk_s * (TICK_S / max(spent, 1e-4)) ** 0.5, 0.05, 600.0))
+            last = now
+            msgs = [self.msgs.event(ev) for ev in backlog + events]
+            backlog = []
+            ext_now = self.twin.extrusion()
+            key = self.msgs.state_key(ext_now)
+            state_due = key != self._last_state or now - self._last_state_s >= STATE_PERIOD_S
+            state = self.msgs.state(ext_now) if state_due else None       # built only when published
+            pose_due = now >= next_pose
+            # the pose now: the position reply from this tick on, and the pose sample when one is due
+            position = self._position = codec.encode(self.msgs.pose(sample=pose_due))
+            ext = self.msgs.extrusion_due(now, ext_now) if pose_due else None
+            temps = self.msgs.temps_due(now) if pose_due else None
+            self.journal.record_tick(msgs, self.twin.t_sim_s)       # written before it is published
+            self.journal.checkpoint(self.twin, self.meta, force=key[:3] != self._last_state[:3])
             for m in msgs:
                 self.pub_events.send(m)
             if state is not None:
@@ -190,8 +235,9 @@ class StationService(Service):
                 self.pub_extrusion.send(ext)
             if temps is not None:
                 self.pub_temps.send(temps)
-
-    # --- message builders (called with the lock held) ---------------------------
+            if now - ok_since > CLOCK_HEALTHY_S:              # a clock that failed once has run well since
+                self.health.clear("clock")
+                ok_since = float("inf")
 
     def _stalled(self, gap_s: float) -> None:
         """The tick came ``gap_s`` late: simulated time does not jump (it is held, and the stall noted).
@@ -208,34 +254,31 @@ class StationService(Service):
         return s.Ack(ok=True, message=message, state=self.twin.state)
 
     # --- the paper's commands ----------------------------------------------------
-
-    def _then_position(self, handler: Callable[[Any], Any]) -> Callable[[Any], Any]:
-        """``handler``, after which the ``position`` snapshot is brought up to date (a command may have
-        changed the pose now, e.g. a new work object), so ``position`` after a command's reply sees it."""
-        def run(req: Any) -> Any:
-            try:
-                return handler(req)
-            finally:
-                with self.lock:
-                    self._position = codec.encode(self.msgs.pose())
-        return run
+    # A command is one step of the writer; one that needs a collision check first is two: the first reads
+    # the move and a stamp, the check runs in the handler's thread, the second acts only if nothing changed.
 
     def on_home(self, _: s.Empty) -> s.Ack:
-        with self.lock:
+        def plan() -> tuple[np.ndarray, tuple]:
             if self.twin.state in ("printing", "paused"):
                 raise StateError(f"cannot go home while {self.twin.state}; stop first",
                                  state=self.twin.state, command="home")
-            q_now = self.twin.pose().q_rad
-        self._check_move(q_now, self.cell.home_q_rad, "the move home")
-        with self.lock:
+            return self.twin.pose().q_rad, self._stamp()
+
+        def act() -> s.Ack:
+            self._still(stamp, "the move home", "home")
             self.twin.go_home()
-            self._checkpoint()
+            self._changed()
             return self._ack("moving home (collision-checked)")
 
+        q_now, stamp = self._step(plan)
+        self._check_move(q_now, self.cell.home_q_rad, "the move home")
+        return self._step(act)
+
     def on_load(self, req: s.LoadRequest) -> s.TimeInfo:
-        art = self.client.artifact("planner", req.program_id)
+        art = self.client.artifact("planner", req.program_id)       # fetched and decoded outside the writer
         program = program_from_artifact(art)
-        with self.lock:
+
+        def act() -> s.TimeInfo:
             if self.twin.state in ("printing", "paused"):
                 raise StateError(f"cannot load while {self.twin.state}", state=self.twin.state, command="load")
             self.twin.load(program)
@@ -244,21 +287,28 @@ class StationService(Service):
             self.meta.layers_total = int(program.layer.max() + 1) if len(program) else 0
             self.meta.planned_mm3 = program.deposited_volume_mm3()
             self.collision_report = None
-            self._checkpoint()
+            self._changed()
             return self._time_msg()
+
+        return self._step(act)
 
     def on_start(self, req: s.StartRequest) -> s.Ack:
         layer = req.from_layer if req.from_layer >= 0 else None
-        if layer is not None:
-            with self.lock:
-                q_from, q_to = self.twin.layer_move(layer)
-            self._check_move(q_from, q_to, f"the move to layer {layer + 1}")
-        with self.lock:
+
+        def act() -> s.Ack:
+            if stamp is not None:
+                self._still(stamp, f"the move to layer {(layer or 0) + 1}", "start")
             self.twin.start(from_layer=layer)
             self._set_rtf(req.rtf)
-            self._checkpoint()
+            self._changed()
             where = "" if layer is None else f" from layer {layer + 1} (heating, then the move above it)"
             return self._ack(f"printing{where} at {self._rtf_text()}")
+
+        stamp = None
+        if layer is not None:
+            (q_from, q_to), stamp = self._step(lambda: (self.twin.layer_move(layer), self._stamp()))
+            self._check_move(q_from, q_to, f"the move to layer {layer + 1}")
+        return self._step(act)
 
     def _set_rtf(self, rtf: float | None) -> None:
         """Take the request's real-time factor, if it gives one (nil keeps the current one)."""
@@ -277,56 +327,74 @@ class StationService(Service):
             raise CollisionError(f"{what} would collide: {hit.body_a} <-> {hit.body_b}", **s.to_plain(hit))
 
     def on_pause(self, _: s.Empty) -> s.Ack:
-        with self.lock:
+        def act() -> s.Ack:
             self.twin.pause()
-            self._checkpoint()
+            self._changed()
             return self._ack("paused: extruder off, retracted, lifted clear")
+        return self._step(act)
 
     def on_resume(self, req: s.StartRequest) -> s.Ack:
-        with self.lock:
+        def act() -> s.Ack:
             self.twin.resume()
             self._set_rtf(req.rtf)
-            self._checkpoint()
+            self._changed()
             return self._ack(f"resuming at the paused spot at {self._rtf_text()}")
+        return self._step(act)
 
     def on_recover(self, req: s.StartRequest) -> s.Ack:
         layer = req.from_layer if req.from_layer >= 0 else None
-        with self.lock:
+        where = "the interrupted spot" if layer is None else f"layer {layer + 1}"
+
+        def plan() -> tuple[tuple[np.ndarray, np.ndarray], tuple]:
             move = self.twin.recovery_move(layer)
             if move is None:
                 raise StateError(f"nothing to recover while {self.twin.state}", state=self.twin.state,
                                  command="recover")
-        where = "the interrupted spot" if layer is None else f"layer {layer + 1}"
-        self._check_move(move[0], move[1], f"the move back to {where}")
-        with self.lock:
+            return move, self._stamp()
+
+        def act() -> s.Ack:
+            self._still(stamp, f"the move back to {where}", "recover")
             self.twin.recover(from_layer=layer)
             self._set_rtf(req.rtf)
-            self._checkpoint()
+            self._changed()
             return self._ack(f"recovering: back to {where} (collision-checked), then going on at "
                              f"{self._rtf_text()}")
 
+        (q_from, q_to), stamp = self._step(plan)
+        self._check_move(q_from, q_to, f"the move back to {where}")
+        return self._step(act)
+
     def on_stop(self, _: s.Empty) -> s.Ack:
-        with self.lock:
+        def act() -> s.Ack:
             self.twin.stop()
-            self._checkpoint()
+            self._changed()
             return self._ack("stopped: extruder off, moved clear; deposit kept on record")
+        return self._step(act)
 
     def on_collisions(self, _: s.Empty) -> s.CollisionReport:
-        if not self.program_id:
-            raise StateError("no program loaded", state=self.twin.state, command="collisions")
-        report = self.client.check(s.CollisionRequest(program_id=self.program_id))
-        self.collision_report = report
+        program_id = self._step(lambda: self.meta.program_id)
+        if not program_id:
+            raise StateError("no program loaded", state=self._step(lambda: self.twin.state), command="collisions")
+        report = self.client.check(s.CollisionRequest(program_id=program_id))
+        self._step(lambda: self._keep_report(program_id, report))
         return report
 
+    def _keep_report(self, program_id: str, report: s.CollisionReport) -> None:
+        """Keep a collision report for the ready checklist, if its program is still the loaded one."""
+        if self.meta.program_id == program_id:
+            self.collision_report = report
+
     def on_calibrate(self, _: s.Empty) -> s.CalibrationReport:
-        with self.lock:
+        def act() -> tuple[Any, Any, Any]:
             if self.twin.state in ("printing", "paused"):
                 raise StateError("cannot calibrate during a print", state=self.twin.state, command="calibrate")
             r = self.twin.calibrate()
             self.twin.note("calibrated", {"residual_rms_mm": float(r.residual_rms_mm),
                                           "correction_xyz_mm": [float(v) for v in r.correction_xyz_mm]})
-            self._checkpoint()
-            wobj_xyz, wobj_rpy = T_to_xyzrpy(self.twin.work_object_T)
+            self._changed()
+            return (r, *T_to_xyzrpy(self.twin.work_object_T))
+
+        r, wobj_xyz, wobj_rpy = self._step(act)
         return s.CalibrationReport(correction_xyz_mm=list(map(float, r.correction_xyz_mm)),
                                    correction_rpy_deg=list(map(float, r.correction_rpy_deg)),
                                    residual_rms_mm=float(r.residual_rms_mm), points=int(r.n_points),
@@ -337,24 +405,30 @@ class StationService(Service):
         return ready_report(self._ready_facts())
 
     def _ready_facts(self) -> ReadyFacts:
-        """What the ready checklist judges: the fabric is asked first (no lock held), then the twin is read."""
+        """What the ready checklist judges: the fabric is asked first (in this thread), then the twin is read
+        in one step of the writer."""
         alive = self.client.alive(timeout=2.0)
+        program_id, report = self._step(lambda: (self.meta.program_id, self.collision_report))
         collision_error = ""
-        if self.program_id and self.collision_report is None:
+        if program_id and report is None:
             try:
-                self.collision_report = self.client.check(s.CollisionRequest(program_id=self.program_id))
+                report = self.client.check(s.CollisionRequest(program_id=program_id))
+                self._step(lambda: self._keep_report(program_id, report))
             except FabricError as err:
                 collision_error = err.message
-        with self.lock:
+
+        def read() -> ReadyFacts:
             q = self.twin.pose().q_rad
             program = self.twin.program
-            return ReadyFacts(alive=alive, program_id=self.program_id, collisions=self.collision_report,
+            return ReadyFacts(alive=alive, program_id=self.meta.program_id,
+                              collisions=report if self.meta.program_id == program_id else None,
                               collision_error=collision_error,
                               pose_known=bool(np.all(np.isfinite(q)) and self.cell.robot.within_limits(q[None, :])[0]),
                               at_home=bool(np.allclose(q, self.cell.home_q_rad, atol=1e-3)),
                               nozzle_c=float(self.twin.temps().nozzle_c),
                               print_temp_c=print_temp_c(program) if program is not None else None,
                               state=self.twin.state, reason=self.twin.reason)
+        return self._step(read)
 
     def _time_msg(self) -> s.TimeInfo:
         ti = self.twin.time_info()
@@ -362,12 +436,10 @@ class StationService(Service):
                           estimate_s=float(ti.estimate_s), state=self.twin.state)
 
     def on_time(self, _: s.Empty) -> s.TimeInfo:
-        with self.lock:
-            return self._time_msg()
+        return self._step(self._time_msg)
 
     def on_state(self, _: s.Empty) -> s.StationState:
-        with self.lock:
-            return self.msgs.state()
+        return self._step(self.msgs.state)
 
     def on_events(self, req: s.EventsQuery) -> s.EventList:
         last = self.journal.last_seq()
@@ -379,27 +451,30 @@ class StationService(Service):
         return s.EventList(events=evs, next_seq=nxt, last_seq=last)
 
     def on_overrides(self, req: s.Overrides) -> s.StationState:
-        with self.lock:
+        def act() -> s.StationState:
             self.twin.set_overrides(speed_r=req.speed_r, flow_r=req.flow_r, nozzle_c=req.nozzle_c, bed_c=req.bed_c)
             given = {k: v for k, v in (("speed_r", req.speed_r), ("flow_r", req.flow_r), ("nozzle_c", req.nozzle_c),
                                        ("bed_c", req.bed_c)) if v is not None}
             self.twin.note("override", given)
-            self._checkpoint()
+            self._changed()
             return self.msgs.state()
+        return self._step(act)
 
     def on_rtf(self, req: s.StartRequest) -> s.StationState:
         """Change how fast simulated time runs; the simulation itself is unchanged (time is exact)."""
-        with self.lock:
+        def act() -> s.StationState:
             self._set_rtf(req.rtf)
-            self._checkpoint()
+            self._changed()
             return self.msgs.state()
+        return self._step(act)
 
     def on_mesh(self, req: s.MeshRequest) -> s.Artifact:
-        with self.lock:
-            if len(self.twin.beads) == 0:
-                raise NotFound("nothing has been deposited yet")
-            beads = self.twin.beads
-            data = beads.export_csv() if req.fmt == "csv" else beads.export_mesh(req.fmt)
+        # the beads are copied in one step; the mesh is built in this thread, while the clock goes on
+        program, arrays = self._step(lambda: (self.twin.program, self.twin.beads.to_arrays(0)))
+        beads = Deposition.from_arrays(program, arrays)
+        if len(beads) == 0:
+            raise NotFound("nothing has been deposited yet")
+        data = beads.export_csv() if req.fmt == "csv" else beads.export_mesh(req.fmt)
         media = {"stl": "model/stl", "glb": "model/gltf-binary", "csv": "text/csv"}[req.fmt]
         return s.Artifact(artifact_id=content_id(data), name=f"as-printed.{req.fmt}", media_type=media, data=data)
 
