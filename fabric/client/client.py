@@ -16,7 +16,7 @@ import os
 import queue
 import time
 from contextlib import contextmanager
-from typing import Any, BinaryIO, Callable, Iterator
+from typing import Any, BinaryIO, Callable, Iterator, Sequence
 
 import zenoh
 
@@ -147,6 +147,22 @@ class Client:
                 found.setdefault(cell, set()).add(service)
         return {cell: sorted(services) for cell, services in sorted(found.items())}
 
+    def health(self, service: str) -> s.Health:
+        """One service's own health: ok, or degraded with the reasons."""
+        return self.call(service, "health")
+
+    def healths(self, timeout: float = 2.0) -> dict[str, s.Health]:
+        """The health of every service of the cell that answers within ``timeout``, in one query."""
+        ep = ENDPOINTS[(SERVICES[0], "health")]
+        found: dict[str, s.Health] = {}
+        replies = self.session.get(self.keys.health_all(), payload=codec.encode(s.Empty()), timeout=timeout,
+                                   **command_qos(ep))
+        for reply in replies:
+            if reply.ok is not None:
+                h = codec.decode(reply.ok.payload.to_bytes(), s.Health)
+                found[h.service] = h
+        return found
+
     def wait_alive(self, services: tuple[str, ...] = SERVICES, deadline_s: float = 30.0) -> None:
         """Block until every service is alive, or raise ServiceUnavailable naming the missing ones.
 
@@ -249,7 +265,10 @@ class Client:
     def unpin(self, service: str, owner: str) -> s.Ack:
         return self.call(service, "pin", s.PinRequest(owner=owner, pinned=False))
     def job(self, job_id: str) -> s.JobRecord: return self.call("supervisor", "job", s.JobQuery(job_id=job_id))
-    def jobs(self) -> s.JobList: return self.call("supervisor", "jobs")
+    def jobs(self, offset: int = 0, limit: int = 100, states: Sequence[str] = ()) -> s.JobList:
+        """A page of the print jobs in queue order (``limit`` up to ``s.MAX_JOBS_PAGE``; ``states``: only
+        those); ``total`` says how many there are in all."""
+        return self.call("supervisor", "jobs", s.JobsQuery(offset=offset, limit=limit, states=list(states)))
     def job_remove(self, job_id: str) -> s.Ack:
         return self.call("supervisor", "job_remove", s.JobQuery(job_id=job_id))
     def job_move(self, job_id: str, position: int) -> s.JobList:

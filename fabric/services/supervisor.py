@@ -15,6 +15,11 @@ failed or interrupted, with timestamps, durations, filament and volume. The
 last event applied is stored with the records, so a restarted supervisor
 catches up from the station's event log exactly where it stopped; jobs that
 were being prepared are prepared again.
+
+Job records have one writer (:mod:`fabric.server.writer`): every transition,
+from a command, the preparer, the load sequence or a station event, is a step
+that reads the record as it is now, changes it and saves it; calls to other
+services run between steps, never inside one.
 """
 from __future__ import annotations
 
@@ -23,7 +28,9 @@ import queue
 import threading
 import time
 import uuid
+from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
 import zenoh
 
@@ -36,6 +43,7 @@ from fabric.printjobs.events import apply_event, job_id_of_event
 from fabric.printjobs.prepare import PrepareCancelled, Preparer
 from fabric.programs import content_id
 from fabric.server.service import Service
+from fabric.server.writer import Writer
 from fabric.store.jobs import JobStore
 
 __all__ = ["SupervisorService", "build", "add_arguments"]
@@ -43,6 +51,12 @@ __all__ = ["SupervisorService", "build", "add_arguments"]
 WAITING_STATES = ("queued", "slicing", "planning", "checking")
 STATION_FREE = ("idle", "ready", "stopped", "fault")
 MODEL_MEDIA = {"model": "application/octet-stream", "gcode": "text/x-gcode"}
+STEP_TIMEOUT_S = 4.0          # a change not begun by then is dropped (under the 5 s a caller waits)
+EVENT_BATCH = 500             # station events applied in one step of the writer, at most
+# what the preparer writes onto a job's record (nothing else: ``start`` or the queue order may change meanwhile)
+PREPARER_FIELDS = ("state", "stage", "progress_r", "prepared", "reason", "error", "ended_s", "gcode_id",
+                   "program_id", "plan", "collisions")
+T = TypeVar("T")
 WAITING_TEXT = {"plate": "prepared: confirm the plate is clear (job next)",
                 "station": "prepared: waiting for the station to be free",
                 "queue": "prepared: waiting behind the jobs ahead of it"}
@@ -51,14 +65,15 @@ WAITING_TEXT = {"plate": "prepared: confirm the plate is clear (job next)",
 class SupervisorService(Service):
     name = "supervisor"
 
-    def __init__(self, session: zenoh.Session, cell: str, data_dir: Path | None = None) -> None:
-        super().__init__(session, cell, data_dir)
-        self.client = Client(session, cell)
+    def __init__(self, session: zenoh.Session, cell_id: str, data_dir: Path | None = None) -> None:
+        super().__init__(session, cell_id, data_dir)
+        self.client = Client(session, cell_id)
         self.store = JobStore(self.data_dir / "jobs.sqlite")
-        self.lock = threading.RLock()                     # one writer of job records at a time
+        self.writer = Writer(self.name)                   # the one writer of job records and the plate
         self.wake = threading.Event()                     # something to prepare or to load
         self.pub_jobs = self.publisher("jobs", lossless=True)
-        self.preparer = Preparer(self.client, self.artifacts, self._save, self.closed)
+        self.preparer = Preparer(self.client, self.artifacts, self._save_prepared, self.closed)
+        self._loading = ""                                # the job being loaded on the station (writer's)
         self._alive: dict[str, float] = {}                # service -> since (wall time)
         self._alive_lock = threading.Lock()
         self._live: queue.Queue[tuple[str, str]] = queue.Queue()
@@ -77,7 +92,8 @@ class SupervisorService(Service):
             self.keys.alive_all(), lambda smp: self._live.put((str(smp.kind), str(smp.key_expr))), history=True)
         self._events = self.client.subscribe("station", "events")
         self._workers = [threading.Thread(target=target, name=f"supervisor:{name}", daemon=True)
-                         for target, name in ((self._track, "liveliness"), (self._prepare_loop, "prepare"),
+                         for target, name in ((lambda: self.writer.run(self.closed), "writer"),
+                                              (self._track, "liveliness"), (self._prepare_loop, "prepare"),
                                               (self._follow_loop, "follow"))]
         for t in self._workers:
             t.start()
@@ -89,47 +105,72 @@ class SupervisorService(Service):
         self.wake.set()
         for t in getattr(self, "_workers", []):
             t.join(timeout=5.0)
+        self.writer.close()
         if hasattr(self, "_live_sub"):
             self._live_sub.undeclare()
             self._events.close()
         self.store.close()
 
-    # --- records --------------------------------------------------------------------
+    # --- records: changed only by steps of the writer ---------------------------------
+
+    def _step(self, fn: Callable[[], T]) -> T:
+        return self.writer.call(fn, timeout_s=STEP_TIMEOUT_S)
 
     def _save(self, rec: s.JobRecord, last_event_seq: int | None = None) -> None:
-        """Persist a changed record, then publish it (lossless ``jobs`` topic)."""
+        """Persist a changed record, then publish it (lossless ``jobs`` topic). On the writer only."""
         rec.updated_s = time.time()
-        with self.lock:
-            self.store.save(rec, last_event_seq=last_event_seq)
+        self.store.save(rec, last_event_seq=last_event_seq)
         self.pub_jobs.send(rec)
 
+    def _save_prepared(self, prepared: s.JobRecord) -> None:
+        """The preparer's progress: its own fields are written onto the record as it is now (a ``job next``
+        meanwhile keeps its ``start``); a job removed or moved on meanwhile cancels the preparation."""
+        def step() -> None:
+            try:
+                rec = self.store.get(prepared.job_id)
+            except NotFound:
+                raise PrepareCancelled(prepared.job_id) from None
+            if rec.state not in WAITING_STATES or rec.prepared:
+                raise PrepareCancelled(prepared.job_id)
+            for name in PREPARER_FIELDS:
+                setattr(rec, name, getattr(prepared, name))
+            self._save(rec)
+        self._step(step)
+
     def _requeue_interrupted_preparations(self) -> None:
-        """Jobs this supervisor was preparing when it stopped are prepared again from the start."""
-        for rec in self.store.all():
-            if rec.state in ("slicing", "planning", "checking"):
-                rec.state, rec.prepared = "queued", False
-                rec.stage = "queued again: the supervisor restarted while preparing it"
-                self.log.info("job %s: %s", rec.job_id, rec.stage)
-                self.store.save(rec)
+        """Jobs this supervisor was preparing when it stopped are prepared again from the start (before
+        the writer runs: nothing else touches the store yet)."""
+        for rec in self.store.in_states(("slicing", "planning", "checking")):
+            rec.state, rec.prepared = "queued", False
+            rec.stage = "queued again: the supervisor restarted while preparing it"
+            self.log.info("job %s: %s", rec.job_id, rec.stage)
+            self.store.save(rec)
 
     def _waiting(self) -> list[s.JobRecord]:
-        return [r for r in self.store.all() if r.state in WAITING_STATES]
+        return self.store.in_states(WAITING_STATES)
 
     def _on_station(self) -> s.JobRecord | None:
-        return next((r for r in self.store.all() if r.state in s.ON_STATION_JOB_STATES), None)
+        on = self.store.in_states(s.ON_STATION_JOB_STATES)
+        return on[0] if on else None
 
     # --- handlers -------------------------------------------------------------------
 
     def on_status(self, _: s.Empty) -> s.FabricStatus:
-        # who is alive: the hub's answer now; since when: what the liveliness subscriber tracked
+        # who is alive: the hub's answer now; since when: what the liveliness subscriber tracked; how each
+        # is: its own health, all asked in one query
         now = self.client.alive(timeout=2.0)
         now["supervisor"] = True
+        healths = self.client.healths(timeout=1.0)
+        healths[self.name] = self.health.report()
         with self._alive_lock:
             since = dict(self._alive)
         since.setdefault("supervisor", self.started_s)
-        infos = [s.ServiceInfo(name=n, alive=now[n], since_s=since.get(n, 0.0) if now[n] else 0.0) for n in SERVICES]
-        records = self.store.all()
-        current = self._on_station() or (max(records, key=lambda r: r.updated_s) if records else None)
+        infos = []
+        for n in SERVICES:
+            h = healths.get(n) if now[n] else None
+            infos.append(s.ServiceInfo(name=n, alive=now[n], since_s=since.get(n, 0.0) if now[n] else 0.0,
+                                       health=h.state if h else "", reasons=list(h.reasons) if h else []))
+        current = self._on_station() or self.store.latest()
         return s.FabricStatus(cell=self.keys.cell, services=infos, job=current)
 
     def on_submit(self, req: s.JobSubmit) -> s.JobAccepted:
@@ -138,44 +179,52 @@ class SupervisorService(Service):
         art = s.Artifact(artifact_id=content_id(req.model), name=req.filename, media_type=MODEL_MEDIA[req.source],
                          data=req.model)
         job_id = uuid.uuid4().hex[:12]
-        self.artifacts.put(art)
+        self.artifacts.put(art)                       # the file on disk (content-addressed) before the record
         self.artifacts.pin(art.artifact_id, job_id)
         now = time.time()
         rec = s.JobRecord(job_id=job_id, filename=req.filename, source=req.source, profile=req.profile,
                           backend=req.backend, model_id=art.artifact_id, overrides=dict(req.overrides),
                           start=req.start, rtf=req.rtf, state="queued", stage="queued", created_s=now,
                           updated_s=now)
-        with self.lock:
+
+        def step() -> None:
             self.store.add(rec)
-        self.pub_jobs.send(rec)
+            self.pub_jobs.send(rec)
+        self._step(step)
         self.log.info("job %s queued: %s (%s)", job_id, req.filename, req.source)
         self.wake.set()
         return s.JobAccepted(job_id=job_id, kind="print")
 
-    def on_jobs(self, _: s.Empty) -> s.JobList:
-        return s.JobList(jobs=self.store.all())
+    def on_jobs(self, req: s.JobsQuery) -> s.JobList:
+        jobs, total = self.store.page(req.offset, req.limit, req.states)
+        return s.JobList(jobs=jobs, total=total, offset=req.offset)
 
     def on_job_remove(self, req: s.JobQuery) -> s.Ack:
-        with self.lock:
+        def step() -> s.JobRecord:
             rec = self.store.get(req.job_id)
-            if rec.state in s.ON_STATION_JOB_STATES:
-                raise StateError(f"job {rec.job_id} is {rec.state} on the station: stop it first",
-                                 state=rec.state, command="job remove")
+            if rec.state in s.ON_STATION_JOB_STATES or rec.job_id == self._loading:
+                state = rec.state if rec.state in s.ON_STATION_JOB_STATES else "loading"
+                raise StateError(f"job {rec.job_id} is {state} on the station: stop it first",
+                                 state=state, command="job remove")
             self.store.remove(rec.job_id)
+            return rec
+        rec = self._step(step)
         self._release(rec)
         return s.Ack(ok=True, message=f"removed job {rec.job_id} ({rec.filename})", state=rec.state)
 
     def on_job_move(self, req: s.JobMove) -> s.JobList:
-        with self.lock:
+        def step() -> None:
             self.store.get(req.job_id)
             self.store.move(req.job_id, req.position, [r.job_id for r in self._waiting()])
+        self._step(step)
         self.wake.set()
-        return s.JobList(jobs=self.store.all())
+        jobs, total = self.store.page(0, 100)
+        return s.JobList(jobs=jobs, total=total)
 
     def on_job_next(self, _: s.Empty) -> s.Ack:
         """The operator confirms the plate is clear: load the next prepared job and start it (or the
         next one submitted, if none waits)."""
-        with self.lock:
+        def step() -> s.JobRecord | None:
             busy = self._on_station()
             if busy is not None and busy.state != "loaded":
                 raise StateError(f"job {busy.job_id} is {busy.state} on the station", state=busy.state,
@@ -183,11 +232,15 @@ class SupervisorService(Service):
             self.store.set_plate_clear(True)
             waiting = self._waiting()
             if not waiting:
-                return s.Ack(ok=True, message="plate marked clear; no job is waiting: the next one submitted "
-                                              "with --start starts at once", state="")
+                return None
             head = waiting[0]
             head.start = True
-            self.store.save(head)
+            self._save(head)
+            return head
+        head = self._step(step)
+        if head is None:
+            return s.Ack(ok=True, message="plate marked clear; no job is waiting: the next one submitted "
+                                          "with --start starts at once", state="")
         if not head.prepared:
             self.wake.set()
             return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} starts once prepared "
@@ -208,55 +261,87 @@ class SupervisorService(Service):
                     todo = next((r for r in self._waiting() if r.state == "queued" and not r.prepared), None)
                     if todo is None:
                         break
-                    self.preparer.prepare(todo)
+                    try:
+                        self.preparer.prepare(todo)
+                    except PrepareCancelled:
+                        if self.closed.is_set():
+                            return
+                        self.log.info("job %s: preparation cancelled (removed or changed meanwhile)", todo.job_id)
+                        continue
                     self._release_if_final(todo)
                 self._load_next()
-            except PrepareCancelled:
-                return
             except FabricError as err:                   # e.g. the station is away: try again on the next wake
                 self.log.warning("job queue: %s: %s", err.code, err.message)
 
     def _load_next(self) -> None:
         """Load the head of the queue when it is prepared, the station has no job and the plate is clear;
-        otherwise say on each prepared job what it waits for."""
-        with self.lock:
-            waiting = self._waiting()
-            if not waiting:
-                return
-            head = waiting[0]
-            for rec in waiting[1:]:
-                self._wait_for(rec, "queue")
-            if not head.prepared:
-                return
-            if self._on_station() is not None:
-                self._wait_for(head, "station")
-                return
-            if not self.store.plate_clear():
-                self._wait_for(head, "plate")
-                return
-        station = self.client.state()
-        if station.state not in STATION_FREE:
-            self.log.info("job %s waits: the station is %s", head.job_id, station.state)
-            self._wait_for(head, "station")
+        otherwise say on each prepared job what it waits for. One load at a time: the writer marks the job
+        being loaded, the station is asked outside it, and the record is changed in a second step from the
+        record as it is then (a ``job next`` meanwhile is honoured)."""
+        head = self._step(self._pick_for_loading)
+        if head is None:
             return
         try:
-            self.client.load(head.program_id, job_id=head.job_id)
-        except NotFound as err:                 # its program is gone (never acknowledged durably): plan again
-            self.log.warning("job %s: %s; preparing it again", head.job_id, err.message)
-            head.prepared, head.waiting_for, head.program_id = False, "", ""
-            head.stage = f"queued again: {err.message}"
-            self._save(head)
-            self.wake.set()
-            return
-        head.state, head.stage, head.waiting_for = "loaded", "loaded on the station", ""
-        self._save(head)
-        self.log.info("job %s loaded on the station", head.job_id)
-        if head.start:
+            station = self.client.state()
+            if station.state not in STATION_FREE:
+                self.log.info("job %s waits: the station is %s", head.job_id, station.state)
+                self._step(lambda: self._wait_for(self.store.get(head.job_id), "station"))
+                return
+            try:
+                self.client.load(head.program_id, job_id=head.job_id)
+            except NotFound as err:             # its program is gone (never acknowledged durably): plan again
+                self.log.warning("job %s: %s; preparing it again", head.job_id, err.message)
+                self._step(lambda: self._prepare_again(head.job_id, err.message))
+                self.wake.set()
+                return
+            start, rtf = self._step(lambda: self._loaded(head.job_id))
+            self.log.info("job %s loaded on the station", head.job_id)
+            if start:
+                self.client.start(rtf=rtf)
+        finally:
+            self._step(self._done_loading)
+
+    def _pick_for_loading(self) -> s.JobRecord | None:
+        """(Writer) The job to load now, marked as being loaded; None when there is none or one is loading."""
+        if self._loading:
+            return None
+        waiting = self._waiting()
+        if not waiting:
+            return None
+        head = waiting[0]
+        for rec in waiting[1:]:
+            self._wait_for(rec, "queue")
+        if not head.prepared:
+            return None
+        if self._on_station() is not None:
+            self._wait_for(head, "station")
+            return None
+        if not self.store.plate_clear():
+            self._wait_for(head, "plate")
+            return None
+        self._loading = head.job_id
+        return head
+
+    def _loaded(self, job_id: str) -> tuple[bool, float]:
+        """(Writer) The station took the job: record it, and whether to start it now (as the record says now)."""
+        rec = self.store.get(job_id)
+        rec.state, rec.stage, rec.waiting_for = "loaded", "loaded on the station", ""
+        self._save(rec)
+        if rec.start:
             self.store.set_plate_clear(False)
-            self.client.start(rtf=head.rtf)
+        return rec.start, rec.rtf
+
+    def _prepare_again(self, job_id: str, why: str) -> None:
+        rec = self.store.get(job_id)
+        rec.prepared, rec.waiting_for, rec.program_id = False, "", ""
+        rec.stage = f"queued again: {why}"
+        self._save(rec)
+
+    def _done_loading(self) -> None:
+        self._loading = ""
 
     def _wait_for(self, rec: s.JobRecord, what: str) -> None:
-        """Record (once) what a prepared job waits for."""
+        """(Writer) Record (once) what a prepared job waits for."""
         if not rec.prepared or rec.waiting_for == what:
             return
         rec.waiting_for = what
@@ -273,14 +358,19 @@ class SupervisorService(Service):
                 self.log.warning("could not release job %s's pins at %s: %s", rec.job_id, service, err.message)
 
     def _release_if_final(self, rec: s.JobRecord) -> None:
-        if rec.state in s.FINAL_JOB_STATES:
-            self._release(rec)
+        try:
+            now = self.store.get(rec.job_id)
+        except NotFound:
+            return
+        if now.state in s.FINAL_JOB_STATES:
+            self._release(now)
 
     # --- following the station ------------------------------------------------------
 
     def _follow_loop(self) -> None:
         """Apply the station's events to the jobs: first the log since the last one applied, then the
-        live stream (subscribed before the log was read, so nothing falls in between)."""
+        live stream (subscribed before the log was read, so nothing falls in between). Events are applied
+        in batches, each one step of the writer."""
         caught_up = False
         self._seen = self.store.last_event_seq()
         self._seen_saved_s = time.monotonic()
@@ -291,37 +381,49 @@ class SupervisorService(Service):
                     self.closed.wait(1.0)
                     continue
             try:
-                ev = self._events.get(timeout=0.5)
+                batch = [self._events.get(timeout=0.5)]
             except queue.Empty:
                 continue
-            if ev.seq <= self._seen:
-                continue
-            if ev.seq > self._seen + 1:                  # a gap (e.g. the station restarted): read the log
-                caught_up = False
-                continue
-            self._apply(ev)
+            while len(batch) < EVENT_BATCH:
+                try:
+                    batch.append(self._events.get(timeout=0))
+                except queue.Empty:
+                    break
+            caught_up = self._apply_batch(batch)
 
     def _catch_up(self) -> bool:
         try:
             since = self._seen + 1
             while True:
-                batch = self.client.events(since).events
-                for ev in batch:
-                    if ev.seq >= since:
-                        self._apply(ev)
-                        since = ev.seq + 1
+                batch = [ev for ev in self.client.events(since).events if ev.seq >= since]
+                if batch:
+                    self._apply_batch(batch)
+                    since = batch[-1].seq + 1
                 if len(batch) < 10_000:
                     return True
         except FabricError as err:
             self.log.info("cannot read the station's events yet (%s: %s)", err.code, err.message)
             return False
 
-    def _apply(self, ev: s.Event) -> None:
-        """Apply one event. A record it changes is saved with the event's number (never applied twice);
-        the number of events that change nothing is saved at most every second (replaying those
-        after a restart changes nothing either)."""
-        ended = None
-        with self.lock:
+    def _apply_batch(self, events: list[s.Event]) -> bool:
+        """Apply events in order (one writer step); False when a gap shows the log must be read first."""
+        ended, gap = self._step(lambda: self._apply_in_writer(events))
+        for rec in ended:                  # asking other services happens outside the writer
+            self._release(rec)
+        if ended:
+            self.wake.set()
+        return not gap
+
+    def _apply_in_writer(self, events: list[s.Event]) -> tuple[list[s.JobRecord], bool]:
+        """(Writer) Apply each event once. A record it changes is saved with the event's number (never
+        applied twice); the number of events that change nothing is saved at most every second (replaying
+        those after a restart changes nothing either)."""
+        ended: list[s.JobRecord] = []
+        for ev in events:
+            if ev.seq <= self._seen:
+                continue
+            if ev.seq > self._seen + 1:                  # a gap (e.g. the station restarted): read the log
+                return ended, True
             rec = self._record_of(job_id_of_event(ev))
             self._seen = ev.seq
             if rec is not None and apply_event(rec, ev, time.time()):
@@ -330,13 +432,11 @@ class SupervisorService(Service):
                 if ev.kind == "started":
                     self.store.set_plate_clear(False)
                 if rec.state in s.FINAL_JOB_STATES:
-                    ended = rec
+                    ended.append(rec)
             elif time.monotonic() - self._seen_saved_s > 1.0:
                 self.store.save(last_event_seq=ev.seq)
                 self._seen_saved_s = time.monotonic()
-        if ended is not None:                  # asking other services happens outside the lock
-            self._release(ended)
-            self.wake.set()
+        return ended, False
 
     def _record_of(self, job_id: str) -> s.JobRecord | None:
         if not job_id:
@@ -359,7 +459,7 @@ class SupervisorService(Service):
                 if kind.endswith("PUT"):
                     self._alive[svc] = time.time()
                     self.log.info("service %s is alive", svc)
-                else:
+                elif svc != self.name:                   # its own token goes as it closes: nothing to report
                     self._alive.pop(svc, None)
                     self.log.warning("service %s is gone", svc)
             if svc == "station" and kind.endswith("PUT"):

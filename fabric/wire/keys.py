@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 from fabric import schemas as s
 
-__all__ = ["ROOT", "SERVICES", "TOPICS", "Endpoint", "ENDPOINTS", "Keys", "valid_cell", "parse_alive",
+__all__ = ["ROOT", "SERVICES", "TOPICS", "Endpoint", "ENDPOINTS", "endpoints_of", "Keys", "valid_cell", "parse_alive",
            "ALIVE_EVERY_CELL", "EVERY_KEY"]
 
 ROOT = "am"
@@ -103,13 +103,22 @@ _TABLE = [
     _ep("supervisor", "submit", s.JobSubmit, s.JobAccepted, 30.0,
         "queue a print job: slice -> plan -> check -> load (-> start)", bulk=True),
     _ep("supervisor", "job", s.JobQuery, s.JobRecord, doc="one print job's whole record"),
-    _ep("supervisor", "jobs", s.Empty, s.JobList, doc="every print job: the queue and the history"),
+    _ep("supervisor", "jobs", s.JobsQuery, s.JobList, doc="a page of the print jobs: the queue and the history"),
     _ep("supervisor", "job_remove", s.JobQuery, s.Ack, doc="remove a job that is not on the station"),
     _ep("supervisor", "job_move", s.JobMove, s.JobList, doc="reorder the waiting queue"),
     _ep("supervisor", "job_next", s.Empty, s.Ack, 60.0,
         "the plate is clear: load the next prepared job and start it"),
 ]
+# every service answers for its own health (served by the runtime, fabric.server.service)
+_TABLE += [_ep(svc, "health", s.Empty, s.Health, 2.0, "ok, or degraded with the reasons") for svc in SERVICES]
 ENDPOINTS: dict[tuple[str, str], Endpoint] = {(e.service, e.command): e for e in _TABLE}
+
+
+def endpoints_of(service: str) -> list[Endpoint]:
+    """The endpoints ``service`` serves, in table order (its handlers are derived from these)."""
+    if service not in SERVICES:
+        raise KeyError(f"no service {service!r}; services: {', '.join(SERVICES)}")
+    return [e for e in _TABLE if e.service == service]
 
 
 def valid_cell(cell: str) -> str:
@@ -140,6 +149,10 @@ class Keys:
 
     def cmd(self, service: str, command: str) -> str:
         return f"{self.prefix}/{service}/cmd/{command}"
+
+    def health_all(self) -> str:
+        """The health queryable of every service of the cell (one query, one reply each)."""
+        return f"{self.prefix}/*/cmd/health"
 
     def cmd_all(self, service: str) -> str:
         """Every command queryable of ``service``."""
