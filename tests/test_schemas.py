@@ -25,7 +25,7 @@ def _strategy(tp: Any, spec=None) -> st.SearchStrategy:
         return st.one_of(st.none(), _strategy(inner, spec))
     if tp is Any:
         return st.one_of(st.integers(-5, 5), st.text(max_size=5), st.booleans())
-    if spec is not None and spec.choices is not None:
+    if spec is not None and spec.choices is not None and origin is not list:
         return st.sampled_from(spec.choices)
     if tp is float:
         lo = spec.ge if spec and spec.ge is not None else -1e9
@@ -49,7 +49,7 @@ def _strategy(tp: Any, spec=None) -> st.SearchStrategy:
     if origin is list:
         (item,) = typing.get_args(tp)
         n = spec.shape[0] if spec and spec.shape and spec.shape[0] is not None else None
-        sub = type(spec)(spec.name, item, True, ge=spec.ge, le=spec.le) if spec else None
+        sub = type(spec)(spec.name, item, True, ge=spec.ge, le=spec.le, choices=spec.choices) if spec else None
         return st.lists(_strategy(item, sub), min_size=n or 0, max_size=n or 3)
     if origin is dict:
         _, vt = typing.get_args(tp)

@@ -57,7 +57,8 @@ def test_beads_are_appended_in_chunks_and_reset_by_a_new_job(tmp_path: Path, cel
     ck = StationStore(tmp_path / "station.sqlite").load()
     assert ck is not None and len(ck.beads["row"]) == len(twin.beads) == sizes[-1] > 0
     np.testing.assert_array_equal(ck.beads["end_mm"], twin.beads.end_mm)
-    chunks = store._db.execute("SELECT COUNT(*) FROM beads").fetchone()[0]
+    with store.db.read() as conn:
+        chunks = conn.execute("SELECT COUNT(*) FROM beads").fetchone()[0]
     assert 1 < chunks <= len(set(sizes))                                    # appended, never rewritten whole
     fresh = Twin(cell)
     fresh.load(prog)

@@ -45,10 +45,14 @@ def _row(rec: s.JobRecord) -> str:
 
 
 def _list_text(jobs: s.JobList) -> str:
+    total = jobs.total if jobs.total >= 0 else len(jobs.jobs)     # -1: the reply holds every job
     if not jobs.jobs:
-        return "no jobs"
+        return "no jobs" if total == 0 else f"no jobs from {jobs.offset + 1} (of {total})"
     head = f"{'job':<12}  {'state':<11} {'created':<8}  {'sim s':>8}  {'mm3':>10}  {'file':<28}  stage / reason"
-    return "\n".join([head] + [_row(r) for r in jobs.jobs])
+    lines = [head] + [_row(r) for r in jobs.jobs]
+    if len(jobs.jobs) < total:
+        lines.append(f"showing {jobs.offset + 1}-{jobs.offset + len(jobs.jobs)} of {total}")
+    return "\n".join(lines)
 
 
 def _record_text(rec: s.JobRecord) -> str:
@@ -107,8 +111,12 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--follow", action="store_true", help="with --start: wait for the print to end")
     p.add_argument("--timeout", type=float, default=None)
     p.set_defaults(run=cmd_submit)
-    p = jsub.add_parser("list", parents=[common], help="the queue and the history")
-    p.set_defaults(run=lambda c, a: (emit(c.jobs(), a.json, _list_text), 0)[1])
+    p = jsub.add_parser("list", parents=[common], help="the queue and the history, a page at a time")
+    p.add_argument("--offset", type=int, default=0, help="skip this many jobs (queue order)")
+    p.add_argument("--limit", type=int, default=100, help=f"show at most this many (up to {s.MAX_JOBS_PAGE})")
+    p.add_argument("--state", action="append", default=[], choices=s.PRINT_JOB_STATES,
+                   help="only jobs in this state (repeat for several)")
+    p.set_defaults(run=lambda c, a: (emit(c.jobs(a.offset, a.limit, a.state), a.json, _list_text), 0)[1])
     for name in ("show", "status"):
         p = jsub.add_parser(name, parents=[common], help="one job's whole record")
         p.add_argument("job_id")

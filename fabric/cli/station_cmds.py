@@ -34,8 +34,16 @@ def _ready_text(r) -> str:
     return "\n".join(lines)
 
 
+def _service_line(i) -> str:
+    if not i.alive:
+        return f"  {i.name:<11} DEAD"
+    if i.health == "degraded":
+        return f"  {i.name:<11} alive  DEGRADED: {'; '.join(i.reasons)}"
+    return f"  {i.name:<11} alive  {i.health or 'health unknown'}"
+
+
 def _status_text(st) -> str:
-    lines = [f"cell {st.cell}"] + [f"  {i.name:<11} {'alive' if i.alive else 'DEAD'}" for i in st.services]
+    lines = [f"cell {st.cell}"] + [_service_line(i) for i in st.services]
     job = st.job
     if job is not None:
         lines.append(f"job {job.job_id} {job.filename}: {job.state} {job.stage}".rstrip())
@@ -62,7 +70,11 @@ def cmd_status(c: Client, a: argparse.Namespace) -> int:
     if a.wait > 0:
         c.wait_alive(deadline_s=a.wait)
     alive = c.alive(timeout=a.timeout)
-    st = s.FabricStatus(cell=c.keys.cell, services=[s.ServiceInfo(name=n, alive=v) for n, v in alive.items()])
+    healths = c.healths(timeout=min(a.timeout, 1.0)) if any(alive.values()) else {}
+    st = s.FabricStatus(cell=c.keys.cell, services=[
+        s.ServiceInfo(name=n, alive=v, health=healths[n].state if v and n in healths else "",
+                      reasons=list(healths[n].reasons) if v and n in healths else [])
+        for n, v in alive.items()])
     if alive.get("supervisor"):
         try:
             st.job = c.status().job
@@ -74,7 +86,9 @@ def cmd_status(c: Client, a: argparse.Namespace) -> int:
         st.job_error = (f"no service of cell {c.keys.cell!r} is on the fabric (cells present: {others}); "
                         "is the cell name right (--cell, $FABRIC_CELL)?")
     emit(st, a.json, _status_text)
-    return 0 if all(alive.values()) else 3
+    if not all(alive.values()):
+        return 3
+    return 4 if any(i.health == "degraded" for i in st.services) else 0
 
 
 def cmd_cells(c: Client, a: argparse.Namespace) -> int:
@@ -162,11 +176,15 @@ def _layer_index(number: int | None) -> int:
 
 def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     def simple(name: str, fn, text, help_: str, **kw):
+        def run(c: Client, a: argparse.Namespace) -> int:
+            emit(fn(c, a), a.json, text)
+            return 0
+
         p = sub.add_parser(name, parents=[common], help=help_)
-        p.set_defaults(run=lambda c, a: (emit(fn(c, a), a.json, text), 0)[1], **kw)
+        p.set_defaults(run=run, **kw)
         return p
 
-    p = sub.add_parser("status", parents=[common], help="which services are alive")
+    p = sub.add_parser("status", parents=[common], help="which services are alive and how they are (exit 3: one is dead, 4: one is degraded)")
     p.add_argument("--timeout", type=float, default=2.0, help="how long to wait for the hub's answer")
     p.add_argument("--wait", type=float, default=0.0, metavar="SECONDS",
                    help="first wait (up to SECONDS) until every service is alive")

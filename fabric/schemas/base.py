@@ -17,7 +17,8 @@ import functools
 import math
 import types
 import typing
-from typing import Any, Callable, TypeVar, Union
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, TypeVar, Union
 
 import numpy as np
 
@@ -25,9 +26,15 @@ from fabric.wire.errors import ValidationError
 
 __all__ = ["schema", "f", "REGISTRY", "validate_into", "to_plain"]
 
-REGISTRY: dict[str, type] = {}
+REGISTRY: dict[str, type[Any]] = {}   # type name -> schema class (with TYPE, VERSION and _SPECS set)
 T = TypeVar("T")
 _MISSING = dataclasses.MISSING
+
+if TYPE_CHECKING:   # tells type checkers that @schema makes a dataclass (typing has it from 3.11 only)
+    from typing_extensions import dataclass_transform
+else:
+    def dataclass_transform(**_kwargs: Any) -> Callable[[T], T]:
+        return lambda fn: fn
 
 
 def f(default: Any = _MISSING, *, ge: float | None = None, le: float | None = None,
@@ -54,6 +61,7 @@ class FieldSpec:
     max_len: int | None = None
 
 
+@dataclass_transform(field_specifiers=(f,))
 def schema(type_name: str, version: int = 1) -> Callable[[type[T]], type[T]]:
     """Class decorator: make a dataclass message registered under ``type_name``."""
 
@@ -61,7 +69,7 @@ def schema(type_name: str, version: int = 1) -> Callable[[type[T]], type[T]]:
         dc = dataclasses.dataclass(cls)
         hints = typing.get_type_hints(dc)
         specs = {}
-        for fld in dataclasses.fields(dc):
+        for fld in dataclasses.fields(dc):  # type: ignore[arg-type]  # typeshed: dataclass() returns type[T]
             required = fld.default is _MISSING and fld.default_factory is _MISSING
             specs[fld.name] = FieldSpec(fld.name, hints[fld.name], required, **dict(fld.metadata))
         dc.TYPE, dc.VERSION, dc._SPECS = type_name, version, specs  # type: ignore[attr-defined]
@@ -205,7 +213,7 @@ def to_plain(msg: Any) -> Any:
     return msg
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _field_names(cls: type) -> tuple[str, ...]:
     """The field names of a dataclass, in order (asked once per class: messages are encoded at 250 Hz)."""
     return tuple(fl.name for fl in dataclasses.fields(cls))

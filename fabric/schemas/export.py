@@ -18,11 +18,11 @@ class ExportChunkRequest:
     are known (the CSV's ``t_s`` column waits for the times). Until then a chunk may come back empty and
     not ``done``: ask again at the same offset."""
     fmt: str = f(choices=EXPORT_FORMATS)
-    program_id: str = f("", max_len=128)
-    job_id: str = f("", max_len=64)
-    offset: int = f(0, ge=0)
-    limit_bytes: int = f(4 << 20, ge=4096, le=MAX_CHUNK_BYTES)
-    module_targets: int = f(5000, ge=10, le=1_000_000)
+    program_id: str = f(default="", max_len=128)
+    job_id: str = f(default="", max_len=64)
+    offset: int = f(default=0, ge=0)
+    limit_bytes: int = f(default=4 << 20, ge=4096, le=MAX_CHUNK_BYTES)
+    module_targets: int = f(default=5000, ge=10, le=1_000_000)
 
 
 @schema("planner.ExportChunk")

@@ -173,11 +173,14 @@ class CollisionReport:
 
 # --- supervisor ---------------------------------------------------------------
 
-@schema("supervisor.ServiceInfo")
+@schema("supervisor.ServiceInfo", version=2)
 class ServiceInfo:
+    """One service of the cell: alive (its liveliness token), since when, and its own health."""
     name: str
     alive: bool
     since_s: float = 0.0
+    health: str = f("", choices=("", "ok", "degraded"))   # "": not known (not alive, or did not answer)
+    reasons: list[str] = f(factory=list)                  # why it is degraded (see common.Health)
 
 
 @schema("supervisor.JobRecord", version=3)
@@ -247,6 +250,22 @@ class JobSubmit:
     rtf: float = f(0.0, ge=0.0, le=1e6)
 
 
-@schema("supervisor.JobList", version=3)
+MAX_JOBS_PAGE = 10_000              # the most records one supervisor/jobs reply carries
+
+
+@schema("supervisor.JobsQuery")
+class JobsQuery:
+    """A page of the print jobs in queue order (``common.Empty``, what older clients send, is the first page).
+
+    ``limit`` jobs from the ``offset``-th (0-based), of ``states`` only when given."""
+    offset: int = f(default=0, ge=0, le=1_000_000_000)
+    limit: int = f(default=100, ge=0, le=MAX_JOBS_PAGE)
+    states: list[str] = f(factory=list, choices=PRINT_JOB_STATES)
+
+
+@schema("supervisor.JobList", version=4)
 class JobList:
+    """Print job records in queue order: a page of them (``supervisor/jobs``), or all (``job_move``)."""
     jobs: list[JobRecord]
+    total: int = f(default=-1, ge=-1)          # jobs matching the query in all; -1: ``jobs`` holds every one
+    offset: int = f(default=0, ge=0)           # the place of ``jobs[0]`` among them

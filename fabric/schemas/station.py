@@ -65,7 +65,7 @@ class StationState:
     elapsed_s: float = 0.0
     total_s: float = 0.0
     remaining_s: float = 0.0
-    progress_r: float = f(0.0, ge=0.0, le=1.0)
+    progress_r: float = f(default=0.0, ge=0.0, le=1.0)
     deposited_mm3: float = 0.0
     planned_mm3: float = 0.0
     layer: int = -1
@@ -92,8 +92,8 @@ class Event:
 @schema("station.EventsQuery", version=2)
 class EventsQuery:
     """Events from ``since_seq`` on; ``kinds`` non-empty: only those kinds."""
-    since_seq: int = f(0, ge=0)
-    limit: int = f(10000, ge=1, le=100000)
+    since_seq: int = f(default=0, ge=0)
+    limit: int = f(default=10000, ge=1, le=100000)
     kinds: list[str] = f(factory=list)
 
 
@@ -126,16 +126,16 @@ class LoadRequest:
 class StartRequest:
     """``rtf`` 1 = real time, larger = faster, 0 = as fast as possible; nil keeps the current one.
     ``from_layer`` (0-based, as in events; -1 = not given): start or recover at that layer."""
-    rtf: float | None = f(None, ge=0.0, le=1e6)
-    from_layer: int = f(-1, ge=-1, le=1_000_000)
+    rtf: float | None = f(default=None, ge=0.0, le=1e6)
+    from_layer: int = f(default=-1, ge=-1, le=1_000_000)
 
 
 @schema("station.Overrides")
 class Overrides:
-    speed_r: float | None = f(None, ge=0.05, le=4.0)
-    flow_r: float | None = f(None, ge=0.0, le=4.0)
-    nozzle_c: float | None = f(None, ge=0.0, le=500.0)
-    bed_c: float | None = f(None, ge=0.0, le=200.0)
+    speed_r: float | None = f(default=None, ge=0.05, le=4.0)
+    flow_r: float | None = f(default=None, ge=0.0, le=4.0)
+    nozzle_c: float | None = f(default=None, ge=0.0, le=500.0)
+    bed_c: float | None = f(default=None, ge=0.0, le=200.0)
 
 
 @schema("station.Check")
@@ -165,4 +165,4 @@ class CalibrationReport:
 class MeshRequest:
     """The as-printed part: a mesh (``stl``, ``glb``) or the bead list (``csv``: one row per bead in
     deposition order, ``x0_mm,y0_mm,z0_mm,x1_mm,y1_mm,z1_mm,volume_mm3``, plate frame)."""
-    fmt: str = f("stl", choices=MESH_FORMATS)
+    fmt: str = f(default="stl", choices=MESH_FORMATS)

@@ -29,7 +29,7 @@ class UploadChunk:
     offset: int = f(ge=0)
     total_bytes: int = f(ge=0)
     data: bytes = b""
-    sha256: str = f("", max_len=64)
+    sha256: str = f(default="", max_len=64)
 
 
 @schema("upload.Status")

@@ -59,7 +59,7 @@ class Writer:
     def call(self, step: Callable[[], T], timeout_s: float = 30.0) -> T:
         """Run ``step`` on the writer and return its result (its exception is raised here). Called on the
         writer's own thread, the step runs at once (a step may call another)."""
-        if self.on_writer():
+        if self.on_writer() and not self._closed.is_set():
             return step()
         fut = self.submit(step)
         try:
@@ -88,8 +88,7 @@ class Writer:
         ran = 0
         budget = self._steps.qsize() + 1
         while item is not None:
-            self._run(*item)
-            ran += 1
+            ran += self._run(*item)
             budget -= 1
             if budget <= 0:
                 break
@@ -116,10 +115,12 @@ class Writer:
                 item[1].set_exception(ServiceUnavailable(f"{self.name} is closing", service=self.name))
 
     @staticmethod
-    def _run(step: Callable[[], Any], fut: Future[Any]) -> None:
+    def _run(step: Callable[[], Any], fut: Future[Any]) -> bool:
+        """Run one step unless its caller gave up on it (cancelled: it never runs); True when it ran."""
         if not fut.set_running_or_notify_cancel():
-            return
+            return False
         try:
             fut.set_result(step())
         except BaseException as exc:  # noqa: BLE001 - handed to the caller, who answers or logs it
             fut.set_exception(exc)
+        return True

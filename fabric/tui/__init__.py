@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from fabric.extras import missing_extra
 from fabric.wire.config import add_session_args, settings_from_args
 from fabric.wire.errors import FabricError
 
@@ -12,12 +13,19 @@ __all__ = ["main"]
 
 def main(argv: list[str] | None = None) -> int:
     from fabric.client import Client
-    from fabric.tui.app import FabricConsole
     p = argparse.ArgumentParser(prog="fabric-tui", description="operator console for an am-fabric cell")
     add_session_args(p)
     p.add_argument("--cell-config", default=None, metavar="TOML",
                    help="the cell model for joint limits (default: the built-in cell, as the services use)")
     a = p.parse_args(argv)
+    try:
+        from fabric.tui.app import FabricConsole
+    except ModuleNotFoundError as exc:      # the tui extra is not installed: one line, no traceback
+        missing = missing_extra(exc, "the console")
+        if missing is None:
+            raise
+        print(f"fabric-tui: error [{missing.code}]: {missing.message}", file=sys.stderr)
+        return 2
     try:
         with Client.connect(settings_from_args(a, default_mode="client")) as client:
             FabricConsole(client, cell_config=a.cell_config).run()

@@ -2,20 +2,31 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Literal
 
 from textual import work
 from textual.app import App
 from textual.binding import Binding
+from textual.notifications import SeverityLevel
 from textual.reactive import reactive
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.wire.errors import FabricError
+from fabric.extras import missing_extra
 from fabric.tui.commands import COMMANDS, describe
 from fabric.tui.link import CellLink
-from fabric.tui.messages import CellsListed, JobsListed, LimitsReady, Liveliness, ProgramReady, Reply, Telemetry
+from fabric.tui.messages import (
+    CellsListed,
+    HealthReport,
+    JobsListed,
+    LimitsReady,
+    Liveliness,
+    ProgramReady,
+    Reply,
+    Telemetry,
+)
 from fabric.tui.screens.cell import CellScreen
 from fabric.tui.screens.cells import CellsDialog
 from fabric.tui.screens.confirm import ConfirmDialog
@@ -25,11 +36,12 @@ from fabric.tui.screens.jobs import JobsScreen
 from fabric.tui.screens.report import ReportDialog
 from fabric.tui.screens.submit import SubmitChoice, SubmitDialog
 from fabric.tui.screens.values import ValuesDialog
+from fabric.wire.errors import FabricError
 
 __all__ = ["FabricConsole"]
 
 GCODE_SUFFIXES = (".gcode", ".gco", ".g", ".nc")
-EVENT_TOASTS = {"fault": "error", "interlock": "error", "stall": "error", "interrupted": "error",
+EVENT_TOASTS: dict[str, SeverityLevel] = {"fault": "error", "interlock": "error", "stall": "error", "interrupted": "error",
                 "stopped": "warning", "finished": "information", "paused": "warning"}
 
 
@@ -64,6 +76,7 @@ class FabricConsole(App):
     extrusion: reactive[Any] = reactive(None, always_update=True)
     temps: reactive[Any] = reactive(None, always_update=True)
     alive: reactive[dict] = reactive(dict, always_update=True)
+    degraded: reactive[dict] = reactive(dict, always_update=True)   # service -> reasons ([] = ok)
     toolpath: reactive[Any] = reactive(None, always_update=True)
     limits: reactive[Any] = reactive(None, always_update=True)
     jobs: reactive[list] = reactive(list, always_update=True)
@@ -113,11 +126,14 @@ class FabricConsole(App):
     @work(thread=True, group="limits")
     def load_limits(self) -> None:
         """Joint limits from the cell model (no service serves it): ``--cell-config`` or the built-in cell."""
-        from fabric.robot.cell import Cell
         try:
+            from fabric.robot.cell import Cell
             model = Cell.load_or_builtin(self.cell_config).to_dict()["robot"]
-        except FabricError as err:
-            self.call_from_thread(self.show_reply, "cell model", False, f"joint limits unknown: {err.message}")
+        except (FabricError, ModuleNotFoundError) as err:     # the model (Pinocchio) comes with the services extra
+            why = err if isinstance(err, FabricError) else missing_extra(err, "the cell model")
+            if why is None:
+                raise
+            self.call_from_thread(self.show_reply, "cell model", False, f"joint limits unknown: {why.message}")
             return
         self.post_message(LimitsReady(model["joint_names"], model["lower_deg"], model["upper_deg"]))
 
@@ -162,6 +178,10 @@ class FabricConsole(App):
         if msg.cell == self.cell:
             self.alive = {**self.alive, **msg.alive}
 
+    def on_health_report(self, msg: HealthReport) -> None:
+        if msg.cell == self.cell:
+            self.degraded = dict(msg.degraded)
+
     def on_jobs_listed(self, msg: JobsListed) -> None:
         if msg.cell == self.cell:
             self.jobs = list(msg.jobs)
@@ -179,9 +199,13 @@ class FabricConsole(App):
             self.push_screen(ReportDialog(msg.command, msg.report))
 
     def on_cells_listed(self, msg: CellsListed) -> None:
-        self.push_screen(CellsDialog(msg.cells, self.cell), lambda name: name and self.switch_cell(name))
+        def chosen(name: str | None) -> None:
+            if name:
+                self.switch_cell(name)
 
-    def show_reply(self, command: str, ok: bool, text: str, severity: str = "") -> None:
+        self.push_screen(CellsDialog(msg.cells, self.cell), chosen)
+
+    def show_reply(self, command: str, ok: bool, text: str, severity: SeverityLevel | Literal[""] = "") -> None:
         """The reply stays on the reply line; a refusal or a failure is also a toast."""
         self.reply = (command, ok, text)
         if not ok or severity in ("error", "warning"):
@@ -197,12 +221,18 @@ class FabricConsole(App):
                 self.run_command(name, {})
                 return
             current = self._current_values()
-            self.push_screen(ValuesDialog(cmd.label.capitalize(), cmd.asks, current),
-                             lambda values: values is not None and self.run_command(name, values))
+            self.push_screen(ValuesDialog(cmd.label.capitalize(), cmd.asks, current), entered)
+
+        def entered(values: dict[str, Any] | None) -> None:
+            if values is not None:
+                self.run_command(name, values)
+
+        def confirmed(yes: bool | None) -> None:
+            if yes:
+                ask_values()
 
         if cmd.confirm:
-            self.push_screen(ConfirmDialog(cmd.label.capitalize(), cmd.confirm),
-                             lambda yes: yes and ask_values())
+            self.push_screen(ConfirmDialog(cmd.label.capitalize(), cmd.confirm), confirmed)
         else:
             ask_values()
 
@@ -227,7 +257,8 @@ class FabricConsole(App):
             self.post_message(Reply(name, False, f"[{err.code}] {err.message}"))
             return
         line, report = describe(name, result)
-        severity = "error" if isinstance(result, s.CollisionReport) and not result.collision_free else ""
+        severity: SeverityLevel | Literal[""] = "error" if isinstance(result, s.CollisionReport) \
+            and not result.collision_free else ""
         if isinstance(result, s.ReadyReport) and not result.ready:
             severity = "warning"
         self.post_message(Reply(name, True, line, report if cmd.report else "", severity))

@@ -1,8 +1,9 @@
 """The console's commands: one table of what each key does, how it is confirmed and how its answer reads."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 from fabric import schemas as s
 from fabric.client import Client
@@ -82,10 +83,11 @@ def describe(name: str, result: Any) -> tuple[str, str]:
         if result.collision_free:
             line = (f"collision-free: {result.checked_configs} configurations, clearance "
                     f"{result.min_distance_mm:.1f} mm")
-        else:
-            h = result.first_hit
+        elif (h := result.first_hit) is not None:
             line = (f"COLLISION at t={h.t_s:.1f} s, G-code line {h.gcode_line}, layer {h.layer + 1}: "
                     f"{h.body_a} <-> {h.body_b}")
+        else:
+            line = "COLLISION"                  # a report without its first hit (not sent by the checker)
         return line, line
     if isinstance(result, s.CalibrationReport):
         line = (f"plate corrected by ({', '.join(f'{v:.3f}' for v in result.correction_xyz_mm)}) mm, "

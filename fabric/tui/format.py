@@ -62,9 +62,11 @@ def job_report(rec: s.JobRecord) -> str:
         lines.append(f"plan      {p.layers} layers, {p.moves} moves, {p.extruded_mm3:.0f} mm3, "
                      f"estimate {duration_text(p.estimate_s)}")
     if rec.collisions is not None:
-        c = rec.collisions
-        lines.append("check     " + ("collision-free" if c.collision_free else
-                                     f"COLLISION {c.first_hit.body_a} <-> {c.first_hit.body_b}"))
+        c, hit = rec.collisions, rec.collisions.first_hit
+        if c.collision_free:
+            lines.append("check     collision-free")
+        else:
+            lines.append("check     COLLISION" + (f" {hit.body_a} <-> {hit.body_b}" if hit is not None else ""))
     if rec.error is not None:
         lines.append(f"error     [{rec.error.code}] {rec.error.message}")
     return "\n".join(lines)

@@ -5,13 +5,13 @@ import logging
 import queue
 import threading
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from textual.message import Message
 
 from fabric.client import AliveSubscription, Client, Subscription
+from fabric.tui.messages import HealthReport, JobsListed, Liveliness, ProgramReady, Telemetry
 from fabric.wire.errors import FabricError
-from fabric.tui.messages import JobsListed, Liveliness, ProgramReady, Telemetry
 
 __all__ = ["CellLink", "STREAMS"]
 
@@ -21,6 +21,7 @@ STREAMS = (("station", "pose"), ("station", "extrusion"), ("station", "temps"), 
            ("station", "events"), ("supervisor", "jobs"))
 THROTTLED = {"pose", "extrusion", "temps"}     # sampled streams: the screen needs at most UI_PERIOD_S of them
 UI_PERIOD_S = 0.1
+HEALTH_PERIOD_S = 5.0          # how often the console asks the services how they are
 
 
 class CellLink:
@@ -43,9 +44,12 @@ class CellLink:
             self._subs.append(sub)
             self._spawn(self._feed, topic, sub, name=f"tui:{topic}")
         # liveliness changes are posted from the Zenoh callback (posting does not block)
-        self._alive_sub = self.client.subscribe_alive(
-            lambda name, alive: self.post(Liveliness(self.cell, {name: alive})))
+        def alive_changed(name: str, alive: bool) -> None:
+            self.post(Liveliness(self.cell, {name: alive}))
+
+        self._alive_sub = self.client.subscribe_alive(alive_changed)
         self._spawn(self._snapshot, name="tui:snapshot")
+        self._spawn(self._health_loop, name="tui:health")
 
     def close(self) -> None:
         self._stop.set()
@@ -82,6 +86,18 @@ class CellLink:
             if topic == "state" and msg.program_id != self._program_id:
                 self._program_id = msg.program_id
                 self._spawn(self._fetch_program, msg.program_id, name="tui:program")
+
+    def _health_loop(self) -> None:
+        """Each service's own health (ok / degraded and why), asked in one query every few seconds."""
+        while not self._stop.is_set():
+            try:
+                healths = self.client.healths(timeout=1.0)
+            except FabricError as err:
+                log.info("no health answers: %s", err)
+            else:
+                self.post(HealthReport(self.cell, {n: h.reasons if h.state == "degraded" else []
+                                                   for n, h in healths.items()}))
+            self._stop.wait(HEALTH_PERIOD_S)
 
     def _snapshot(self) -> None:
         """Snapshot first (then the streams carry the changes): liveliness, state, jobs."""

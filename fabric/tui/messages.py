@@ -1,9 +1,10 @@
 """Messages posted up to the console (small classes; attributes down, messages up)."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 from textual.message import Message
+from textual.notifications import SeverityLevel
 
 __all__ = ["Telemetry", "Liveliness", "Reply", "ProgramReady", "LimitsReady", "JobsListed", "CellsListed"]
 
@@ -24,13 +25,22 @@ class Liveliness(Message):
         self.cell, self.alive = cell, alive
 
 
+class HealthReport(Message):
+    """How the services of cell ``cell`` that answered are: service -> the reasons it is degraded ([] = ok)."""
+
+    def __init__(self, cell: str, degraded: dict[str, list[str]]) -> None:
+        super().__init__()
+        self.cell, self.degraded = cell, degraded
+
+
 class Reply(Message):
     """What a command answered: ``ok`` and one line of text, or a longer ``report`` to show in a dialog."""
 
-    def __init__(self, command: str, ok: bool, text: str, report: str = "", severity: str = "") -> None:
+    def __init__(self, command: str, ok: bool, text: str, report: str = "",
+                 severity: SeverityLevel | Literal[""] = "") -> None:
         super().__init__()
         self.command, self.ok, self.text, self.report = command, ok, text, report
-        self.severity = severity or ("information" if ok else "error")
+        self.severity: SeverityLevel = severity or ("information" if ok else "error")
 
 
 class ProgramReady(Message):

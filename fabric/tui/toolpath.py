@@ -26,7 +26,7 @@ class Toolpath:
     bounds_mm: tuple[float, float, float, float]
 
     @classmethod
-    def from_program(cls, program: Program) -> "Toolpath":
+    def from_program(cls, program: Program) -> Toolpath:
         rows = np.flatnonzero((program.section == PRINT) & (program.op == MOVEL))
         rows = rows[rows > 0]
         start, end = program.xyz_mm[rows - 1, :2], program.xyz_mm[rows, :2]

@@ -5,16 +5,19 @@ message's fields plus ``"_t"`` (type name) and ``"_v"`` (schema version).
 An ``np.ndarray`` field travels as the map ``{"nd": true, "dtype": "<f8",
 "shape": [n, 3], "data": <bin, C order>}`` so bulk data is never a list of
 floats and any msgpack + numpy reader can rebuild it with ``np.frombuffer``.
+A ``common.Empty`` message decodes as any type whose fields all have
+defaults: a command that grows arguments still answers older clients.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, TypeVar
 
 import msgpack
 import numpy as np
 
-from fabric.wire.errors import DecodeError
 from fabric.schemas.base import REGISTRY, to_plain, validate_into
+from fabric.wire.errors import DecodeError
 
 __all__ = ["encode", "encode_pieces", "Spliced", "decode", "decode_any", "pack", "unpack", "MAX_ARRAY_BYTES"]
 
@@ -87,7 +90,7 @@ class Spliced:
     """Bytes given as pieces (already encoded elsewhere), packed by :func:`encode_pieces` as one bin
     field without joining them (e.g. a large artifact's data)."""
 
-    def __init__(self, pieces: list[Buffer]) -> None:
+    def __init__(self, pieces: Sequence[Buffer]) -> None:
         self.pieces = pieces
         self.size = sum(memoryview(p).nbytes for p in pieces)
 
@@ -122,7 +125,7 @@ def _pieces(value: Any, out: list[Buffer], packer: msgpack.Packer) -> None:
         arr = np.ascontiguousarray(value)
         if arr.dtype.byteorder == ">":
             arr = arr.astype(arr.dtype.newbyteorder("<"))
-        data = memoryview(arr).cast("B") if arr.size else b""
+        data = arr.data.cast("B") if arr.size else b""
         _pieces({"nd": True, "dtype": arr.dtype.str, "shape": list(arr.shape), "data": Spliced([data])}, out, packer)
     elif isinstance(value, Spliced):
         out.append(_bin_header(value.size))
@@ -152,6 +155,10 @@ def decode(data: bytes, expected: type[T]) -> T:
         raise DecodeError(f"payload is a {type(body).__name__}, expected a {expected.TYPE} map",  # type: ignore[attr-defined]
                           expected=expected.TYPE)  # type: ignore[attr-defined]
     tname, version = body.get("_t"), body.get("_v")
+    if tname == "common.Empty" and body.keys() <= {"_t", "_v"} and _all_optional(expected):
+        # a request that grew arguments (supervisor/jobs: common.Empty -> JobsQuery): an older client's
+        # empty request is the new one with every field at its default
+        return validate_into(expected, {})
     if tname != expected.TYPE:  # type: ignore[attr-defined]
         raise DecodeError(f"payload is a {tname!r} message, expected {expected.TYPE}",  # type: ignore[attr-defined]
                           got=str(tname), expected=expected.TYPE)  # type: ignore[attr-defined]
@@ -159,6 +166,11 @@ def decode(data: bytes, expected: type[T]) -> T:
         raise DecodeError(f"{tname} version {version!r} is not supported (this side speaks up to "
                           f"v{expected.VERSION})", got=version, supported=expected.VERSION)  # type: ignore[attr-defined]
     return validate_into(expected, body)
+
+
+def _all_optional(cls: type) -> bool:
+    """Whether every field of the schema ``cls`` has a default (so an empty message is a valid one)."""
+    return all(not spec.required for spec in cls._SPECS.values())  # type: ignore[attr-defined]
 
 
 def decode_any(data: bytes) -> Any:

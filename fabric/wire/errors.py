@@ -19,6 +19,7 @@ class that matches it)::
     ├── SlicerError                  "slicer"          an external slicer failed
     ├── ServiceUnavailable           "unavailable"     no service answered in time
     ├── PermissionDenied             "forbidden"       the caller's role may not do this
+    ├── StoreError                   "store"           a database file is damaged, or newer than this release
     └── InternalError                "internal"        unexpected failure (bug)
 
 Every error carries ``details``: a dict of plain values that a caller can act
@@ -37,6 +38,8 @@ may rely on, by class (others may be present)::
     NotFound           what was looked for (job_id, artifact_id, backend, ...): str
     ServiceUnavailable key: str, timeout_s: float, or missing: list[str]
     PermissionDenied   role: str, service: str, command: str
+    StoreError         file: str, reason: str ("damaged", "newer", "migration", "open"), and for
+                       "newer" and "migration" table: str, version: int
 """
 from __future__ import annotations
 
@@ -46,7 +49,7 @@ __all__ = [
     "FabricError", "BadRequest", "DecodeError", "ValidationError", "GcodeError",
     "MeshError", "ProfileError", "ConfigError", "PlacementError", "UnreachableError",
     "CollisionError", "StateError", "NotFound", "SlicerError", "ServiceUnavailable",
-    "PermissionDenied", "InternalError", "error_from_code", "UNREACHABLE_REASONS",
+    "PermissionDenied", "StoreError", "InternalError", "error_from_code", "UNREACHABLE_REASONS",
 ]
 
 UNREACHABLE_REASONS = ("out of reach", "joint limit", "singular", "joint jump", "off the plate", "below the plate")
@@ -152,6 +155,14 @@ class PermissionDenied(FabricError):
     """The caller's role (its credentials) may not do this; the hub would drop the request unanswered."""
 
     code = "forbidden"
+
+
+class StoreError(FabricError):
+    """A service's database cannot be used: the file is damaged (or not SQLite), a table in it was
+    written by a newer release, or migrating it failed. ``details['file']`` names the file; the message
+    says what to do."""
+
+    code = "store"
 
 
 class InternalError(FabricError):

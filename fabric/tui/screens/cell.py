@@ -1,7 +1,7 @@
 """The Cell screen: state banner, progress and ETA, temperatures, robot, extruder and the live layer view."""
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from textual.app import ComposeResult
 from textual.containers import Container
@@ -17,11 +17,19 @@ from fabric.tui.widgets.reply_line import ReplyLine
 from fabric.tui.widgets.temps_panel import TempsPanel
 from fabric.tui.widgets.toolpath_view import ToolpathView
 
+if TYPE_CHECKING:
+    from textual import getters
+
+    from fabric.tui.app import FabricConsole
+
 WIDE_COLS, WIDE_ROWS = 120, 36     # from this size on, the layer view takes a column of its own
 
 
 class CellScreen(Screen):
     """Reads the console's state (app attributes) and hands it down to its widgets."""
+
+    if TYPE_CHECKING:
+        app = getters.app(FabricConsole)      # self.app is the console (for the type checker)
 
     def compose(self) -> ComposeResult:
         yield Header()
@@ -45,6 +53,7 @@ class CellScreen(Screen):
         self.watch(app, "extrusion", self._on_extrusion)
         self.watch(app, "temps", self._on_temps)
         self.watch(app, "alive", self._on_alive)
+        self.watch(app, "degraded", self._on_degraded)
         self.watch(app, "toolpath", lambda tp: setattr(self.query_one(ToolpathView), "toolpath", tp))
         self.watch(app, "limits", lambda lim: setattr(self.query_one(JointsPanel), "limits", lim))
         self.watch(app, "reply", self._on_reply)
@@ -75,6 +84,9 @@ class CellScreen(Screen):
     def _on_temps(self, t: Any) -> None:
         self.query_one(StateBanner).temps = t
         self.query_one(TempsPanel).temps = t
+
+    def _on_degraded(self, degraded: dict) -> None:
+        self.query_one(ExtruderPanel).degraded = dict(degraded)
 
     def _on_alive(self, alive: dict) -> None:
         self.query_one(StateBanner).alive = dict(alive)

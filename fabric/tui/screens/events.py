@@ -1,7 +1,7 @@
 """The Events screen: the station's event history plus the live stream, filtered by kind, searchable."""
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from textual import work
 from textual.app import ComposeResult
@@ -11,8 +11,13 @@ from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Header, Input, Label, Select
 
 from fabric import schemas as s
-from fabric.wire.errors import FabricError
 from fabric.sim.types import EVENT_KINDS
+from fabric.wire.errors import FabricError
+
+if TYPE_CHECKING:
+    from textual import getters
+
+    from fabric.tui.app import FabricConsole
 
 HISTORY_EVENTS = 5000      # the newest this many events are fetched
 
@@ -24,6 +29,9 @@ def event_data_text(data: dict) -> str:
 class EventsScreen(Screen):
     BINDINGS = [Binding("slash", "search", "search", show=False),
                 Binding("escape", "clear", "clear filter", show=False)]
+
+    if TYPE_CHECKING:
+        app = getters.app(FabricConsole)      # self.app is the console (for the type checker)
 
     def __init__(self) -> None:
         super().__init__()
@@ -42,7 +50,10 @@ class EventsScreen(Screen):
     def on_mount(self) -> None:
         self.query_one(DataTable).add_columns("seq", "t_sim s", "kind", "layer", "line", "data")
         self.watch(self.app, "last_event", self._on_event, init=False)
-        self.watch(self.app, "cell", lambda _: self.load(self.kind))
+        self.watch(self.app, "cell", self._on_cell)
+
+    def _on_cell(self, _cell: str) -> None:
+        self.load(self.kind)            # the console switched cells: that cell's history
 
     def _on_event(self, e: Any) -> None:
         if e is not None and (self.kind is None or e.kind == self.kind) and (not self.rows or e.seq > self.rows[-1].seq):

@@ -2,7 +2,7 @@
 duration and material."""
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -16,6 +16,11 @@ from fabric.tui.screens.confirm import ConfirmDialog
 from fabric.tui.screens.report import ReportDialog
 from fabric.tui.widgets.reply_line import ReplyLine
 
+if TYPE_CHECKING:
+    from textual import getters
+
+    from fabric.tui.app import FabricConsole
+
 WAITING_STATES = ("queued", "slicing", "planning", "checking")     # reorderable (the supervisor's queue)
 
 
@@ -25,6 +30,9 @@ class JobsScreen(Screen):
                 Binding("delete,backspace", "remove", "remove", show=False),
                 Binding("left_square_bracket", "move(-1)", "up", show=False),
                 Binding("right_square_bracket", "move(1)", "down", show=False)]
+
+    if TYPE_CHECKING:
+        app = getters.app(FabricConsole)      # self.app is the console (for the type checker)
 
     def compose(self) -> ComposeResult:
         yield Header()

@@ -76,7 +76,8 @@ class SubmitDialog(ModalScreen[SubmitChoice | None]):
             error.update(f"pick a file ({', '.join(PRINTABLE_SUFFIXES)})")
             return
         rtf_in = self.query_one("#submit-rtf", Input)
-        if not rtf_in.validate(rtf_in.value).is_valid:
+        checked = rtf_in.validate(rtf_in.value)
+        if checked is not None and not checked.is_valid:
             error.update("the real-time factor is 0..1e6 (0 = as fast as possible)")
             return
         self.dismiss(SubmitChoice(path, str(self.query_one("#submit-backend", Select).value),

@@ -11,11 +11,13 @@ from fabric.wire.keys import SERVICES
 
 
 class ExtruderPanel(Static):
-    """Attributes: ``extrusion`` (Extrusion), ``state`` (StationState), ``alive`` (service -> bool)."""
+    """Attributes: ``extrusion`` (Extrusion), ``state`` (StationState), ``alive`` (service -> bool),
+    ``degraded`` (service -> the reasons it is degraded; [] or missing = ok)."""
 
     extrusion: reactive[Any] = reactive(None, always_update=True)
     state: reactive[Any] = reactive(None, always_update=True)
     alive: reactive[dict] = reactive(dict, always_update=True)
+    degraded: reactive[dict] = reactive(dict, always_update=True)
 
     def render(self) -> Text:
         e, st = self.extrusion, self.state
@@ -29,7 +31,13 @@ class ExtruderPanel(Static):
             rtf = "max" if st.rtf == 0 else f"{st.rtf:g}"
             out.append(f"speed x{st.speed_r:.2f}  flow x{st.flow_r:.2f}  rtf {rtf}\n")
             out.append(f"deposited {st.deposited_mm3:.0f}/{st.planned_mm3:.0f} mm3\n")
+        sick = []
         for name in SERVICES:
-            up = self.alive.get(name)
-            out.append("●" if up else "○", style="green" if up else "red").append(f"{name[:5]} ")
+            up, why = self.alive.get(name), self.degraded.get(name)
+            style = "red" if not up else ("yellow" if why else "green")
+            out.append("●" if up else "○", style=style).append(f"{name[:5]} ")
+            if up and why:
+                sick.append(f"{name}: {why[0]}")
+        for line in sick:
+            out.append(f"\nDEGRADED {line}", style="yellow")
         return out

@@ -1,8 +1,8 @@
 """A directory tree showing only folders and the files a print job can start from."""
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from textual.widgets import DirectoryTree
 
