@@ -11,6 +11,7 @@ from pathlib import Path
 from fabric.cli import auth_cmds, job_cmds, pipeline_cmds, station_cmds
 from fabric.cli.output import emit, fail
 from fabric.client import Client
+from fabric.extras import missing_extra, require
 from fabric.wire.config import add_cell_argument, add_data_argument, add_session_args, settings_from_args
 from fabric.wire.errors import FabricError
 from fabric.wire.keys import SERVICES
@@ -18,6 +19,7 @@ from fabric.wire.keys import SERVICES
 # Building the parser and running a query import only the client and the schemas (numpy, zenoh, msgpack).
 # The heavy modules (services, twin, robot model: scipy, trimesh, pinocchio) are imported inside the
 # commands that need them: ``serve`` (the service's module), ``up`` (the launcher), ``cell`` (the cell model).
+# Those come with extras (fabric/extras.py); ``main`` turns a missing one into one line, for every command.
 
 __all__ = ["main", "build_parser", "service_parser"]
 
@@ -108,6 +110,7 @@ def _cmd_serve(a: argparse.Namespace) -> int:
 
 
 def _cmd_up(a: argparse.Namespace) -> int:
+    require("services")                 # here, not in each child as it starts (and is restarted)
     from fabric.cli.up import run_up
     extra = {}
     if a.cell_config:
@@ -196,6 +199,14 @@ def _cmd_cell_urdf(a: argparse.Namespace) -> int:
     return 0
 
 
+def _command_name(a: argparse.Namespace) -> str:
+    """``fabric-cli job submit``: the command as typed, for messages."""
+    words = [a.command] + [v for k, v in vars(a).items() if k.endswith("_cmd") and isinstance(v, str)]
+    if a.command == "serve":
+        words.append(a.service)
+    return " ".join(["fabric-cli", *words])
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     a = parser.parse_args(argv)
@@ -207,6 +218,11 @@ def main(argv: list[str] | None = None) -> int:
             return a.run(client, a)
     except FabricError as err:
         return fail(err.message, as_json, err.code, err.details)
+    except ModuleNotFoundError as exc:  # a command of an extra that is not installed: one line, no traceback
+        missing = missing_extra(exc, _command_name(a))
+        if missing is None:
+            raise
+        return fail(missing.message, as_json, missing.code, missing.details)
     except KeyboardInterrupt:
         return 130
     except BrokenPipeError:

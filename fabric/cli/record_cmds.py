@@ -119,6 +119,8 @@ def cmd_record(c: Client, a: argparse.Namespace) -> int:
     out = Path(a.output)
     if out.suffix.lower() not in (".parquet", ".pq", ".csv"):
         raise BadRequest(f"record writes .parquet or .csv, not {out.name!r}", file=str(out))
+    if out.suffix.lower() != ".csv":
+        import pyarrow.parquet  # noqa: F401  (the record extra: missing, say so now, not after the recording)
     topics = list(dict.fromkeys(a.topics))
     inbox: queue.Queue[tuple[str, Any]] = queue.Queue()
     stop = threading.Event()
