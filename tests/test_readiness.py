@@ -4,9 +4,9 @@ from __future__ import annotations
 from dataclasses import replace
 
 from fabric import schemas as s
-from fabric.wire.keys import SERVICES
 from fabric.motion.program import BED, NOZZLE, SET_TEMP, Program
 from fabric.services.readiness import ReadyFacts, print_temp_c, ready_report
+from fabric.wire.keys import SERVICES
 
 ALL_ALIVE = {name: True for name in SERVICES}
 CLEAR = s.CollisionReport(collision_free=True, checked_configs=100, min_distance_mm=12.34)
@@ -28,9 +28,9 @@ def test_everything_in_order_is_ready() -> None:
     assert report.ready
     assert [c.name for c in report.checks] == ["services alive", "program planned and loaded",
                                                "program collision-free", "robot at a known pose",
-                                               "extruder at temperature", "no fault"]
+                                               "plate clear", "extruder at temperature", "no fault"]
     assert [c.detail for c in report.checks] == [f"all {len(SERVICES)}", "0123456789ab", "min clearance 12.3 mm",
-                                                 "at home", "nozzle 212 C, print needs 210 C", ""]
+                                                 "at home", "", "nozzle 212 C, print needs 210 C", ""]
 
 
 def test_dead_services_are_named() -> None:

@@ -1,18 +1,20 @@
 """The station service over real in-process Zenoh sessions: the paper's commands end to end."""
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.wire.errors import NotFound, StateError, ValidationError
+from fabric.motion.testprog import square_program
 from fabric.programs import program_artifact
+from fabric.robot.cell import Cell
 from fabric.services.collision import CollisionService
 from fabric.services.planner import PlannerService
 from fabric.services.station import StationService
-from fabric.robot.cell import Cell
-from fabric.motion.testprog import square_program
+from fabric.wire.errors import NotFound, StateError, ValidationError
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -66,7 +68,7 @@ def test_load_unknown_program_is_not_found(fabric):
 
 
 def test_print_at_max_speed_estimate_matches_and_events_are_lossless(fabric):
-    client, station, pid, _ = fabric
+    client, _station, pid, _ = fabric
     info = client.load(pid)
     assert info.estimate_s > 0 and info.total_s == pytest.approx(info.estimate_s)
     report = client.collisions()
@@ -88,13 +90,14 @@ def test_print_at_max_speed_estimate_matches_and_events_are_lossless(fabric):
     assert kinds.count("layer") >= 3 and kinds[0] == "started" and kinds[-1] == "finished"
     assert "extruder_on" not in kinds and len(kinds) < 20           # what an operator reads, not one per bead
     import io
+
     import trimesh
     mesh = trimesh.load(io.BytesIO(client.mesh("stl").data), file_type="stl")
     assert len(mesh.faces) > 0 and mesh.extents[0] == pytest.approx(20.0, abs=2.0)
 
 
 def test_pause_resume_and_stop_over_the_fabric(fabric):
-    client, station, pid, _ = fabric
+    client, _station, pid, _ = fabric
     client.load(pid)
     events = client.subscribe("station", "events")
     try:
@@ -119,7 +122,7 @@ def test_pause_resume_and_stop_over_the_fabric(fabric):
 
 
 def test_overrides_calibrate_ready_and_home(fabric, cell):
-    client, station, pid, _ = fabric
+    client, _station, pid, _ = fabric
     st = client.overrides(speed_r=1.5, flow_r=0.9, nozzle_c=210.0)
     assert st.speed_r == pytest.approx(1.5) and st.flow_r == pytest.approx(0.9)
     temps = client.subscribe("station", "temps")
@@ -171,6 +174,7 @@ def test_real_time_then_max_speed_gives_the_same_print_as_max_speed(fabric):
     pid = planner.store_artifact(program_artifact(cold))
     ends = []
     for plan in (("max",), ("rt", "max")):
+        client.clear_plate()                    # the first print's part is taken off
         client.load(pid)
         events = client.subscribe("station", "events")
         try:
@@ -214,7 +218,7 @@ def test_a_simulation_failure_faults_the_job_and_the_station_keeps_serving(fabri
 
 
 def test_stop_then_start_again_at_a_layer(fabric):
-    client, station, pid, _ = fabric
+    client, _station, pid, _ = fabric
     client.load(pid)
     events = client.subscribe("station", "events")
     try:
@@ -237,7 +241,7 @@ def test_stop_then_start_again_at_a_layer(fabric):
 
 
 def test_one_clock_and_honest_progress(fabric):
-    client, station, pid, _ = fabric
+    client, _station, pid, _ = fabric
     client.load(pid)
     st0 = client.state()
     assert st0.progress_r == 0.0 and st0.planned_mm3 > 0
@@ -268,7 +272,7 @@ def test_one_clock_and_honest_progress(fabric):
 
 
 def test_events_by_kind_and_overrides_on_record(fabric):
-    client, station, pid, _ = fabric
+    client, _station, pid, _ = fabric
     client.load(pid)
     client.overrides(speed_r=1.2)
     events = client.subscribe("station", "events")
@@ -306,7 +310,7 @@ def test_extrusion_and_temps_are_published_on_change_pose_at_its_rate(fabric):
     assert len(poses) > 0.8 * 100.0 * wall_s                      # 100 Hz
     assert len(exts) < 0.6 * len(poses) and len(ts) < 0.3 * len(poses)
     assert [e.seq for e in exts] == list(range(exts[0].seq, exts[0].seq + len(exts)))
-    switches = sum(a.on != b.on for a, b in zip(exts, exts[1:]))
+    switches = sum(a.on != b.on for a, b in itertools.pairwise(exts))
     assert switches >= 2 and any(e.on for e in exts)               # the extruder went on and off: both seen
     assert exts[-1].extruded_mm3 > 0 and not exts[-1].on
     assert any(t.nozzle_target_c == 200.0 for t in ts)

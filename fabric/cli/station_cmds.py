@@ -184,7 +184,8 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
         p.set_defaults(run=run, **kw)
         return p
 
-    p = sub.add_parser("status", parents=[common], help="which services are alive and how they are (exit 3: one is dead, 4: one is degraded)")
+    p = sub.add_parser("status", parents=[common],
+                       help="which services are alive and how they are (exit 3: one is dead, 4: one is degraded)")
     p.add_argument("--timeout", type=float, default=2.0, help="how long to wait for the hub's answer")
     p.add_argument("--wait", type=float, default=0.0, metavar="SECONDS",
                    help="first wait (up to SECONDS) until every service is alive")
@@ -206,6 +207,8 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--rtf", type=float, default=None, help="real-time factor (0 = max; default: keep the current)")
     simple("pause", lambda c, a: c.pause(), _ack_text, "pause: extruder off, retract, lift")
     simple("stop", lambda c, a: c.stop(), _ack_text, "abort the print safely")
+    simple("plate-clear", lambda c, a: c.clear_plate(), _ack_text,
+           "say the part is off the plate (a print from the start, or the next job, needs it)")
     simple("collisions", lambda c, a: c.collisions(), _collision_text, "sweep the loaded program for collisions")
     p = sub.add_parser("calibrate", parents=[common], help="probe the plate and fit the work object")
     p.set_defaults(run=cmd_calibrate)

@@ -48,7 +48,7 @@ class Temps:
     t_sim_s: float = 0.0
 
 
-@schema("station.State", version=2)
+@schema("station.State", version=3)
 class StationState:
     """The station's whole state: a snapshot reply and a publication on change.
 
@@ -56,7 +56,9 @@ class StationState:
     ``elapsed_s`` the job's simulated time since it started. ``layer`` is the 0-based index of the
     layer being printed, as in events (people read ``layer + 1`` of ``layers_total``).
     ``progress_r`` is the deposited volume over the program's (0 while heating, frozen while paused,
-    where it stopped for a stopped print, 1 when finished)."""
+    where it stopped for a stopped print, 1 when finished). ``plate_clear`` is false from the first
+    bead of a print until the operator says the part is off the plate (``clear_plate``); ``plate_mm3``
+    and ``plate_job_id`` say what is on it."""
     state: str = f(choices=STATES)
     reason: str = ""
     program_id: str = ""
@@ -75,6 +77,9 @@ class StationState:
     flow_r: float = 1.0
     wobj_xyz_mm: list[float] = f(factory=lambda: [0.0, 0.0, 0.0], shape=(3,))    # work object now (calibrated)
     wobj_rpy_deg: list[float] = f(factory=lambda: [0.0, 0.0, 0.0], shape=(3,))
+    plate_clear: bool = True
+    plate_mm3: float = 0.0
+    plate_job_id: str = ""
 
 
 @schema("station.Event")

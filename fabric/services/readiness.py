@@ -6,8 +6,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from fabric import schemas as s
-from fabric.wire.keys import SERVICES
 from fabric.motion.program import NOZZLE, SET_TEMP, Program
+from fabric.wire.keys import SERVICES
 
 __all__ = ["ReadyFacts", "ready_report", "print_temp_c", "TEMP_TOLERANCE_C"]
 
@@ -28,11 +28,13 @@ class ReadyFacts:
     print_temp_c: float | None                 # nozzle temperature the program sets (None: no program / none set)
     state: str                                 # the twin's state
     reason: str = ""                           # why it is in that state (the fault's reason)
+    plate: str = ""                            # what is on the plate ("" when it is clear)
 
 
 def ready_report(facts: ReadyFacts) -> s.ReadyReport:
     """Services alive, program planned and collision-free, robot at a known pose, extruder hot, no fault."""
-    checks = [_services(facts), _program(facts), _collisions(facts), _pose(facts), _temperature(facts), _fault(facts)]
+    checks = [_services(facts), _program(facts), _collisions(facts), _pose(facts), _plate(facts),
+              _temperature(facts), _fault(facts)]
     return s.ReadyReport(ready=all(c.ok for c in checks), checks=checks)
 
 
@@ -75,6 +77,13 @@ def _pose(facts: ReadyFacts) -> s.Check:
                                                    "recover it (fabric-cli recover) before anything else moves")
     detail = "at home" if facts.at_home else ("within limits" if facts.pose_known else "outside its limits")
     return s.Check(name=name, ok=facts.pose_known, detail=detail)
+
+
+def _plate(facts: ReadyFacts) -> s.Check:
+    if not facts.plate:
+        return s.Check(name="plate clear", ok=True, detail="")
+    return s.Check(name="plate clear", ok=False, detail=f"holds {facts.plate}: take it off, then fabric-cli "
+                                                        f"plate-clear (or go on at a layer: start --layer N)")
 
 
 def _temperature(facts: ReadyFacts) -> s.Check:

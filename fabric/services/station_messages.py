@@ -81,8 +81,9 @@ class StationMessages:
 
     def state_key(self, ext: ExtrusionState) -> tuple:
         """What a published state says that matters to a watcher (a change is published at once);
-        the first three fields changing also force a checkpoint."""
-        return (self.twin.state, self.twin.reason, self.meta.program_id, int(ext.layer), self.meta.rtf,
+        the first four fields changing also force a checkpoint."""
+        return (self.twin.state, self.twin.reason, self.meta.program_id, self.meta.plate_occupied, int(ext.layer),
+                self.meta.rtf,
                 float(self.twin.speed_r), float(self.twin.flow_r), round(self.progress_r(ext), 3))
 
     def state(self, ext: ExtrusionState | None = None) -> s.StationState:
@@ -97,4 +98,6 @@ class StationMessages:
                               progress_r=self.progress_r(ext), deposited_mm3=float(ext.extruded_mm3),
                               planned_mm3=meta.planned_mm3, layer=int(ext.layer), layers_total=meta.layers_total,
                               rtf=meta.rtf, speed_r=float(twin.speed_r), flow_r=float(twin.flow_r),
-                              wobj_xyz_mm=np.asarray(wobj_xyz).tolist(), wobj_rpy_deg=np.asarray(wobj_rpy).tolist())
+                              wobj_xyz_mm=np.asarray(wobj_xyz).tolist(), wobj_rpy_deg=np.asarray(wobj_rpy).tolist(),
+                              plate_clear=not meta.plate_occupied, plate_mm3=float(meta.plate_mm3),
+                              plate_job_id=meta.plate_job_id)

@@ -222,8 +222,11 @@ class SupervisorService(Service):
         return s.JobList(jobs=jobs, total=total)
 
     def on_job_next(self, _: s.Empty) -> s.Ack:
-        """The operator confirms the plate is clear: load the next prepared job and start it (or the
-        next one submitted, if none waits)."""
+        """The operator confirms the plate is clear: the station is told (it owns the part on the plate and
+        refuses while a print is on), then the next prepared job is loaded and started (or the next one
+        submitted, if none waits)."""
+        self.client.clear_plate()
+
         def step() -> s.JobRecord | None:
             busy = self._on_station()
             if busy is not None and busy.state != "loaded":
@@ -283,6 +286,14 @@ class SupervisorService(Service):
             return
         try:
             station = self.client.state()
+            if not station.plate_clear:                   # the station owns the part on the plate
+                self.log.info("job %s waits: the plate holds a part (%.0f mm3)", head.job_id, station.plate_mm3)
+
+                def plate_taken() -> None:
+                    self.store.set_plate_clear(False)
+                    self._wait_for(self.store.get(head.job_id), "plate")
+                self._step(plate_taken)
+                return
             if station.state not in STATION_FREE:
                 self.log.info("job %s waits: the station is %s", head.job_id, station.state)
                 self._step(lambda: self._wait_for(self.store.get(head.job_id), "station"))
@@ -410,7 +421,7 @@ class SupervisorService(Service):
         ended, gap = self._step(lambda: self._apply_in_writer(events))
         for rec in ended:                  # asking other services happens outside the writer
             self._release(rec)
-        if ended:
+        if ended or any(ev.kind == "plate_cleared" for ev in events):
             self.wake.set()
         return not gap
 
@@ -426,6 +437,8 @@ class SupervisorService(Service):
                 return ended, True
             rec = self._record_of(job_id_of_event(ev))
             self._seen = ev.seq
+            if ev.kind == "plate_cleared":                 # the station's word on the plate (started: taken)
+                self.store.set_plate_clear(True)
             if rec is not None and apply_event(rec, ev, time.time()):
                 self._save(rec, last_event_seq=ev.seq)
                 self._seen_saved_s = time.monotonic()

@@ -24,22 +24,22 @@ from typing import Any
 
 import numpy as np
 
-from fabric.wire.errors import CollisionError, FabricError, StateError, UnreachableError, ValidationError
 from fabric.motion.program import Program
 from fabric.motion.thermal import Thermal
 from fabric.motion.validate import validate_program
-from fabric.robot.kinematics import ik_reason
 from fabric.robot.frames import make_T, rot_x
+from fabric.robot.kinematics import ik_reason
 from fabric.sim.builder import LegBuilder
 from fabric.sim.calibration import CalibrationResult, calibrate_plate
 from fabric.sim.config import TwinConfig
 from fabric.sim.deposition import Deposition
 from fabric.sim.legs import Leg, ProgramLegSpec
 from fabric.sim.moves import MotionPlanner
-from fabric.sim.runner import LegRunner
 from fabric.sim.readout import Readout
+from fabric.sim.runner import LegRunner
 from fabric.sim.state import JobState, TwinState
 from fabric.sim.types import EVENT_KINDS, IK_ACCEPT, STATES, Event, ExtrusionState, Pose, Temps, TimeInfo
+from fabric.wire.errors import CollisionError, FabricError, StateError, UnreachableError, ValidationError
 
 SPEED_R_MIN, SPEED_R_MAX = 0.0, 10.0         # speed and flow overrides: (0, 10]
 
@@ -79,7 +79,7 @@ class Twin:
 
     @classmethod
     def from_snapshot(cls, cell: Any, snapshot: dict[str, Any], program: Program | None,
-                      beads: dict[str, np.ndarray] | None = None) -> "Twin":
+                      beads: dict[str, np.ndarray] | None = None) -> Twin:
         """A twin in exactly the state ``snapshot`` saved, running ``program`` (the same one), with
         ``beads`` when the snapshot was taken without them."""
         config = TwinConfig.from_dict(snapshot["config"])
@@ -224,14 +224,16 @@ class Twin:
             self._new_job(st.program)
             leg = Leg(ProgramLegSpec(0), True, ["finished"])
             self.runner.enqueue(leg)
-            st.estimate_s = leg.tl.total_s
+            st.estimate_s = leg.timeline.total_s
+            reason = "started"
         else:
             st.job.resume_at = None
             st.job.carry_mm3.clear()
             self.moves.restart_at(row, "at_layer")
             st.estimate_s = self.moves.remaining_s()
+            reason = f"restarted at layer {from_layer + 1}" if from_layer is not None else "restarted"
         st.t_started_s, st.t_ended_s = st.t_sim_s, None
-        st.state, st.reason = "printing", "started" if row == 0 else f"restarted at layer {from_layer + 1}"
+        st.state, st.reason = "printing", reason
         data = {"rows": len(st.program), "estimate_s": st.estimate_s, "from_row": row}
         self.runner.emit(st.pending, st.t_sim_s, "started", data)
 
@@ -270,6 +272,11 @@ class Twin:
             st.legs[-1].end_kinds = ["stopped" if k == "paused" else k for k in st.legs[-1].end_kinds]
         else:
             self.runner.on_end("stopped", st.t_sim_s, st.pending)
+
+    def clear_plate(self) -> None:
+        """The part was taken off the plate: its beads are forgotten (the job's totals stay on record)."""
+        self._refuse("clear_plate", ("idle", "ready", "stopped", "fault"))
+        self.s.beads = Deposition(self.s.program)
 
     def go_home(self, collision_ok: bool = True) -> None:
         """Joint move to the cell's home joints (``collision_ok``: the collision service's verdict)."""
@@ -435,6 +442,7 @@ class Twin:
     def _interlocked(self, events: list[Event]) -> None:
         """The runner refused to start extruding cold: pause there (a clear reason, an event)."""
         trip, self.runner.tripped = self.runner.tripped, None
+        assert trip is not None, "called only when the runner tripped"
         self.moves.interlock_pause(trip.j, trip.reason)
         self.runner.emit(events, trip.t_s, "interlock", {"reason": trip.reason, "nozzle_c": trip.nozzle_c,
                                                          "min_c": trip.min_c, "row": trip.row})

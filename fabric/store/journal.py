@@ -38,6 +38,11 @@ class StationMeta:
     rtf: float = 1.0
     layers_total: int = 0
     planned_mm3: float = 0.0          # what the loaded program deposits in all
+    # the part on the plate: from the first bead of a print until the operator says the plate is clear
+    plate_occupied: bool = False
+    plate_job_id: str = ""
+    plate_program_id: str = ""
+    plate_mm3: float = 0.0
 
 
 @dataclass
