@@ -255,8 +255,14 @@ class StationService(Service):
         return f"the part of job {m.plate_job_id or '(loaded by hand)'} ({m.plate_mm3:.0f} mm3)"
 
     def _refuse_on_part(self, command: str, from_layer: int | None) -> None:
-        """A print from the start needs a clear plate; a restart at a layer needs this program's part on it."""
+        """A print from the start needs a clear plate and a job that has not printed yet (a job is printed
+        once: its record is its history); a restart at a layer needs this program's part on the plate."""
         m = self.meta
+        if from_layer is None and m.job_id and self.twin.s.t_ended_s is not None:
+            raise StateError(f"cannot {command} job {m.job_id} from the beginning: its print ended "
+                             f"({self.twin.reason}); print it again as a new job (fabric-cli job submit), or go "
+                             f"on at a layer of its part (start --layer N)", state=self.twin.state,
+                             command=command, job_id=m.job_id)
         if from_layer is None and m.plate_occupied:
             raise StateError(f"cannot {command} from the beginning: the plate holds {self._plate_text()}; take it "
                              f"off and say so (fabric-cli plate-clear, or job next), or go on at a layer of it "

@@ -249,7 +249,11 @@ class SupervisorService(Service):
             return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} starts once prepared "
                                           f"({head.state})", state=head.state)
         self._load_next()
-        head = self.store.get(head.job_id)
+        try:
+            head = self.store.get(head.job_id)
+        except NotFound:                                  # removed meanwhile by another operator
+            return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} was removed meanwhile",
+                         state="")
         return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} ({head.filename}) {head.state}",
                      state=head.state)
 
@@ -300,6 +304,10 @@ class SupervisorService(Service):
                 return
             try:
                 self.client.load(head.program_id, job_id=head.job_id)
+            except StateError as err:             # the station is busy after all (e.g. a stop's lift): wait
+                self.log.info("job %s waits: %s", head.job_id, err.message)
+                self._step(lambda: self._wait_for(self.store.get(head.job_id), "station"))
+                return
             except NotFound as err:             # its program is gone (never acknowledged durably): plan again
                 self.log.warning("job %s: %s; preparing it again", head.job_id, err.message)
                 self._step(lambda: self._prepare_again(head.job_id, err.message))

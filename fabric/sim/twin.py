@@ -187,6 +187,7 @@ class Twin:
         """Validate ``program`` and make it the job (state ``ready``); returns the time estimate."""
         st = self.s
         self._refuse("load", ("idle", "ready", "stopped", "fault"))
+        self._busy("load")                 # e.g. a stop's lift: its end event belongs to the job before
         validate_program(program, self.robot)
         dp = np.abs(program.wobj - st.work_T)
         if dp[:3, 3].max() > 0.01 or dp[:3, :3].max() > 1e-6:
@@ -276,6 +277,7 @@ class Twin:
     def clear_plate(self) -> None:
         """The part was taken off the plate: its beads are forgotten (the job's totals stay on record)."""
         self._refuse("clear_plate", ("idle", "ready", "stopped", "fault"))
+        self._busy("clear_plate")
         self.s.beads = Deposition(self.s.program)
 
     def go_home(self, collision_ok: bool = True) -> None:
