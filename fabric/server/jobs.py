@@ -14,8 +14,10 @@ import threading
 import time
 import traceback
 import uuid
+from pathlib import Path
 from typing import Callable
 
+from fabric.server.disk import disk_full_of
 from fabric.wire.errors import FabricError, InternalError, NotFound
 from fabric.server.service import Publisher
 from fabric.schemas import ErrorReply, JobStatus
@@ -51,8 +53,11 @@ class Job:
 class JobRunner:
     """One worker thread running jobs in submission order; keeps the last ``keep`` statuses."""
 
-    def __init__(self, name: str, publisher: Publisher | None, keep: int = 200) -> None:
+    def __init__(self, name: str, publisher: Publisher | None, keep: int = 200,
+                 data_dir: str | Path | None = None) -> None:
+        """``data_dir``: where the jobs write (named in a ``disk_full`` error)."""
         self.name, self._pub, self._keep = name, publisher, keep
+        self.data_dir = data_dir
         self._jobs: dict[str, JobStatus] = {}
         self._queue: queue.Queue = queue.Queue()
         self._lock = threading.Lock()
@@ -103,9 +108,14 @@ class JobRunner:
                 st.state, st.progress_r = "done", 1.0
             except FabricError as err:
                 _fail(st, err)
-            except Exception as exc:  # a bug: keep the trace, fail the job, keep running
-                log.error("%s job %s failed:\n%s", self.name, st.job_id, traceback.format_exc())
-                _fail(st, InternalError(f"{type(exc).__name__}: {exc}"))
+            except Exception as exc:  # a full disk, or a bug (keep the trace): fail the job, keep running
+                full = disk_full_of(exc, self.name, self.data_dir or ".")
+                if full is not None:
+                    log.error("%s job %s: %s", self.name, st.job_id, full.message)
+                    _fail(st, full)
+                else:
+                    log.error("%s job %s failed:\n%s", self.name, st.job_id, traceback.format_exc())
+                    _fail(st, InternalError(f"{type(exc).__name__}: {exc}"))
             self.publish(st)
 
 

@@ -27,6 +27,7 @@ import zenoh
 
 from fabric.wire import codec
 from fabric.wire.errors import FabricError, InternalError, NotFound, StateError, ValidationError
+from fabric.server.disk import disk_full_of
 from fabric.server.health import Health
 from fabric.wire.keys import ENDPOINTS, SERVICES, TOPICS, Endpoint, Keys, endpoints_of
 from fabric.wire.qos import reply_qos
@@ -205,7 +206,13 @@ class Service:
         except FabricError as err:
             self.log.info("%s/%s: %s: %s", self.name, ep.command, err.code, err.message)
             reply_error(query, err)
-        except Exception as exc:  # a bug: answer, log the traceback, mark degraded, keep serving
+        except Exception as exc:  # a full disk, or a bug: answer, log, mark degraded, keep serving
+            full = disk_full_of(exc, self.name, self.data_dir)
+            if full is not None:
+                self.health.degrade("disk", full.message)
+                self.log.error("%s/%s: %s", self.name, ep.command, full.message)
+                reply_error(query, full)
+                return
             self.health.degrade(f"handler:{ep.command}", f"{type(exc).__name__}: {exc}")
             self.log.error("%s/%s failed:\n%s", self.name, ep.command, traceback.format_exc())
             reply_error(query, InternalError(f"{self.name}/{ep.command} failed: {type(exc).__name__}: {exc}",

@@ -16,6 +16,7 @@ import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from fabric.server.disk import require_room
 from fabric.wire.errors import BadRequest, NotFound, ValidationError
 from fabric.schemas.upload import UPLOAD_CHUNK_MAX_BYTES, UPLOAD_ID_PATTERN, UploadChunk, UploadStatus
 
@@ -58,6 +59,7 @@ class UploadStore:
         with self._lock:
             part = self._open.get(uid)
             if chunk.offset == 0:
+                require_room(self.root, chunk.total_bytes, self.root.parent.name or "service", "this upload")
                 part = self._start(uid, chunk.total_bytes)
             elif part is None or chunk.offset != part.received_bytes:
                 expected = 0 if part is None else part.received_bytes

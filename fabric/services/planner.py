@@ -17,34 +17,44 @@ from __future__ import annotations
 import argparse
 import io
 import threading
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, TextIO
+from typing import TextIO, cast
 
 import numpy as np
 import zenoh
 
-from fabric.wire import codec
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.wire.errors import BadRequest, FabricError, InternalError, NotFound, UnreachableError, error_from_code
-from fabric.server.jobs import Job, JobRunner
-from fabric.programs import content_id, program_artifact_pieces, program_from_artifact
-from fabric.wire.config import add_cell_argument, service_data_dir
-from fabric.server.service import Service
-from fabric.schemas.upload import MAX_GCODE_BYTES
-from fabric.server.uploads import UploadStore
-from fabric.robot.cell import Cell
-from fabric.robot.frames import xyzrpy_to_T
 from fabric.motion.program import Program
 from fabric.motion.timing import StartState, time_program
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.memory import keep_freed_memory
-from fabric.planning.report import Reachability
 from fabric.planning.post import write_export
 from fabric.planning.post.stream import ExportStream
+from fabric.planning.report import Reachability
+from fabric.programs import content_id, program_artifact_pieces, program_from_artifact
+from fabric.robot.cell import Cell
+from fabric.robot.frames import xyzrpy_to_T
+from fabric.schemas.upload import MAX_GCODE_BYTES
+from fabric.server.jobs import Job, JobRunner
+from fabric.server.service import Service
+from fabric.server.disk import disk_full_of, require_room
+from fabric.server.uploads import UploadStore
 from fabric.services.plan_handoff import PlanHandoff
+from fabric.wire import codec
+from fabric.wire.config import add_cell_argument, service_data_dir
+from fabric.wire.errors import (
+    BadRequest,
+    ColdExtrusionError,
+    FabricError,
+    InternalError,
+    NotFound,
+    UnreachableError,
+    error_from_code,
+)
 
 __all__ = ["PlannerService", "build", "add_arguments"]
 
@@ -63,6 +73,7 @@ class PlannedProgram:
     program: Program
     t_end_s: np.ndarray | None
 
+PROGRAM_PER_GCODE_BYTE = 3      # room a plan needs: the program artifact and its pieces, per byte of G-code
 
 class PlannerService(Service):
     name = "planner"
@@ -72,7 +83,7 @@ class PlannerService(Service):
         keep_freed_memory()                     # the next plan reuses the pages of the last one
         self.cell = cell
         self.client = Client(session, cell_id)
-        self.jobs = JobRunner("planner", self.publisher("progress", lossless=True))
+        self.jobs = JobRunner("planner", self.publisher("progress", lossless=True), data_dir=self.data_dir)
         self.handle("plan", self.on_plan)
         self.handle("job", lambda q: self.jobs.get(q.job_id))
         self.handle("summary", self.on_summary)
@@ -102,8 +113,8 @@ class PlannerService(Service):
         if not req.gcode and not req.gcode_id and not req.upload_id:
             raise BadRequest("give the G-code inline (gcode), uploaded (upload_id) or a slicer artifact id "
                              "(gcode_id)", field="gcode")
-        if req.upload_id:
-            self.uploads.path(req.upload_id)        # NotFound now, not in the job
+        size = self.uploads.path(req.upload_id).stat().st_size if req.upload_id else len(req.gcode)
+        require_room(self.data_dir, PROGRAM_PER_GCODE_BYTE * size, self.name, "planning this G-code")
         wobj = None
         if req.wobj_xyz_mm is not None or req.wobj_rpy_deg is not None:
             wobj = xyzrpy_to_T(np.asarray(req.wobj_xyz_mm or [0.0, 0.0, 0.0]),
@@ -115,7 +126,7 @@ class PlannerService(Service):
         return s.JobAccepted(job_id=st.job_id, kind="plan")
 
     def _run(self, job: Job, req: s.PlanRequest, options: PlanOptions) -> str:
-        data = req.gcode
+        data: bytes | Path = req.gcode
         if req.gcode_id:
             job.progress(0.0, "fetching G-code")
             data = self.client.artifact("slicer", req.gcode_id).data
@@ -129,20 +140,25 @@ class PlannerService(Service):
         except FabricError as err:
             handoff.failed(err)
             raise
-        except Exception as exc:    # a bug: the job reports it; exports waiting on the job get it too
-            handoff.failed(InternalError(f"planning failed: {type(exc).__name__}: {exc}"))
+        except Exception as exc:    # a full disk or a bug: the job reports it; exports waiting on it get it too
+            handoff.failed(disk_full_of(exc, self.name, self.data_dir)
+                           or InternalError(f"planning failed: {type(exc).__name__}: {exc}"))
             raise
+        finally:
+            if req.upload_id:                    # the upload served its job: its file goes, whatever the outcome
+                self.uploads.discard(req.upload_id)
         handoff.finished(pid)
         return pid
 
-    def _plan(self, job: Job, req: s.PlanRequest, options: PlanOptions, data: bytes, handoff: PlanHandoff) -> str:
+    def _plan(self, job: Job, req: s.PlanRequest, options: PlanOptions, data: bytes | Path,
+              handoff: PlanHandoff) -> str:
         name = req.filename.rsplit(".", 1)[0] + ".program"
         storing: list[Future[str]] = []
 
         def program_ready(program: Program, report: Reachability) -> None:
             # the program is final: exports by job id start formatting it, and it is encoded, hashed (its
             # id) and written to the durable store while the plan goes on with the cycle time
-            handoff.program_ready(program, _first_unreachable(report))
+            handoff.program_ready(program, _first_unreachable(report), _cold_extrusion(report))
             storing.append(self._storer.submit(self._store_program, program, name))
 
         result = plan_gcode(data, self.cell, options, progress=lambda fr: job.progress(fr, "planning"),
@@ -158,15 +174,17 @@ class PlannerService(Service):
             self.recent.pop(next(iter(self.recent)))
         rep = result.report
         first = _first_unreachable(rep)
+        cold = _cold_extrusion(rep)
         st = result.stats
         estimate = float(result.estimate_s) if np.isfinite(result.estimate_s) else -1.0
         summary = s.PlanSummary(
             program_id=pid, targets=int(st.targets), moves=int(st.moves), layers=int(st.layers),
-            feasible_r=float(rep.feasible_r), runnable=first is None, estimate_s=estimate,
+            feasible_r=float(rep.feasible_r), runnable=first is None and cold is None, estimate_s=estimate,
             extruded_mm3=float(st.extruded_volume_mm3), path_mm=float(st.path_length_mm), first_unreachable=first,
             unreachable_by_reason={str(k): int(v) for k, v in rep.counts.items() if k != "ok"},
             elapsed_s=float(st.total_s), slowed_targets=0 if result.slowed_rows is None else len(result.slowed_rows),
-            first_slowed=_first_slowed(result, program), allow_off_plate=req.allow_off_plate, **_material_fields(st))
+            first_slowed=_first_slowed(result, program), allow_off_plate=req.allow_off_plate, cold_extrusion=cold,
+            **_material_fields(st))
         self.records.put("summary", pid, summary)
         return pid
 
@@ -234,8 +252,10 @@ class PlannerService(Service):
             handoff = self.handoffs.get(req.job_id)
             program_id = handoff.program_id if handoff is not None else ""
             name = f"{handoff.name or 'program'}.{SUFFIX[req.fmt]}" if handoff is not None else name
-        # the pieces are joined once, as the reply is encoded (a chunk is up to limit_bytes, 4 MB by default)
-        return s.ExportChunk(program_id=program_id, fmt=req.fmt, offset=req.offset, data=codec.Spliced(data),
+        # the pieces are joined once, as the reply is encoded (a chunk is up to limit_bytes, 4 MB by default);
+        # the codec writes a Spliced as the bytes field it stands in for
+        return s.ExportChunk(program_id=program_id, fmt=req.fmt, offset=req.offset,
+                             data=cast(bytes, codec.Spliced(data)),
                              done=stream.done, name=name, media_type=MEDIA[req.fmt])
 
     def _job_exporter(self, job_id: str, fmt: str, module_targets: int) -> tuple[Callable[[TextIO], None], str]:
@@ -276,6 +296,9 @@ class PlannerService(Service):
             raise UnreachableError(f"program is not runnable: first unreachable target at G-code line "
                                    f"{fu.gcode_line} ({fu.reason})", gcode_line=fu.gcode_line, reason=fu.reason,
                                    row=fu.row)
+        cold = summary.cold_extrusion
+        if cold is not None and fmt != "csv":
+            raise _cold_error(cold)
         planned = self.recent.get(program_id)
         if planned is None:                         # an older plan: read its artifact back
             art = self.get_artifact(program_id)
@@ -311,6 +334,21 @@ def _first_unreachable(report: Reachability) -> s.UnreachableTarget | None:
         return None
     line, reason = report.first_unreachable
     return s.UnreachableTarget(gcode_line=int(line), reason=reason, row=int(report.first_unreachable_row))
+
+
+def _cold_extrusion(report: Reachability) -> s.ColdExtrusion | None:
+    cold = report.cold
+    if cold is None:
+        return None
+    return s.ColdExtrusion(gcode_line=cold.gcode_line, reason=cold.reason, row=cold.row, nozzle_c=cold.nozzle_c,
+                           min_c=cold.min_c, set_line=cold.set_line, waited_c=cold.waited_c,
+                           wait_line=cold.wait_line, message=cold.message)
+
+
+def _cold_error(cold: s.ColdExtrusion) -> ColdExtrusionError:
+    """The typed error of a program that would extrude cold (a controller export of it is refused)."""
+    return ColdExtrusionError(f"program is not runnable: {cold.message}", **{
+        k: v for k, v in s.to_plain(cold).items() if k != "message"})
 
 
 def _first_slowed(result, program) -> s.SlowedMove | None:

@@ -8,20 +8,22 @@ from pathlib import Path
 import zenoh
 
 from fabric import schemas as s
-from fabric.wire.errors import NotFound
-from fabric.server.jobs import Job, JobRunner
 from fabric.programs import content_id
-from fabric.wire.config import add_cell_argument, service_data_dir
-from fabric.server.service import Service
-from fabric.schemas.upload import MAX_MODEL_BYTES
-from fabric.server.uploads import UploadStore
 from fabric.robot.cell import Cell
+from fabric.schemas.upload import MAX_MODEL_BYTES
+from fabric.server.jobs import Job, JobRunner
+from fabric.server.service import Service
+from fabric.server.disk import require_room
+from fabric.server.uploads import UploadStore
 from fabric.slicing import Placement, available_backends, list_profiles, load_profile, slice_model
+from fabric.wire.config import add_cell_argument, service_data_dir
+from fabric.wire.errors import NotFound
 
 __all__ = ["SlicerService", "build", "add_arguments"]
 
 GCODE_MEDIA_TYPE = "text/x-gcode"
 
+GCODE_PER_MODEL_BYTE = 4        # room a slice needs: G-code and temporary files, per byte of model
 
 class SlicerService(Service):
     name = "slicer"
@@ -30,7 +32,7 @@ class SlicerService(Service):
                  build_height_mm: float, data_dir: Path | None = None) -> None:
         super().__init__(session, cell_id, data_dir)
         self.plate_size_mm, self.build_height_mm = plate_size_mm, build_height_mm
-        self.jobs = JobRunner("slicer", self.publisher("progress", lossless=True))
+        self.jobs = JobRunner("slicer", self.publisher("progress", lossless=True), data_dir=self.data_dir)
         self.handle("slice", self.on_slice)
         self.handle("job", lambda q: self.jobs.get(q.job_id))
         self.handle("result", self.on_result)
@@ -45,17 +47,25 @@ class SlicerService(Service):
 
     def on_slice(self, req: s.SliceRequest) -> s.JobAccepted:
         profile = load_profile(req.profile, req.overrides)     # a bad profile fails now, not in the job
-        if req.upload_id:
-            self.uploads.path(req.upload_id)                    # NotFound now, not in the job
+        size = self.uploads.path(req.upload_id).stat().st_size if req.upload_id else len(req.model)
+        require_room(self.data_dir, GCODE_PER_MODEL_BYTE * size, self.name, "slicing this model")
         backends = available_backends()
         if backends.get(req.backend) is None:
             raise NotFound(f"slicer back-end '{req.backend}' is not installed on this host",
                            backend=req.backend, installed=[k for k, v in backends.items() if v])
-        placement = Placement(center_xy_mm=tuple(req.center_xy_mm) if req.center_xy_mm else None)
+        center = req.center_xy_mm
+        placement = Placement(center_xy_mm=(center[0], center[1]) if center else None)
         st = self.jobs.submit("slice", lambda job: self._run(job, req, profile, placement))
         return s.JobAccepted(job_id=st.job_id, kind="slice")
 
     def _run(self, job: Job, req: s.SliceRequest, profile, placement) -> str:
+        try:
+            return self._slice(job, req, profile, placement)
+        finally:
+            if req.upload_id:                    # the upload served its job: its file goes, whatever the outcome
+                self.uploads.discard(req.upload_id)
+
+    def _slice(self, job: Job, req: s.SliceRequest, profile, placement) -> str:
         model = self.uploads.path(req.upload_id).read_bytes() if req.upload_id else req.model
         res = slice_model(model, req.filename, profile, backend=req.backend, placement=placement,
                           plate_size_mm=self.plate_size_mm, build_height_mm=self.build_height_mm,
@@ -88,6 +98,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def build(session: zenoh.Session, cell_id: str, options: argparse.Namespace) -> SlicerService:
     cell = Cell.load_or_builtin(options.cell_config)
-    size = tuple(float(v) for v in cell.plate_size_mm[:2])
+    size = (float(cell.plate_size_mm[0]), float(cell.plate_size_mm[1]))
     return SlicerService(session, cell_id, size, options.build_height,
                          service_data_dir(options.data_dir, cell_id, "slicer"))

@@ -49,6 +49,7 @@ from fabric.programs import content_id, program_from_artifact
 from fabric.services.readiness import ReadyFacts, print_temp_c, ready_report
 from fabric.wire.config import add_cell_argument, service_data_dir
 from fabric.wire.keys import endpoints_of
+from fabric.server.disk import require_room
 from fabric.server.health import Backoff
 from fabric.server.service import Service
 from fabric.server.writer import Stale, Writer
@@ -315,6 +316,8 @@ class StationService(Service):
     def on_load(self, req: s.LoadRequest) -> s.TimeInfo:
         art = self.client.artifact("planner", req.program_id)       # fetched and decoded outside the writer
         program = program_from_artifact(art)
+        require_room(self.data_dir, len(art.data), self.name, "keeping the program")
+        self.artifacts.put(art)        # on disk before the twin takes it: a full disk leaves the station as it was
 
         def act() -> s.TimeInfo:
             if self.twin.state in ("printing", "paused"):

@@ -37,11 +37,12 @@ import zenoh
 from fabric import schemas as s
 from fabric.client import Client
 from fabric.wire.config import service_data_dir
-from fabric.wire.errors import FabricError, NotFound, StateError, ValidationError
+from fabric.wire.errors import BadRequest, DiskFull, FabricError, NotFound, StateError, ValidationError
 from fabric.wire.keys import SERVICES, parse_alive
 from fabric.printjobs.events import apply_event, job_id_of_event
 from fabric.printjobs.prepare import PrepareCancelled, Preparer
 from fabric.programs import content_id
+from fabric.server.disk import require_room
 from fabric.server.service import Service
 from fabric.server.writer import Writer
 from fabric.store.jobs import JobStore
@@ -176,6 +177,7 @@ class SupervisorService(Service):
     def on_submit(self, req: s.JobSubmit) -> s.JobAccepted:
         if not req.model:
             raise ValidationError("the submitted file is empty", field="model")
+        require_room(self.data_dir, len(req.model), self.name, "the submitted file")
         art = s.Artifact(artifact_id=content_id(req.model), name=req.filename, media_type=MODEL_MEDIA[req.source],
                          data=req.model)
         job_id = uuid.uuid4().hex[:12]
@@ -304,6 +306,12 @@ class SupervisorService(Service):
                 return
             try:
                 self.client.load(head.program_id, job_id=head.job_id)
+            except (DiskFull, BadRequest) as err:  # a load that cannot succeed is not tried again: the job fails
+                self.log.warning("job %s cannot be loaded: %s: %s", head.job_id, err.code, err.message)
+                self._step(lambda: self._fail(head.job_id, err))
+                self._release_if_final(head)
+                self.wake.set()
+                return
             except StateError as err:             # the station is busy after all (e.g. a stop's lift): wait
                 self.log.info("job %s waits: %s", head.job_id, err.message)
                 self._step(lambda: self._wait_for(self.store.get(head.job_id), "station"))
@@ -349,6 +357,14 @@ class SupervisorService(Service):
         if rec.start:
             self.store.set_plate_clear(False)
         return rec.start, rec.rtf
+
+    def _fail(self, job_id: str, err: FabricError) -> None:
+        """(Writer) The job failed with a typed error (its code and message are its reason)."""
+        rec = self.store.get(job_id)
+        wire = err.to_wire()
+        rec.state, rec.reason, rec.stage, rec.ended_s = "failed", f"{err.code}: {err.message}", "failed", time.time()
+        rec.error = s.ErrorReply(code=wire["code"], message=wire["message"], details=wire["details"])
+        self._save(rec)
 
     def _prepare_again(self, job_id: str, why: str) -> None:
         rec = self.store.get(job_id)

@@ -13,6 +13,7 @@ class that matches it)::
     │   ├── ConfigError              "config"          cell / service configuration
     │   └── PlacementError           "placement"       part does not fit plate/volume
     ├── UnreachableError             "unreachable"     IK failed: names the G-code line
+    ├── ColdExtrusionError           "cold_extrusion"  the program extrudes below the material's minimum
     ├── CollisionError               "collision"       a move would collide
     ├── StateError                   "state"           command not valid in this state
     ├── NotFound                     "not_found"       unknown job / artifact / robot
@@ -20,6 +21,7 @@ class that matches it)::
     ├── ServiceUnavailable           "unavailable"     no service answered in time
     ├── PermissionDenied             "forbidden"       the caller's role may not do this
     ├── StoreError                   "store"           a database file is damaged, or newer than this release
+    ├── DiskFull                     "disk_full"       a service's disk has no room for the work
     └── InternalError                "internal"        unexpected failure (bug)
 
 Every error carries ``details``: a dict of plain values that a caller can act
@@ -32,6 +34,8 @@ may rely on, by class (others may be present)::
     ConfigError        field: str (``section.key``), value
     UnreachableError   reason: str (one of UNREACHABLE_REASONS), gcode_line: int (-1: not from G-code),
                        and where known row: int, joint: int (0-based), xyz_mm: list[float], probe: int
+    ColdExtrusionError reason: str (one of COLD_EXTRUSION_REASONS), gcode_line, row: int, nozzle_c: float
+                       (the set point), min_c: float, set_line: int, waited_c: float | None, wait_line: int
     CollisionError     the fields of ``collision.Hit``: body_a, body_b: str, t_s: float,
                        row, gcode_line, layer: int, move_r: float
     StateError         state: str, command: str
@@ -40,6 +44,7 @@ may rely on, by class (others may be present)::
     PermissionDenied   role: str, service: str, command: str
     StoreError         file: str, reason: str ("damaged", "newer", "migration", "open"), and for
                        "newer" and "migration" table: str, version: int
+    DiskFull           service: str, path: str, free_mb: float, need_mb: float
 """
 from __future__ import annotations
 
@@ -50,6 +55,7 @@ __all__ = [
     "MeshError", "ProfileError", "ConfigError", "PlacementError", "UnreachableError",
     "CollisionError", "StateError", "NotFound", "SlicerError", "ServiceUnavailable",
     "PermissionDenied", "StoreError", "InternalError", "error_from_code", "UNREACHABLE_REASONS",
+    "ColdExtrusionError", "COLD_EXTRUSION_REASONS",
 ]
 
 UNREACHABLE_REASONS = ("out of reach", "joint limit", "singular", "joint jump", "off the plate", "below the plate")
@@ -57,6 +63,11 @@ UNREACHABLE_REASONS = ("out of reach", "joint limit", "singular", "joint jump", 
 solution only beyond a joint's limits, at a singularity, or a configuration change between two
 consecutive targets (``fabric.robot.kinematics.ik_reason`` maps the IK status codes to these); or
 outside the work envelope: beyond the plate's edges, or under its surface (``fabric.planning.envelope``)."""
+
+COLD_EXTRUSION_REASONS = ("set below the minimum", "not heated")
+"""Why a program would extrude cold (``ColdExtrusionError.details['reason']``): the nozzle's set point is
+below the material's minimum extrusion temperature, or it is not but nothing waits (M109) for the nozzle
+to get there (``fabric.motion.cold``)."""
 
 
 class FabricError(Exception):
@@ -129,6 +140,13 @@ class UnreachableError(FabricError):
         super().__init__(message, reason=reason, gcode_line=int(gcode_line), **details)
 
 
+class ColdExtrusionError(FabricError):
+    """A program that would extrude below its material's minimum extrusion temperature; ``details`` has
+    ``reason`` (one of ``COLD_EXTRUSION_REASONS``), ``gcode_line`` and the temperatures."""
+
+    code = "cold_extrusion"
+
+
 class CollisionError(FabricError):
     code = "collision"
 
@@ -163,6 +181,13 @@ class StoreError(FabricError):
     says what to do."""
 
     code = "store"
+
+
+class DiskFull(FabricError):
+    """A service's disk has no room for the work asked (checked before it is accepted), or ran out of room
+    doing it (``ENOSPC``): nothing was half-written that counts; free space, then ask again."""
+
+    code = "disk_full"
 
 
 class InternalError(FabricError):
