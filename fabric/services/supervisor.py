@@ -40,7 +40,9 @@ from fabric.wire.config import service_data_dir
 from fabric.wire.errors import BadRequest, DiskFull, FabricError, NotFound, StateError, ValidationError
 from fabric.wire.keys import SERVICES, parse_alive
 from fabric.printjobs.events import apply_event, job_id_of_event
+from fabric.printjobs.follower import EventFollower
 from fabric.printjobs.prepare import PrepareCancelled, Preparer
+from fabric.printjobs.queue import PREPARER_FIELDS, STATION_FREE, WAITING_STATES, WAITING_TEXT, next_to_load
 from fabric.programs import content_id
 from fabric.server.disk import require_room
 from fabric.server.service import Service
@@ -49,18 +51,9 @@ from fabric.store.jobs import JobStore
 
 __all__ = ["SupervisorService", "build", "add_arguments"]
 
-WAITING_STATES = ("queued", "slicing", "planning", "checking")
-STATION_FREE = ("idle", "ready", "stopped", "fault")
 MODEL_MEDIA = {"model": "application/octet-stream", "gcode": "text/x-gcode"}
 STEP_TIMEOUT_S = 4.0          # a change not begun by then is dropped (under the 5 s a caller waits)
-EVENT_BATCH = 500             # station events applied in one step of the writer, at most
-# what the preparer writes onto a job's record (nothing else: ``start`` or the queue order may change meanwhile)
-PREPARER_FIELDS = ("state", "stage", "progress_r", "prepared", "reason", "error", "ended_s", "gcode_id",
-                   "program_id", "plan", "collisions")
 T = TypeVar("T")
-WAITING_TEXT = {"plate": "prepared: confirm the plate is clear (job next)",
-                "station": "prepared: waiting for the station to be free",
-                "queue": "prepared: waiting behind the jobs ahead of it"}
 
 
 class SupervisorService(Service):
@@ -95,7 +88,7 @@ class SupervisorService(Service):
         self._workers = [threading.Thread(target=target, name=f"supervisor:{name}", daemon=True)
                          for target, name in ((lambda: self.writer.run(self.closed), "writer"),
                                               (self._track, "liveliness"), (self._prepare_loop, "prepare"),
-                                              (self._follow_loop, "follow"))]
+                                              (self._follow_events, "follow"))]
         for t in self._workers:
             t.start()
         super().start()
@@ -332,22 +325,12 @@ class SupervisorService(Service):
         """(Writer) The job to load now, marked as being loaded; None when there is none or one is loading."""
         if self._loading:
             return None
-        waiting = self._waiting()
-        if not waiting:
-            return None
-        head = waiting[0]
-        for rec in waiting[1:]:
-            self._wait_for(rec, "queue")
-        if not head.prepared:
-            return None
-        if self._on_station() is not None:
-            self._wait_for(head, "station")
-            return None
-        if not self.store.plate_clear():
-            self._wait_for(head, "plate")
-            return None
-        self._loading = head.job_id
-        return head
+        decision = next_to_load(self._waiting(), self._on_station(), self.store.plate_clear())
+        for rec, what in decision.waits:
+            self._wait_for(rec, what)
+        if decision.load is not None:
+            self._loading = decision.load.job_id
+        return decision.load
 
     def _loaded(self, job_id: str) -> tuple[bool, float]:
         """(Writer) The station took the job: record it, and whether to start it now (as the record says now)."""
@@ -402,43 +385,10 @@ class SupervisorService(Service):
 
     # --- following the station ------------------------------------------------------
 
-    def _follow_loop(self) -> None:
-        """Apply the station's events to the jobs: first the log since the last one applied, then the
-        live stream (subscribed before the log was read, so nothing falls in between). Events are applied
-        in batches, each one step of the writer."""
-        caught_up = False
+    def _follow_events(self) -> None:
         self._seen = self.store.last_event_seq()
         self._seen_saved_s = time.monotonic()
-        while not self.closed.is_set():
-            if not caught_up:
-                caught_up = self._catch_up()
-                if not caught_up:
-                    self.closed.wait(1.0)
-                    continue
-            try:
-                batch = [self._events.get(timeout=0.5)]
-            except queue.Empty:
-                continue
-            while len(batch) < EVENT_BATCH:
-                try:
-                    batch.append(self._events.get(timeout=0))
-                except queue.Empty:
-                    break
-            caught_up = self._apply_batch(batch)
-
-    def _catch_up(self) -> bool:
-        try:
-            since = self._seen + 1
-            while True:
-                batch = [ev for ev in self.client.events(since).events if ev.seq >= since]
-                if batch:
-                    self._apply_batch(batch)
-                    since = batch[-1].seq + 1
-                if len(batch) < 10_000:
-                    return True
-        except FabricError as err:
-            self.log.info("cannot read the station's events yet (%s: %s)", err.code, err.message)
-            return False
+        EventFollower(self.client, self._events, lambda: self._seen, self._apply_batch, self.closed).run()
 
     def _apply_batch(self, events: list[s.Event]) -> bool:
         """Apply events in order (one writer step); False when a gap shows the log must be read first."""

@@ -15,13 +15,13 @@ from fabric.tui.format import duration_text, job_report
 from fabric.tui.screens.confirm import ConfirmDialog
 from fabric.tui.screens.report import ReportDialog
 from fabric.tui.widgets.reply_line import ReplyLine
+from fabric.printjobs.queue import WAITING_STATES
 
 if TYPE_CHECKING:
     from textual import getters
 
     from fabric.tui.app import FabricConsole
 
-WAITING_STATES = ("queued", "slicing", "planning", "checking")     # reorderable (the supervisor's queue)
 
 
 class JobsScreen(Screen):
