@@ -20,11 +20,11 @@ from pathlib import Path
 from fabric import schemas as s
 from fabric.cli.up import CellProcesses
 from fabric.client import Client
-from fabric.wire.config import SessionSettings
-from fabric.wire.errors import FabricError
 from fabric.client.follow import follow_print
 from fabric.programs import program_from_artifact
 from fabric.viz import toolpath_png
+from fabric.wire.config import SessionSettings
+from fabric.wire.errors import FabricError
 
 __all__ = ["main", "sample_model", "run_demo"]
 
@@ -75,7 +75,8 @@ def run_demo(client: Client, model: Path, out: Path, profile: str, backend: str,
     finally:
         ext_sub.close()
 
-    plan, coll = rec.plan, rec.collisions          # both set: the job went through planning and the check
+    plan, coll = rec.plan, rec.collisions
+    assert plan is not None and coll is not None, "a printed job went through planning and the check"
     slice_res = client.slice_result(rec.gcode_id)
     (out / f"{model.stem}.gcode").write_bytes(client.artifact("slicer", rec.gcode_id).data)
     program = program_from_artifact(client.artifact("planner", rec.program_id))

@@ -2,13 +2,14 @@
 from __future__ import annotations
 
 import hashlib
+from typing import cast
 
 import numpy as np
 
-from fabric.wire import codec
 from fabric import schemas as s
-from fabric.wire.errors import DecodeError, ValidationError
 from fabric.motion.program import COLUMNS, Program
+from fabric.wire import codec
+from fabric.wire.errors import DecodeError, ValidationError
 
 __all__ = ["program_to_msg", "program_from_msg", "program_artifact", "program_artifact_pieces",
            "program_from_artifact", "content_id", "PROGRAM_MEDIA_TYPE"]
@@ -58,7 +59,9 @@ def program_artifact_pieces(program: Program, name: str = "program") -> tuple[st
     for piece in body:
         digest.update(piece)
     artifact_id = digest.hexdigest()
-    art = s.Artifact(artifact_id=artifact_id, name=name, media_type=PROGRAM_MEDIA_TYPE, data=codec.Spliced(body))
+    # the codec writes a Spliced as the bytes field it stands in for (the body is never joined)
+    art = s.Artifact(artifact_id=artifact_id, name=name, media_type=PROGRAM_MEDIA_TYPE,
+                     data=cast(bytes, codec.Spliced(body)))
     return artifact_id, codec.encode_pieces(art)
 
 

@@ -7,10 +7,10 @@ from typing import Any, Union
 
 import numpy as np
 
-from fabric.wire.errors import UNREACHABLE_REASONS
-from fabric.services.telemetry_gate import EXTRUSION_PERIOD_S, TEMPS_PERIOD_S
-from fabric.wire.keys import ENDPOINTS, SERVICES, TOPICS
 from fabric.schemas import REGISTRY
+from fabric.services.telemetry_gate import EXTRUSION_PERIOD_S, TEMPS_PERIOD_S
+from fabric.wire.errors import UNREACHABLE_REASONS
+from fabric.wire.keys import ENDPOINTS, SERVICES, TOPICS
 
 __all__ = ["render"]
 
@@ -53,7 +53,8 @@ is an error reply (`reply_err`) whose payload is `common.Error`:
 `{"code": str, "message": str, "details": map}`. Codes: `bad_request`, `decode`,
 `validation` (details.field names the field), `gcode` (details.line), `mesh`, `profile`,
 `config`, `placement`, `unreachable` (details.gcode_line, details.reason: one of {reasons}),
-`collision` (details: the fields of `collision.Hit`), `state` (details.state, details.command), `not_found`, `slicer`, `unavailable`, `internal`.
+`collision` (details: the fields of `collision.Hit`), `state` (details.state, details.command), `not_found`,
+`slicer`, `unavailable`, `internal`.
 A service answers malformed payloads with `decode`/`validation` errors and keeps serving.
 
 Long work (slicing, planning, print jobs) is a **job**: the command replies at once with

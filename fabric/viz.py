@@ -3,7 +3,8 @@ faint) and a PNG of recorded telemetry (temperatures, speed, flow, extrusion aga
 from __future__ import annotations
 
 import io
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 

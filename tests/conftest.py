@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from fabric.cli.up import CellProcesses, hub_settings
 from fabric.client import wait_connected
 from fabric.wire.config import DATA_ROOT_ENV, SessionSettings, zenoh_config
-from fabric.cli.up import CellProcesses, hub_settings
 
 
 def pytest_configure(config) -> None:

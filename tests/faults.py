@@ -18,12 +18,12 @@ import numpy as np
 from fabric import schemas as s
 from fabric.cli.up import CellProcesses
 from fabric.client import Client
-from fabric.wire.config import SessionSettings
-from fabric.wire.errors import FabricError
 from fabric.demo import sample_model
 from fabric.programs import program_from_artifact
 from fabric.robot.cell import Cell
 from fabric.sim.twin import Twin
+from fabric.wire.config import SessionSettings
+from fabric.wire.errors import FabricError
 
 PROFILE = "robot-1.2mm"
 KILL_PHASE = {"slicer": "slicing", "planner": "planning", "station": "printing", "supervisor": None}
@@ -53,7 +53,7 @@ class SupervisedCell:
         self._stop = threading.Event()
         self.log: list[str] = []
 
-    def __enter__(self) -> "SupervisedCell":
+    def __enter__(self) -> SupervisedCell:
         self.cell.start(deadline_s=120.0)
         self._thread = threading.Thread(target=self._supervise, daemon=True)
         self._thread.start()

@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fabric.wire.errors import NotFound, ValidationError
 from fabric.programs import content_id
 from fabric.schemas import Artifact
 from fabric.store.artifacts import ArtifactStore
+from fabric.wire.errors import NotFound, ValidationError
 
 
 def art(data: bytes, name: str = "a.gcode") -> Artifact:

@@ -4,12 +4,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fabric.wire.errors import ConfigError, StateError, ValidationError
-from fabric.sim.calibration import calibrate_plate
+from fabric.motion.testprog import square_program
 from fabric.robot.cell import Cell
 from fabric.robot.frames import inv_T, xyzrpy_to_T
-from fabric.motion.testprog import square_program
+from fabric.sim.calibration import calibrate_plate
 from fabric.sim.twin import Twin
+from fabric.wire.errors import ConfigError, StateError, ValidationError
 
 LO, HI = np.array([0.0, 0.0, -10.0]), np.array([250.0, 250.0, 0.0])
 
@@ -28,7 +28,7 @@ def test_fit_recovers_planted_error(seed: int) -> None:
     nominal = xyzrpy_to_T([475.0, -125.0, 10.0], [0, 0, 0])
     planted = xyzrpy_to_T([2.5, -3.0, 1.7], [0.3, -0.2, 0.4])
     true = nominal @ planted
-    res, plan, frames = calibrate_plate(nominal, true, LO, HI, 0.01, np.random.default_rng(seed))
+    res, _plan, frames = calibrate_plate(nominal, true, LO, HI, 0.01, np.random.default_rng(seed))
     dp, ang = pose_error(true, res.work_object_T)
     assert dp < 0.05 and ang < 0.01
     np.testing.assert_allclose(res.correction_xyz_mm, [2.5, -3.0, 1.7], atol=0.05)

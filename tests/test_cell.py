@@ -8,10 +8,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from fabric.wire.errors import ConfigError, NotFound
 from fabric.robot.cell import CELLS_DIR, Cell
-from fabric.robot.path_ik import solve_path
 from fabric.robot.kinematics import IK_OK
+from fabric.robot.path_ik import solve_path
+from fabric.wire.errors import ConfigError, NotFound
 
 IRB_TEXT = (CELLS_DIR / "irb140.toml").read_text()
 

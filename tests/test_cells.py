@@ -10,13 +10,14 @@ from dataclasses import replace
 import pytest
 import zenoh
 
-from conftest import make_settings
-from fabric.wire import codec
 from fabric import schemas as s
 from fabric.cli.up import CellProcesses, hub_settings
 from fabric.client import Client
+from fabric.wire import codec
 from fabric.wire.config import zenoh_config
 from fabric.wire.keys import Keys, parse_alive
+
+from conftest import make_settings
 
 pytestmark = pytest.mark.timeout(180)
 CELLS = 10

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from fabric.wire.errors import ValidationError
-from fabric.sim.deposition import Deposition, bead_area_mm2
 from fabric.motion.program import MOVEL, Program
+from fabric.sim.deposition import Deposition, bead_area_mm2
+from fabric.wire.errors import ValidationError
 
 
 def layered_program(heights: list[float], flow: float = 0.3, meta: dict | None = None) -> Program:

@@ -10,7 +10,6 @@ import time
 import numpy as np
 import pytest
 
-from fabric import schemas as s
 from fabric.client import Client
 from fabric.motion.testprog import square_program
 from fabric.programs import program_artifact

@@ -13,11 +13,11 @@ import msgpack
 import pytest
 import zenoh
 
-from fabric.wire import codec
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.demo import sample_model
 from fabric.client.follow import follow_print
+from fabric.demo import sample_model
+from fabric.wire import codec
 from fabric.wire.keys import ENDPOINTS, SERVICES
 
 pytestmark = pytest.mark.timeout(300)
@@ -89,7 +89,7 @@ def test_demo_path_through_the_processes(running_cell, client, tmp_path):
             assert len(msg["xyz_mm"]) == 3 and len(msg["q_deg"]) == 6
             with lock:
                 received.append(msg)
-        except Exception as exc:  # recorded and asserted on below
+        except Exception as exc:  # noqa: BLE001 - recorded and asserted on below
             errors.append(repr(exc))
 
     with zenoh.open(conf) as monitor:

@@ -3,15 +3,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings as hsettings, strategies as st
+from hypothesis import given
+from hypothesis import settings as hsettings
+from hypothesis import strategies as st
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.wire.errors import UnreachableError, ValidationError
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.envelope import ENV_BELOW_PLATE, ENV_OFF_PLATE, envelope_status
 from fabric.robot.cell import Cell
 from fabric.services.planner import PlannerService
+from fabric.wire.errors import UnreachableError, ValidationError
 
 pytestmark = pytest.mark.timeout(120)
 

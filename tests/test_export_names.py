@@ -6,7 +6,8 @@ import keyword
 import re
 
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fabric.planning import plan_gcode
 from fabric.planning.post import export_program, write_export

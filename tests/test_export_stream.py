@@ -7,11 +7,11 @@ import pytest
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.wire.errors import BadRequest, FabricError, NotFound, UnreachableError, ValidationError
 from fabric.planning.post.atomic import AtomicFiles
 from fabric.planning.post.stream import ExportStream
 from fabric.robot.cell import Cell
 from fabric.services.planner import PlannerService
+from fabric.wire.errors import BadRequest, FabricError, NotFound, UnreachableError, ValidationError
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -122,11 +122,10 @@ def test_writer_failure_reaches_the_reader() -> None:
 def test_atomic_files_all_or_nothing(tmp_path) -> None:
     a, b = tmp_path / "a.csv", tmp_path / "b.mod"
     b.write_text("old")
-    with pytest.raises(RuntimeError):
-        with AtomicFiles() as files:
-            files.open(a).write(b"new a")
-            files.open(b).write(b"new b")
-            raise RuntimeError("export failed half way")
+    with pytest.raises(RuntimeError), AtomicFiles() as files:
+        files.open(a).write(b"new a")
+        files.open(b).write(b"new b")
+        raise RuntimeError("export failed half way")
     assert not a.exists() and b.read_text() == "old"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["b.mod"]       # no temporary file left
     with AtomicFiles() as files:

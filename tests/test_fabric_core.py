@@ -10,13 +10,13 @@ import msgpack
 import pytest
 import zenoh
 
-from fabric.wire import codec
 from fabric import schemas as s
 from fabric.client import Client
+from fabric.services.supervisor import SupervisorService
+from fabric.wire import codec
 from fabric.wire.config import SessionSettings, add_session_args, settings_from_args, zenoh_config
 from fabric.wire.errors import DecodeError, NotFound, ServiceUnavailable, ValidationError
 from fabric.wire.keys import ENDPOINTS, Keys, parse_alive
-from fabric.services.supervisor import SupervisorService
 
 
 @pytest.fixture
@@ -213,8 +213,8 @@ def test_cmd_all_matches_every_command_of_a_service_only():
 
 
 def test_a_failed_job_carries_a_typed_error_the_client_raises_again():
-    from fabric.wire.errors import UnreachableError, error_from_code
     from fabric.server.jobs import JobRunner
+    from fabric.wire.errors import UnreachableError, error_from_code
 
     def fail(job):
         raise UnreachableError("G-code line 6 is out of reach", reason="out of reach", gcode_line=6, row=3)

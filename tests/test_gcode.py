@@ -9,11 +9,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fabric.wire.errors import GcodeError, ValidationError
-from fabric.gcode import (EV_BED_TEMP, EV_DWELL, EV_EXTRUDE, EV_FAN, EV_FW_RETRACT,
-                          EV_FW_UNRETRACT, EV_NOZZLE_TEMP, WAIT_ANY, WAIT_HEAT, WAIT_NONE,
-                          parse_gcode, parse_gcode_file)
+from fabric.gcode import (
+    EV_BED_TEMP,
+    EV_DWELL,
+    EV_EXTRUDE,
+    EV_FAN,
+    EV_FW_RETRACT,
+    EV_FW_UNRETRACT,
+    EV_NOZZLE_TEMP,
+    WAIT_ANY,
+    WAIT_HEAT,
+    WAIT_NONE,
+    parse_gcode,
+    parse_gcode_file,
+)
 from fabric.gcode.lexer import W_BAD, W_EMPTY, W_OK, lex_block
+from fabric.wire.errors import GcodeError, ValidationError
 
 
 def tp_of(text: str, **kw):
@@ -24,7 +35,7 @@ def tp_of(text: str, **kw):
 
 def test_numbers_parse_exactly_like_float() -> None:
     rng = np.random.default_rng(3)
-    toks = [f"{v:.{d}f}" for v, d in zip(rng.uniform(-1e5, 1e5, 3000), rng.integers(0, 9, 3000))]
+    toks = [f"{v:.{d}f}" for v, d in zip(rng.uniform(-1e5, 1e5, 3000), rng.integers(0, 9, 3000), strict=True)]
     toks += [".5", "-.25", "+3.", "007", "123456789012.345", "0.000000000001", "12345678901234567.5"]
     lx = lex_block(" ".join("X" + t for t in toks).encode())
     assert (lx.word_status == W_OK).all()

@@ -8,13 +8,14 @@ import uuid
 
 import pytest
 
-from conftest import free_port
 from fabric import schemas as s
 from fabric.cli.up import CellProcesses
 from fabric.client import Client
-from fabric.wire.config import SessionSettings
 from fabric.demo import sample_model
 from fabric.security.credentials import Credentials
+from fabric.wire.config import SessionSettings
+
+from conftest import free_port
 
 pytestmark = pytest.mark.timeout(180)
 PRINT_RTF = 250.0            # the sample part (~1,600 s simulated) prints in some 6 s

@@ -8,11 +8,19 @@ import pytest
 
 from fabric.robot import frames
 from fabric.robot.cell import Cell
-from fabric.robot.path_ik import joint_jumps, solve_path
 from fabric.robot.closed_form import ClosedFormIK
-from fabric.robot.kinematics import (IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR,
-                                   IRB140_ARM, SphericalWristArm)
+from fabric.robot.kinematics import (
+    IK_JOINT_LIMIT,
+    IK_JUMP,
+    IK_OK,
+    IK_OUT_OF_REACH,
+    IK_REASONS,
+    IK_SINGULAR,
+    IRB140_ARM,
+    SphericalWristArm,
+)
 from fabric.robot.model import IRB140_URDF, RobotModel
+from fabric.robot.path_ik import joint_jumps, solve_path
 
 
 @pytest.fixture(scope="module")
@@ -136,7 +144,7 @@ def test_throughput_on_a_toolpath(robot: RobotModel) -> None:
     q = _smooth_path(200_000)
     T = robot.fk(q)
     t0 = time.perf_counter()
-    qs, st = robot.ik(T, q[0])
+    _q, st = robot.ik(T, q[0])
     dt = time.perf_counter() - t0
     assert np.all(st != IK_OUT_OF_REACH)
     assert dt < 4.0, f"{len(q) / dt:,.0f} targets/s"    # ~1e6 targets/s on a quiet core

@@ -49,13 +49,13 @@ def test_up_starts_five_reports_a_dead_child_and_stops_all_on_ctrl_c():
         with Client.connect(replace(st, mode="client")) as client:
             client.wait_alive(deadline_s=30)
             pids = {m.group(1): int(m.group(2)) for m in
-                    (re.match(r"\s+(\w+)\s+pid (\d+)", l) for l in lines) if m}
+                    (re.match(r"\s+(\w+)\s+pid (\d+)", line) for line in lines) if m}
             assert set(pids) == set(SERVICES)
             assert all(_alive(p) for p in pids.values())
 
             os.kill(pids["planner"], signal.SIGKILL)
             assert seen.wait(10), "the launcher did not report the dead child"
-            assert any("planner exited with code -9" in l for l in lines)
+            assert any("planner exited with code -9" in line for line in lines)
             assert not client.alive(timeout=0.5)["planner"]
 
         proc.send_signal(signal.SIGINT)
@@ -69,10 +69,11 @@ def test_up_starts_five_reports_a_dead_child_and_stops_all_on_ctrl_c():
 
 
 def test_up_listens_where_asked_restarts_a_dead_service_and_stops_the_print_on_ctrl_c(tmp_path):
-    from conftest import free_port
     from fabric import schemas as s
     from fabric.demo import sample_model
     from fabric.store.station import StationStore
+
+    from conftest import free_port
 
     st = make_settings()
     port = free_port()
@@ -97,10 +98,10 @@ def test_up_listens_where_asked_restarts_a_dead_service_and_stops_the_print_on_c
         with Client.connect(client_settings) as client:
             client.wait_alive(deadline_s=30)           # the children joined the hub where it listens
             pids = {m.group(1): int(m.group(2)) for m in
-                    (re.match(r"\s+(\w+)\s+pid (\d+)", l) for l in lines) if m}
+                    (re.match(r"\s+(\w+)\s+pid (\d+)", line) for line in lines) if m}
             os.kill(pids["station"], signal.SIGKILL)
             assert restarted.wait(30), "the launcher did not restart the station: " + "".join(lines)
-            assert any("station exited with code -9; restarting" in l for l in lines)
+            assert any("station exited with code -9; restarting" in line for line in lines)
             client.wait_alive(("station",), deadline_s=60)
             new_pid = int(re.search(r"station restarted \(pid (\d+)", "".join(lines)).group(1))
 

@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fabric.wire.errors import GcodeError, ProfileError, ValidationError
 from fabric.gcode import parse_gcode, parse_gcode_file
 from fabric.gcode.material import HEAD_BYTES, Material, read_material
 from fabric.planning import PlanOptions, plan_gcode
@@ -15,6 +14,7 @@ from fabric.planning.material import ASSUMED_FILAMENT_DIAMETER_MM, resolve_mater
 from fabric.robot.cell import Cell
 from fabric.sim.twin import Twin
 from fabric.slicing import load_profile
+from fabric.wire.errors import GcodeError, ProfileError, ValidationError
 
 MOVES = "M83\nG1 X20 Y20 F3000\nG1 X40 Y20 E2\nG1 X40 Y40 E2\n"
 
@@ -114,7 +114,7 @@ def test_the_twin_counts_filament_with_the_programs_diameter(cell: Cell) -> None
     events = []
     while twin.state in ("printing", "paused") or twin.moving:
         events += twin.advance(1e6)
-    done = [e for e in events if e.kind == "finished"][0].data
+    done = next(e for e in events if e.kind == "finished").data
     assert done["extruded_mm3"] == pytest.approx(prog.deposited_volume_mm3(), rel=1e-9)
     assert done["filament_mm"] == pytest.approx(4.0, abs=1e-6)            # 4 mm of 2.85 mm filament, not 10.6
     assert twin.extrusion().filament_mm == pytest.approx(4.0, abs=1e-6)

@@ -4,12 +4,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fabric.wire.errors import UnreachableError, ValidationError
-from fabric.robot.frames import make_T
+from fabric.motion.program import MOVEJ, MOVEL, WAIT, Program
 from fabric.motion.timing import StartState, stop_timeline, time_program
 from fabric.motion.validate import validate_program
-from fabric.motion.program import MOVEJ, MOVEL, WAIT, Program
+from fabric.robot.frames import make_T
 from fabric.robot.model import IRB140_URDF, RobotModel
+from fabric.wire.errors import UnreachableError, ValidationError
 
 A = 2000.0
 
@@ -177,7 +177,7 @@ def test_controlled_stop_distance() -> None:
     tl = time_program(line_program(pts, speed=60.0, zone=1.0), PointRobot())
     t = tl.t_end_s[1] - 0.001                                  # 1 ms before the end of the first move
     smp = tl.sample(t)
-    st, row, s = stop_timeline(tl, t)
+    st, row, _s = stop_timeline(tl, t)
     travelled = np.sum(st.len_mm)
     assert travelled == pytest.approx(smp.tcp_speed_mm_s ** 2 / (2 * A), rel=1e-9)
     assert st.total_s == pytest.approx(smp.tcp_speed_mm_s / A, rel=1e-9)

@@ -9,12 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fabric.wire.errors import UnreachableError, ValidationError
+from fabric.motion.program import MOVEJ, MOVEL, PRINT, RETRACT, SET_TEMP, WAIT_TEMP
 from fabric.planning import PlanOptions, plan_gcode, plan_gcode_file
 from fabric.robot.cell import Cell
 from fabric.robot.kinematics import IK_OK
-from fabric.motion.program import (MOVEJ, MOVEL, PRINT, RETRACT, SET_TEMP,
-                                WAIT_TEMP)
+from fabric.wire.errors import UnreachableError, ValidationError
 
 
 @pytest.fixture(scope="module")
@@ -170,7 +169,7 @@ def test_program_structure_speeds_flow_events(cell: Cell) -> None:
     # Approach: joint move above the first bead, heat and wait there, linear move down to the bead's start
     assert p.section_bounds() == {"Approach": (0, 6), "Print": (6, len(p) - 2), "ReturnHome": (len(p) - 2, len(p))}
     assert p.op[[0, 5, -2, -1]].tolist() == [MOVEJ, MOVEL, MOVEL, MOVEJ]
-    assert [(int(o), int(ln)) for o, ln in zip(p.op[1:5], p.gcode_line[1:5])] == [
+    assert [(int(o), int(ln)) for o, ln in zip(p.op[1:5], p.gcode_line[1:5], strict=True)] == [
         (SET_TEMP, 2), (SET_TEMP, 3), (WAIT_TEMP, 9), (WAIT_TEMP, 10)]
     assert np.allclose(p.xyz_mm[0:5], [30, 30, 0.3 + cell.approach_height_mm])   # heating up there, clear
     assert np.allclose(p.xyz_mm[5], [30, 30, 0.3]) and p.zone_mm[5] == 0.0        # where line 14's bead starts
@@ -182,7 +181,8 @@ def test_program_structure_speeds_flow_events(cell: Cell) -> None:
     # events became rows before their moves, with their G-code lines
     ev = p.op[6:-2]
     lines = p.gcode_line[6:-2]
-    assert [(int(o), int(ln)) for o, ln in zip(ev, lines) if o > MOVEL] == [(RETRACT, 16), (RETRACT, 18), (SET_TEMP, 26)]
+    assert [(int(o), int(ln)) for o, ln in zip(ev, lines, strict=True) if o > MOVEL] == [
+        (RETRACT, 16), (RETRACT, 18), (SET_TEMP, 26)]
     assert p.value[(p.op == RETRACT)].tolist() == [-0.8, 0.8]
     # speeds: feed * speed_r, capped; flow per mm from E
     row = int(np.flatnonzero(p.gcode_line == 14)[0])

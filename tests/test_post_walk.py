@@ -4,11 +4,25 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fabric.wire.errors import ValidationError
 from fabric.motion.program import BED, MOVEJ, MOVEL, NOZZLE, PRINT, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
-from fabric.planning.post.walk import (BED_HEATER, NOZZLE_HEATER, Block, ExtruderOff, ExtruderOn, ExtruderRate,
-                                       JointMove, LayerStart, LinearMove, LinearRun, Retract, RowWalker, SetTemp, Wait,
-                                       WaitTemp)
+from fabric.planning.post.walk import (
+    BED_HEATER,
+    NOZZLE_HEATER,
+    Block,
+    ExtruderOff,
+    ExtruderOn,
+    ExtruderRate,
+    JointMove,
+    LayerStart,
+    LinearMove,
+    LinearRun,
+    Retract,
+    RowWalker,
+    SetTemp,
+    Wait,
+    WaitTemp,
+)
+from fabric.wire.errors import ValidationError
 
 
 def _program(rows: list[tuple]) -> Program:
@@ -86,7 +100,8 @@ def test_runs_are_the_plain_linear_moves() -> None:
     flow = np.repeat(rng.choice([0.0, 0.1, 0.12], n // 50), 50) * (rng.random(n) > 0.002)
     speed = np.repeat(rng.choice([10.0, 20.0], n // 100), 100)
     layer = np.repeat(np.arange(n // 700 + 1), 700)[:n]
-    p = _program([(int(o), float(f), float(v), 0.5, 0, int(k)) for o, f, v, k in zip(ops, flow, speed, layer)])
+    p = _program([(int(o), float(f), float(v), 0.5, 0, int(k))
+                  for o, f, v, k in zip(ops, flow, speed, layer, strict=True)])
     p.section[:300] = 0
     with_runs, reference = RowWalker(p, block_rows=1000, runs=True), RowWalker(p, block_rows=1000)
     expanded, expected, runs = [], [], 0

@@ -8,13 +8,21 @@ import re
 import numpy as np
 import pytest
 
-from fabric.wire.errors import ValidationError
+from fabric.motion.program import MOVEJ, MOVEL, PRINT, RETRACT, WAIT_TEMP
 from fabric.planning import PlanOptions, plan_gcode
-from fabric.planning.post import (CSV_COLUMNS, RapidOptions, export_program, write_csv, write_export, write_krl,
-                                  write_rapid, write_urscript)
+from fabric.planning.post import (
+    CSV_COLUMNS,
+    RapidOptions,
+    export_program,
+    write_csv,
+    write_export,
+    write_krl,
+    write_rapid,
+    write_urscript,
+)
 from fabric.robot.cell import Cell
 from fabric.robot.frames import R_from_quat, rot_x, rot_y, rot_z
-from fabric.motion.program import MOVEJ, MOVEL, PRINT, RETRACT, WAIT_TEMP
+from fabric.wire.errors import ValidationError
 
 
 @pytest.fixture(scope="module")

@@ -1,9 +1,9 @@
 """docs/protocol.md is generated from the key table and schemas: it must be current."""
 from pathlib import Path
 
-from fabric.wire.keys import ENDPOINTS, TOPICS
 from fabric.protocol_doc import render
 from fabric.schemas import REGISTRY
+from fabric.wire.keys import ENDPOINTS, TOPICS
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "protocol.md"
 

@@ -12,11 +12,11 @@ import msgpack
 import pytest
 import zenoh
 
-from fabric.wire import codec
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.wire.config import SessionSettings
 from fabric.services.supervisor import SupervisorService
+from fabric.wire import codec
+from fabric.wire.config import SessionSettings
 
 from conftest import free_port, relay_process
 

@@ -5,10 +5,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from fabric.wire.errors import ConfigError, NotFound, ValidationError
 from fabric.robot import frames
 from fabric.robot.kinematics import IRB140_ARM
 from fabric.robot.model import ACC_PER_S, IRB140_URDF, JERK_PER_S2, RobotModel, ToolGeometry
+from fabric.wire.errors import ConfigError, NotFound, ValidationError
 
 ABB_RANGES_DEG = [(-180, 180), (-90, 110), (-230, 50), (-200, 200), (-115, 115), (-400, 400)]
 ABB_SPEEDS_DEG_S = [200, 200, 260, 360, 360, 450]

@@ -16,6 +16,7 @@ import pytest
 
 from fabric.demo import sample_model
 from fabric.security.credentials import Credentials
+
 from test_multihost import ADDR_A, ADDR_B, fabric, hosts  # noqa: F401  (the fixture)
 
 pytestmark = [pytest.mark.timeout(300),

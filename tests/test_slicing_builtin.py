@@ -1,6 +1,7 @@
 """The built-in slicer: sectioning, bead model, G-code conventions, shells, seams, travel, progress."""
 from __future__ import annotations
 
+import itertools
 import math
 import re
 
@@ -175,7 +176,7 @@ def test_progress_is_monotonic_from_zero_to_one() -> None:
     seen: list[float] = []
     slice_model(ISLANDS, "i.stl", TAZ, progress=seen.append)
     assert seen[0] == 0.0 and seen[-1] == 1.0 and len(seen) > 4
-    assert all(b >= a for a, b in zip(seen, seen[1:], strict=False))
+    assert all(b >= a for a, b in itertools.pairwise(seen))
 
 
 def test_skirt_on_first_layer_only() -> None:

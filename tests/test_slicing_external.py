@@ -7,7 +7,6 @@ import shutil
 import numpy as np
 import pytest
 
-from fabric.wire.errors import NotFound, SlicerError
 from fabric.slicing import (
     Placement,
     available_backends,
@@ -18,6 +17,7 @@ from fabric.slicing import (
 from fabric.slicing import backends as backends_mod
 from fabric.slicing.gcode_stats import gcode_stats
 from fabric.slicing.samples import islands_part, to_stl_bytes
+from fabric.wire.errors import NotFound, SlicerError
 
 TAZ = load_profile("taz-pla-medium")
 ISLANDS = to_stl_bytes(islands_part())

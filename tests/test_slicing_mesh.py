@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 import trimesh
 
-from fabric.wire.errors import MeshError, NotFound, PlacementError, ProfileError
 from fabric.slicing import (
     Placement,
     list_profiles,
@@ -18,6 +17,7 @@ from fabric.slicing import (
 )
 from fabric.slicing.placement import place_mesh
 from fabric.slicing.samples import box, islands_part, to_stl_bytes
+from fabric.wire.errors import MeshError, NotFound, PlacementError, ProfileError
 
 BOX = box((20.0, 20.0, 10.0))
 BOX_STL = to_stl_bytes(BOX)
@@ -66,7 +66,7 @@ def test_3mf_units_and_build_transform_are_applied() -> None:
 
 # -- broken inputs -------------------------------------------------------------------------------
 def test_empty_file_is_a_mesh_error_naming_the_file() -> None:
-    with pytest.raises(MeshError, match="bracket.stl: the file is empty") as err:
+    with pytest.raises(MeshError, match=r"bracket\.stl: the file is empty") as err:
         load_mesh(b"", "bracket.stl")
     assert err.value.details["reason"] == "empty"
 
@@ -137,7 +137,7 @@ def test_placement_centres_on_the_plate_and_rotates() -> None:
 
 
 def test_part_larger_than_the_plate_names_axis_and_excess() -> None:
-    with pytest.raises(PlacementError, match="part is 300.00 mm in X, 50.00 mm more") as err:
+    with pytest.raises(PlacementError, match=r"part is 300\.00 mm in X, 50\.00 mm more") as err:
         place_mesh(box((300.0, 20.0, 10.0)), None)
     assert err.value.details["axis"] == "X" and err.value.details["excess_mm"] == pytest.approx(50.0)
     with pytest.raises(PlacementError, match="build height") as err:

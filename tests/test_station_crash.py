@@ -12,13 +12,13 @@ import pytest
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.wire.errors import StateError
 from fabric.motion.testprog import square_program
 from fabric.programs import program_artifact
 from fabric.robot.cell import Cell
 from fabric.services.collision import CollisionService
 from fabric.services.planner import PlannerService
 from fabric.sim.twin import Twin
+from fabric.wire.errors import StateError
 
 pytestmark = pytest.mark.timeout(240)
 

@@ -150,7 +150,8 @@ def test_a_damaged_file_is_a_typed_error_naming_it(tmp_path, store_type, name, d
         path.write_bytes(b"\x00garbage, not SQLite" * 1000)
     with pytest.raises(StoreError) as err:
         store_type(path)
-    assert err.value.details == {"file": str(path), "reason": "damaged"}
+    assert {k: err.value.details[k] for k in ("file", "reason")} == {"file": str(path), "reason": "damaged"}
+    assert err.value.details["problem"]                              # what SQLite or quick_check found
     assert str(path) in err.value.message and "damaged" in err.value.message and "move it aside" in err.value.message
 
 

@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from fabric.wire.errors import ValidationError
 from fabric.motion.program import BED, NOZZLE, SET_TEMP, WAIT, WAIT_TEMP, Program
 from fabric.motion.thermal import HeaterParams, Thermal
 from fabric.motion.timing import StartState, time_program
+from fabric.wire.errors import ValidationError
 
 
 class PointRobot:

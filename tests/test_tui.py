@@ -9,17 +9,18 @@ from pathlib import Path
 
 import pytest
 
-from conftest import make_settings
 from fabric.cli.up import CellProcesses
 from fabric.client import Client
 from fabric.demo import sample_model
-from fabric.wire.keys import SERVICES
 from fabric.tui.app import FabricConsole
 from fabric.tui.screens.cells import CellsDialog
 from fabric.tui.screens.confirm import ConfirmDialog
 from fabric.tui.screens.report import ReportDialog
 from fabric.tui.screens.submit import SubmitDialog
 from fabric.tui.screens.values import ValuesDialog
+from fabric.wire.keys import SERVICES
+
+from conftest import make_settings
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -139,7 +140,7 @@ def test_every_command_from_the_console(console_cell):
                 await until(pilot, lambda: app.reply is not before, what="rtf reply")
                 assert app.reply[1] and "rtf 50" in app.reply[2]
                 await until(pilot, lambda: app.station_state.rtf == 50.0, what="rtf in the state")
-                app.station_state  # the last reply stays on screen until the next
+                # the last reply stays on screen until the next
                 assert "rtf 50" in str(app.screen.query_one("#reply").render())
     asyncio.run(scenario())
 

@@ -1,15 +1,17 @@
 """The twin's state machine: exact timing under any stepping, pause/resume, stop, overrides, heat, faults."""
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
-from fabric.wire.errors import CollisionError, StateError, UnreachableError, ValidationError
-from fabric.robot.cell import Cell
 from fabric.motion.program import BED, Program
 from fabric.motion.testprog import square_program
 from fabric.motion.thermal import Thermal
+from fabric.robot.cell import Cell
 from fabric.sim.twin import Twin
+from fabric.wire.errors import CollisionError, StateError, UnreachableError, ValidationError
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +53,7 @@ def test_same_total_and_volume_for_fine_and_huge_steps(cell: Cell, prog: Program
         assert fin[0].t_sim_s == pytest.approx(est, rel=1e-9)
         results.append((total, twin.extrusion().extruded_mm3, twin.beads.total_volume_mm3, len(twin.beads)))
         seqs = [e.seq for e in events]
-        assert seqs == sorted(seqs) and all(b.t_sim_s >= a.t_sim_s for a, b in zip(events, events[1:]))
+        assert seqs == sorted(seqs) and all(b.t_sim_s >= a.t_sim_s for a, b in itertools.pairwise(events))
     (t1, v1, b1, n1), (t2, v2, b2, n2) = results
     assert t1 == pytest.approx(t2, rel=1e-12)
     assert v1 == pytest.approx(v2, rel=1e-12) and v1 == pytest.approx(prog.deposited_volume_mm3(), rel=1e-9)

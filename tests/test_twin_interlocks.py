@@ -6,12 +6,12 @@ from collections.abc import Callable
 
 import pytest
 
-from fabric.wire.codec import pack
-from fabric.wire.errors import FabricError, StateError, ValidationError
 from fabric.motion.program import Program
 from fabric.motion.testprog import square_program
 from fabric.robot.cell import Cell
 from fabric.sim.twin import Twin
+from fabric.wire.codec import pack
+from fabric.wire.errors import FabricError, StateError, ValidationError
 
 
 @pytest.fixture(scope="module")

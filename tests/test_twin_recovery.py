@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fabric.wire.codec import pack, unpack
-from fabric.wire.errors import CollisionError, StateError, ValidationError
 from fabric.motion.program import Program
 from fabric.motion.testprog import square_program
 from fabric.robot.cell import Cell
 from fabric.sim.twin import Twin
+from fabric.wire.codec import pack, unpack
+from fabric.wire.errors import CollisionError, StateError, ValidationError
 
 
 @pytest.fixture(scope="module")

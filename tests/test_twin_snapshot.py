@@ -6,12 +6,12 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from fabric.wire.codec import pack, unpack
-from fabric.wire.errors import ValidationError
 from fabric.motion.program import Program
 from fabric.motion.testprog import square_program
 from fabric.robot.cell import Cell
 from fabric.sim.twin import Twin
+from fabric.wire.codec import pack, unpack
+from fabric.wire.errors import ValidationError
 
 Script = list[tuple[float, Callable[[Twin], None] | None]]
 

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import hashlib
-import os
 from pathlib import Path
 
 import pytest
@@ -11,12 +10,12 @@ import trimesh
 from fabric import schemas as s
 from fabric.cli.inputs import LIMIT_ENV, LargeInput, gcode_source, read_input, read_whole
 from fabric.client import Client, input_size
-from fabric.wire.errors import BadRequest, ConfigError, NotFound, ValidationError
 from fabric.robot.cell import Cell
 from fabric.schemas.upload import INLINE_MAX_BYTES, UPLOAD_CHUNK_MAX_BYTES
+from fabric.server.uploads import UploadStore
 from fabric.services.planner import PlannerService
 from fabric.services.slicer import SlicerService
-from fabric.server.uploads import UploadStore
+from fabric.wire.errors import BadRequest, ConfigError, NotFound, ValidationError
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -6,11 +6,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fabric.collision.sweep import CollisionChecker
 from fabric.demo import sample_model
 from fabric.planning import PlanOptions, plan_gcode
-from fabric.services.collision import sweep_program
 from fabric.robot.cell import Cell
-from fabric.collision.sweep import CollisionChecker
+from fabric.services.collision import sweep_program
 from fabric.sim.twin import Twin
 from fabric.slicing import load_profile, slice_model
 

@@ -12,7 +12,8 @@ import math
 
 import pytest
 import trimesh
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from fabric.demo import sample_model
 from fabric.planning import plan_gcode

@@ -8,9 +8,9 @@ from pathlib import Path
 from typing import BinaryIO
 
 from fabric import schemas as s
+from fabric.cli.inputs import LargeInput, gcode_source, model_source, read_input
 from fabric.cli.output import emit
 from fabric.client import Client
-from fabric.cli.inputs import gcode_source, model_source, read_input
 from fabric.wire.errors import BadRequest
 
 __all__ = ["register", "parse_sets", "read_input"]
@@ -58,7 +58,7 @@ def cmd_slice(c: Client, a: argparse.Namespace) -> int:
     return 0
 
 
-def plan_file(c: Client, data: bytes, filename: str, a: argparse.Namespace,
+def plan_file(c: Client, data: bytes | LargeInput, filename: str, a: argparse.Namespace,
               exports: dict[str, BinaryIO] | None = None) -> tuple[s.PlanSummary, dict[str, int]]:
     """Plan G-code; returns its summary and the bytes of each export written into ``exports`` (format ->
     binary stream). The exports are asked for by job id at once, so the planner streams each as soon as
@@ -78,7 +78,7 @@ def plan_file(c: Client, data: bytes, filename: str, a: argparse.Namespace,
 
 
 def cmd_plan(c: Client, a: argparse.Namespace) -> int:
-    from fabric.planning.memory import keep_freed_memory    # only this command needs these
+    from fabric.planning.memory import keep_freed_memory  # only this command needs these
     from fabric.planning.post.atomic import AtomicFiles
     keep_freed_memory()                     # export chunks reuse the pages of the ones before
     data = read_input(a.gcode)
@@ -104,6 +104,8 @@ def cmd_plan(c: Client, a: argparse.Namespace) -> int:
         fu = r.first_unreachable
         if fu is not None:
             lines.append(f"NOT RUNNABLE: first unreachable target at G-code line {fu.gcode_line}: {fu.reason}")
+        if r.cold_extrusion is not None:
+            lines.append(f"NOT RUNNABLE: cold extrusion: {r.cold_extrusion.message}")
         outside = {k: v for k, v in r.unreachable_by_reason.items() if k in ("off the plate", "below the plate")}
         if outside:
             lines.append(", ".join(f"{n} targets {k}" for k, n in outside.items())

@@ -11,7 +11,9 @@ from fabric.client import Client
 from fabric.wire.errors import BadRequest, FabricError
 from fabric.wire.keys import SERVICES
 
-__all__ = ["register"]
+__all__ = ["register", "NOT_READY_EXIT"]
+
+NOT_READY_EXIT = 2          # `ready` when the station is not ready (1 is an error, as for every command)
 
 
 def _pose_text(p) -> str:
@@ -175,10 +177,11 @@ def _layer_index(number: int | None) -> int:
 
 
 def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
-    def simple(name: str, fn, text, help_: str, **kw):
+    def simple(name: str, fn, text, help_: str, exit_code=None, **kw):
         def run(c: Client, a: argparse.Namespace) -> int:
-            emit(fn(c, a), a.json, text)
-            return 0
+            result = fn(c, a)
+            emit(result, a.json, text)
+            return exit_code(result) if exit_code is not None else 0
 
         p = sub.add_parser(name, parents=[common], help=help_)
         p.set_defaults(run=run, **kw)
@@ -212,7 +215,8 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     simple("collisions", lambda c, a: c.collisions(), _collision_text, "sweep the loaded program for collisions")
     p = sub.add_parser("calibrate", parents=[common], help="probe the plate and fit the work object")
     p.set_defaults(run=cmd_calibrate)
-    simple("ready", lambda c, a: c.ready(), _ready_text, "station-ready checklist")
+    simple("ready", lambda c, a: c.ready(), _ready_text, "station-ready checklist (exit 2: NOT READY)",
+           exit_code=lambda r: 0 if r.ready else NOT_READY_EXIT)
     simple("time", lambda c, a: c.time(), _time_text, "simulation time: elapsed, total, remaining")
     simple("state", lambda c, a: c.state(), None, "the station's state snapshot")
     p = simple("events", lambda c, a: c.events(a.since, kinds=a.kind), _events_text, "event history")

@@ -12,6 +12,7 @@ joins it as a client with the services' credentials.
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import os
 import queue
@@ -20,17 +21,18 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import zenoh
 
 from fabric.client import Client
+from fabric.security.credentials import Credentials
+from fabric.security.hub import hub_zenoh_config, role_settings
 from fabric.wire.config import SessionSettings, zenoh_config
 from fabric.wire.errors import FabricError, ServiceUnavailable
 from fabric.wire.keys import SERVICES, Keys
-from fabric.security.credentials import Credentials
-from fabric.security.hub import hub_zenoh_config, role_settings
 
 __all__ = ["CellProcesses", "hub_settings", "run_up"]
 
@@ -52,6 +54,17 @@ def _die_with_parent() -> None:
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
     except OSError:
         pass                       # not Linux: the process group still lets the launcher stop them
+
+
+def _child_setup(pgid: int) -> Callable[[], None]:
+    """In the child, before exec: join process group ``pgid`` (0: a new group led by the child) and die
+    with the launcher. (Popen's own ``process_group`` argument needs Python 3.11.)"""
+
+    def setup() -> None:
+        os.setpgid(0, pgid)
+        _die_with_parent()
+
+    return setup
 
 
 @dataclass
@@ -134,19 +147,21 @@ class CellProcesses:
         if self.data_dir is not None:
             cmd += ["--data-dir", str(self.data_dir)]
         cmd += self.extra_args.get(name, [])
-        out = None
+        log = None
         if self.log_dir is not None:
             self.log_dir.mkdir(parents=True, exist_ok=True)
-            out = open(self.log_dir / f"{name}.log", "ab")
+            log = self.log_dir / f"{name}.log"
         env = dict(os.environ, PYTHONUNBUFFERED="1")
-        try:
-            proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT if out else None, env=env,
-                                    process_group=self._pgid or 0, preexec_fn=_die_with_parent)
-        except (PermissionError, subprocess.SubprocessError):
-            # the group is gone (all its members exited): start a new one
-            proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT if out else None, env=env,
-                                    process_group=0, preexec_fn=_die_with_parent)
-            self._pgid = proc.pid
+        # the child writes to its own copy of the log file; the launcher's is closed once it is started
+        with open(log, "ab") if log is not None else contextlib.nullcontext() as out:
+            try:
+                proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT if out else None, env=env,
+                                        preexec_fn=_child_setup(self._pgid or 0))
+            except (PermissionError, subprocess.SubprocessError):
+                # the group is gone (all its members exited): start a new one
+                proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT if out else None, env=env,
+                                        preexec_fn=_child_setup(0))
+                self._pgid = proc.pid
         if self._pgid is None:
             self._pgid = proc.pid
         return proc

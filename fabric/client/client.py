@@ -212,6 +212,7 @@ class Client:
     def recover(self, rtf: float | None = None, from_layer: int = -1) -> s.Ack:
         return self.call("station", "recover", s.StartRequest(rtf=rtf, from_layer=from_layer))
     def stop(self) -> s.Ack: return self.call("station", "stop")
+    def clear_plate(self) -> s.Ack: return self.call("station", "clear_plate")
     def collisions(self) -> s.CollisionReport: return self.call("station", "collisions")
     def calibrate(self) -> s.CalibrationReport: return self.call("station", "calibrate")
     def ready(self) -> s.ReadyReport: return self.call("station", "ready")

@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import queue
 import time
-from typing import TYPE_CHECKING, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from fabric import schemas as s
 from fabric.wire.errors import ServiceUnavailable, error_from_code
@@ -18,7 +19,7 @@ if TYPE_CHECKING:
 __all__ = ["wait_job", "wait_print_job"]
 
 
-def wait_job(client: "Client", service: str, job_id: str, timeout: float = 600.0,
+def wait_job(client: Client, service: str, job_id: str, timeout: float = 600.0,
              on_progress: Callable[[s.JobStatus], None] | None = None) -> s.JobStatus:
     """Follow a job (snapshot, then the progress stream) until it ends; raise its error if it failed."""
     sub = client.subscribe(service, "progress")
@@ -45,7 +46,7 @@ def wait_job(client: "Client", service: str, job_id: str, timeout: float = 600.0
         sub.close()
 
 
-def wait_print_job(client: "Client", job_id: str, done: Callable[[s.JobRecord], bool], timeout: float = 600.0,
+def wait_print_job(client: Client, job_id: str, done: Callable[[s.JobRecord], bool], timeout: float = 600.0,
                    on_change: Callable[[s.JobRecord], None] | None = None) -> s.JobRecord:
     """Follow a print job (its record, then the ``jobs`` stream) until ``done(record)`` or its
     state is final; raise its typed error if it failed."""

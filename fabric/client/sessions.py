@@ -5,8 +5,8 @@ import time
 
 import zenoh
 
-from fabric.wire import codec
 from fabric import schemas as s
+from fabric.wire import codec
 from fabric.wire.config import SessionSettings, zenoh_config
 from fabric.wire.errors import DecodeError, FabricError, PermissionDenied, ServiceUnavailable, error_from_code
 

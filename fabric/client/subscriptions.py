@@ -6,7 +6,8 @@ the change on); decoding and validation happen in the reading thread.
 from __future__ import annotations
 
 import queue
-from typing import Any, Callable, Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import zenoh
 

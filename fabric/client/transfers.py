@@ -11,11 +11,12 @@ import os
 import queue
 import threading
 import uuid
-from typing import TYPE_CHECKING, BinaryIO, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING, BinaryIO
 
 from fabric import schemas as s
-from fabric.wire.errors import BadRequest, ValidationError
 from fabric.schemas.upload import UPLOAD_CHUNK_BYTES, UPLOAD_CHUNK_MAX_BYTES
+from fabric.wire.errors import BadRequest, ValidationError
 
 if TYPE_CHECKING:
     from fabric.client import Client
@@ -29,9 +30,10 @@ __all__ = ["input_size", "upload_file", "export_to_file", "EXPORT_CHUNK_BYTES"]
 EXPORT_CHUNK_BYTES = 4 << 20
 
 
-def input_size(path: str | os.PathLike[str], max_bytes: int) -> int:
+def input_size(path: str | os.PathLike[str], max_bytes: int, limit_hint: str = "") -> int:
     """The size of an input file the user named, checked before it is read: BadRequest when it is not
-    there, ValidationError (field ``size``) when it is larger than ``max_bytes``."""
+    there, ValidationError (field ``size``) when it is larger than ``max_bytes`` (its message ends with
+    ``limit_hint``, e.g. how the caller's user sets the limit)."""
     try:
         size = os.stat(path).st_size
     except OSError:
@@ -39,12 +41,13 @@ def input_size(path: str | os.PathLike[str], max_bytes: int) -> int:
     if not os.path.isfile(path):
         raise BadRequest(f"not a file: {path}", file=str(path))
     if size > max_bytes:
-        raise ValidationError(f"{path} is {size / 2**20:,.1f} MB, more than the limit of {max_bytes / 2**20:,.0f} MB "
-                              "(--max-size-mb raises it)", field="size", file=str(path), value=size, limit=max_bytes)
+        raise ValidationError(f"{path} is {size / 2**20:,.1f} MB, more than the limit of {max_bytes / 2**20:,.0f} MB"
+                              + (f" ({limit_hint})" if limit_hint else ""), field="size", file=str(path), value=size,
+                              limit=max_bytes)
     return size
 
 
-def upload_file(client: "Client", service: str, path: str | os.PathLike[str], max_bytes: int,
+def upload_file(client: Client, service: str, path: str | os.PathLike[str], max_bytes: int,
                 chunk_bytes: int = UPLOAD_CHUNK_BYTES, on_progress: Callable[[int, int], None] | None = None) -> str:
     """Send a file to ``<service>/upload`` in pieces of ``chunk_bytes`` (its size checked against
     ``max_bytes`` before a byte is read, see :func:`input_size`); returns the upload id to name in the
@@ -67,7 +70,7 @@ def upload_file(client: "Client", service: str, path: str | os.PathLike[str], ma
                 return uid
 
 
-def export_to_file(client: "Client", program_id: str, fmt: str, out: BinaryIO, module_targets: int = 5000,
+def export_to_file(client: Client, program_id: str, fmt: str, out: BinaryIO, module_targets: int = 5000,
                    limit_bytes: int = EXPORT_CHUNK_BYTES, *, job_id: str = "") -> int:
     """Stream an export into ``out`` chunk by chunk; returns the bytes written.
 
@@ -115,7 +118,7 @@ class _ChunkWriter:
             raise self._error
         self._queue.put(data)
 
-    def __enter__(self) -> "_ChunkWriter":
+    def __enter__(self) -> _ChunkWriter:
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, *_: object) -> None:

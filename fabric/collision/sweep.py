@@ -22,8 +22,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from fabric.robot.cell import Cell
 from fabric.motion.program import MOVEJ, MOVEL, Program
+from fabric.robot.cell import Cell
 
 __all__ = ["Hit", "SweepResult", "CollisionChecker"]
 
@@ -85,7 +85,8 @@ class CollisionChecker:
     # --- configurations -------------------------------------------------------------
 
     @staticmethod
-    def sample(program: Program, q_start: np.ndarray | None, step_deg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def sample(program: Program, q_start: np.ndarray | None,
+               step_deg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Configurations along the program's moves: (q (M,nq), row (M,), fraction along row (M,))."""
         q = program.q_rad
         motion = np.flatnonzero(program.op <= MOVEL)

@@ -62,9 +62,9 @@ def _centres(s: np.ndarray, e: np.ndarray, cw: np.ndarray, ij: np.ndarray,
 
 
 class ArcChords(NamedTuple):
-    """Arcs expanded into chords: the points of arc ``k`` are its ``count[k]`` chord end points in order."""
+    """Arcs expanded into chords: the points of arc ``k`` are its ``n_points[k]`` chord end points in order."""
 
-    count: np.ndarray          # (A,) int64, 0 for a bad arc
+    n_points: np.ndarray       # (A,) int64, 0 for a bad arc
     points: np.ndarray         # (P, 3) mm
     e_mm: np.ndarray           # (P,) filament of each chord
     status: np.ndarray         # (A,) uint8 ARC_* (ARC_OK or why the arc is bad)

@@ -8,8 +8,18 @@ import numpy as np
 
 from fabric.gcode.commands import KNOWN, PARAMS
 from fabric.gcode.table import CommandTable, LineError
-from fabric.gcode.toolpath import (EV_BED_TEMP, EV_DWELL, EV_EXTRUDE, EV_FAN, EV_FW_RETRACT,
-                                   EV_FW_UNRETRACT, EV_NOZZLE_TEMP, WAIT_ANY, WAIT_HEAT, WAIT_NONE)
+from fabric.gcode.toolpath import (
+    EV_BED_TEMP,
+    EV_DWELL,
+    EV_EXTRUDE,
+    EV_FAN,
+    EV_FW_RETRACT,
+    EV_FW_UNRETRACT,
+    EV_NOZZLE_TEMP,
+    WAIT_ANY,
+    WAIT_HEAT,
+    WAIT_NONE,
+)
 
 __all__ = ["command_events", "BlockEvents", "ExtrudeOnly"]
 

@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fabric.wire.errors import GcodeError
 from fabric.gcode import arcs
 from fabric.gcode.commands import KNOWN, LENGTH_COLS, PARAMS
 from fabric.gcode.events import ExtrudeOnly, command_events
@@ -28,12 +27,13 @@ from fabric.gcode.lexer import Lexed, lex_block
 from fabric.gcode.modal import anchored, ffill, modal_setting, shifted
 from fabric.gcode.table import CommandTable, LineError, command_table
 from fabric.gcode.toolpath import RowColumns, Toolpath
+from fabric.wire.errors import GcodeError
 
 __all__ = ["Interpreter", "LexedBlock", "lex_and_tabulate", "DEFAULT_FEED_MM_S"]
 
 DEFAULT_FEED_MM_S = 25.0     # feed before the first F word (Marlin's 1500 mm/min)
 _G = dict(KNOWN)
-X, Y, Z, E, F, I, J, R, P, S, L = range(len(PARAMS))
+X, Y, Z, E, F, I, J, R, P, S, L = range(len(PARAMS))     # noqa: E741  (G-code's own parameter letters)
 _G3 = _G["G3"]                 # G0, G1, G2, G3 are the first four codes: motion is ``code <= _G3``
 _EVENT_COLUMNS = ("ev_row", "ev_kind", "ev_value", "ev_aux", "ev_line")
 
@@ -125,6 +125,7 @@ class Interpreter:
         self._out: dict[str, list[np.ndarray]] = {k: [] for k in _EVENT_COLUMNS}
         self._unknown: dict[str, int] = {}
         self._start: np.ndarray | None = None
+        self._chunks = _Chunks()
 
     # -- one block ---------------------------------------------------------
 
@@ -171,7 +172,7 @@ class Interpreter:
         st, g, code, par = self.state, _G, table.code, table.par
         unit = modal_setting(code, (g["G20"],), (g["G21"],), st.unit_mm, 25.4, 1.0)
         if np.any(unit != 1.0):                     # inches somewhere in the block
-            par[:, LENGTH_COLS] *= unit[:, None] if np.ndim(unit) else unit
+            par[:, LENGTH_COLS] *= unit[:, None] if isinstance(unit, np.ndarray) else unit
         abs_xyz = modal_setting(code, (g["G90"],), (g["G91"],), st.abs_xyz)
         abs_e = modal_setting(code, (g["G90"], g["M82"]), (g["G91"], g["M83"]), st.abs_e)
         feed_set = (code <= _G3) & table.has[:, F]
@@ -181,7 +182,8 @@ class Interpreter:
         feed = ffill(par[:, F] / 60.0, feed_set, st.feed_mm_s)
         if len(code):
             st.feed_mm_s = feed[-1]
-            st.unit_mm, st.abs_xyz, st.abs_e = (float(m[-1]) if np.ndim(m) else m for m in (unit, abs_xyz, abs_e))
+            st.unit_mm, st.abs_xyz, st.abs_e = (float(m[-1]) if isinstance(m, np.ndarray) else m
+                                                for m in (unit, abs_xyz, abs_e))
         return _Modes(unit, abs_xyz, abs_e, feed)
 
     def _positions(self, table: CommandTable, modes: _Modes) -> _Positions:
@@ -270,7 +272,7 @@ class Interpreter:
             bad = np.flatnonzero(chords.status)
             if len(bad):
                 errors.append(LineError(int(line[arc[bad[0]]]), arcs.ARC_REASONS[int(chords.status[bad[0]])]))
-            count[arc] = chords.count
+            count[arc] = chords.n_points
         total = int(count.sum())
         if chords is None:                          # straight moves only: one row per moving move
             xyz, e_rows = e[:, lin_row].T, e_move[lin_row]
@@ -300,6 +302,81 @@ class Interpreter:
         return {"ev_row": st.rows + np.searchsorted(row_line, ev.line, side="left"),
                 "ev_kind": ev.kind, "ev_value": ev.value, "ev_aux": ev.aux, "ev_line": st.lines + ev.line + 1}
 
+    # -- result in chunks ---------------------------------------------------
+
+    def take_chunk(self, min_rows: int, final: bool = False) -> Toolpath | None:
+        """The rows interpreted so far up to a *safe cut* as a toolpath of their own, once there are at least
+        ``min_rows`` (``final``: all the rows left, the file being at its end); None while there is no cut.
+
+        A safe cut lies between two rows that both extrude (filament fed while moving), with no event
+        between them: no travel run, lift or stop straddles it, so the chunks plan exactly as the whole
+        toolpath would (``fabric.planning.planner``). Each chunk starts where the last one ended
+        (``start_xyz_mm``); its event rows are its own. Layers: from the markers as they come, or inferred
+        from Z across chunks as :func:`~fabric.gcode.layers.infer_layers` does on the whole file, when the
+        file has shown no marker by its first chunk. ``layer_z_mm`` of a chunk is empty: the layers of the
+        whole file are in :meth:`chunk_summary` once the last chunk is taken.
+        """
+        ch = self._chunks
+        n = self._rows.n
+        if not final and n < max(min_rows, 2):
+            return None
+        cols = self._rows.cols
+        ev = {k: (np.concatenate(v) if len(v) > 1 else v[0]) if v else np.zeros(0) for k, v in self._out.items()}
+        for k, arr in ev.items():
+            self._out[k] = [arr] if len(arr) else []
+        ev_row = ev["ev_row"].astype(np.int64, copy=False) - ch.base if len(ev["ev_row"]) else np.zeros(0, np.int64)
+        if final:
+            c = n
+        else:
+            c = _safe_cut(cols["xyz"][:n], cols["e"][:n], ev_row)
+            if c <= 0:
+                return None
+        if ch.infer is None:
+            ch.infer = self.layers.layer_count == 0
+        start = ch.last_xyz if ch.last_xyz is not None else self._start
+        if start is None:
+            start = self.state.logical[:3] + self.state.offset[:3]
+        xyz, e = cols["xyz"][:c].copy(), cols["e"][:c].copy()
+        layer = ch.infer_layers(xyz, e) if ch.infer else cols["layer"][:c].copy()
+        if not ch.infer:
+            ch.first_extruding_z(xyz, e, layer)
+        sel = ev_row < c if not final else np.ones(len(ev_row), bool)
+        tp = Toolpath(
+            start_xyz_mm=np.array(start, dtype=float), xyz_mm=xyz, e_mm=e, feed_mm_s=cols["feed"][:c].copy(),
+            line=cols["line"][:c].copy(), layer=layer.astype(np.int32, copy=False),
+            feature=cols["feature"][:c].copy(), feature_names=list(self.layers.features),
+            event_row=ev_row[sel], event_kind=ev["ev_kind"][sel].astype("u1", copy=False),
+            event_value=ev["ev_value"][sel].astype("f8", copy=False), event_aux=ev["ev_aux"][sel].astype("i2", copy=False),
+            event_line=ev["ev_line"][sel].astype("i8", copy=False), layer_z_mm=np.zeros(0),
+            unknown_commands={}, n_lines=self.state.lines)
+        if c:
+            ch.last_xyz = xyz[-1].copy()
+        # the rest moves to the front of the columns; the events left keep their rows (relative to the new base)
+        for arr in cols.values():
+            arr[:n - c] = arr[c:n]
+        self._rows.n = n - c
+        ch.base += c
+        for k in self._out:
+            left = ev[k][~sel] if len(ev[k]) else ev[k]
+            self._out[k] = [left] if len(left) else []
+        return tp
+
+    def chunk_summary(self) -> ChunkSummary:
+        """What the whole file held, once its last chunk is taken: lines, layers and their Z, unknown commands."""
+        ch = self._chunks
+        if ch.infer is None or ch.infer:
+            layer_z = np.asarray(ch.layer_z, dtype=float)
+        else:
+            layer_z = np.full(self.layers.layer_count, np.nan)
+            for li, z in ch.first_z.items():
+                if li < len(layer_z):
+                    layer_z[li] = z
+            for li, z in self.layers.layer_z.items():
+                layer_z[li] = z
+        return ChunkSummary(n_lines=self.state.lines, n_rows=ch.base + self._rows.n, layer_z_mm=layer_z,
+                            unknown_commands=dict(sorted(self._unknown.items())),
+                            feature_names=list(self.layers.features))
+
     # -- result ------------------------------------------------------------
 
     def finish(self) -> Toolpath:
@@ -322,3 +399,80 @@ class Interpreter:
             event_aux=cat("ev_aux", "i2"), event_line=cat("ev_line", "i8"),
             layer_z_mm=layers.layer_z_mm, unknown_commands=dict(sorted(self._unknown.items())),
             n_lines=self.state.lines)
+
+
+@dataclass
+class ChunkSummary:
+    """The whole file, after its chunks (:meth:`Interpreter.take_chunk`)."""
+
+    n_lines: int
+    n_rows: int
+    layer_z_mm: np.ndarray
+    unknown_commands: dict[str, int]
+    feature_names: list[str]
+
+    @property
+    def n_layers(self) -> int:
+        return len(self.layer_z_mm)
+
+
+@dataclass
+class _Chunks:
+    """What one chunk leaves to the next: where the rows left start, the last point, the layer inference."""
+
+    base: int = 0                               # the toolpath row of the first row not yet taken
+    last_xyz: np.ndarray | None = None
+    infer: bool | None = None                   # layers inferred from Z (decided at the first chunk)
+    layer_z: list[float] = field(default_factory=list)      # inferred: Z of each layer so far
+    z_max: float = -np.inf                      # inferred: the highest extruding row so far
+    first_z: dict[int, float] = field(default_factory=dict)   # markers: Z of each layer's first extruding row
+
+    def infer_layers(self, xyz: np.ndarray, e: np.ndarray) -> np.ndarray:
+        """Layers of a chunk's rows from Z, continuing the chunks before (as ``infer_layers`` on the whole)."""
+        n = len(e)
+        before = len(self.layer_z) - 1
+        ext = np.flatnonzero(e > 0)
+        if len(ext) == 0:
+            return np.full(n, before, np.int32)
+        z = xyz[ext, 2]
+        prev = np.maximum.accumulate(np.concatenate([[self.z_max], z[:-1]]))
+        new = z > prev + 1e-6
+        ni = np.flatnonzero(new)
+        # a layer begins right after the previous extruding row: the row before this chunk's first one
+        # extruded (the cut is between extruding rows), so a new layer at ext[0] begins at row 0 of the chunk
+        first = ext[0] if not np.isfinite(self.z_max) else 0
+        starts = np.where(ni == 0, first, ext[np.maximum(ni - 1, 0)] + 1)
+        layer = before + np.searchsorted(starts, np.arange(n), side="right")
+        self.layer_z.extend(z[ni].tolist())
+        self.z_max = max(self.z_max, float(z.max()))
+        return layer.astype(np.int32)
+
+    def first_extruding_z(self, xyz: np.ndarray, e: np.ndarray, layer: np.ndarray) -> None:
+        """Markers: the Z of the first extruding row of each layer not seen before (its default Z)."""
+        ext = np.flatnonzero((e > 0) & (layer >= 0))
+        if len(ext) == 0:
+            return
+        u, first = np.unique(layer[ext], return_index=True)
+        for li, k in zip(u.tolist(), first.tolist(), strict=True):
+            self.first_z.setdefault(int(li), float(xyz[ext[k], 2]))
+
+
+def _safe_cut(xyz: np.ndarray, e: np.ndarray, ev_row: np.ndarray) -> int:
+    """The last row ``c`` (``2 <= c < n``) such that rows ``c - 1`` and ``c`` both extrude (filament fed while
+    moving more than 1e-9 mm) with no event at row ``c``; 0 if there is none."""
+    n = len(e)
+    lo = 1
+    for lo in (max(1, n - 65536), 1):
+        if n - lo < 2:
+            continue
+        d = xyz[lo:] - xyz[lo - 1:-1]
+        ext = (e[lo:] > 0) & (np.einsum("ij,ij->i", d, d) > 1e-18)     # rows lo..n-1
+        ok = ext[1:] & ext[:-1]                                       # c = lo + 1 .. n - 1
+        if len(ev_row):
+            ok[np.clip(ev_row - lo - 1, 0, len(ok) - 1)[(ev_row >= lo + 1) & (ev_row < n)]] = False
+        hit = np.flatnonzero(ok)
+        if len(hit):
+            return lo + 1 + int(hit[-1])
+        if lo == 1:
+            break
+    return 0

@@ -61,7 +61,7 @@ class LayerTracker:
         # ;Z: markers give the height of the layer they are in
         zi = np.flatnonzero(mk.kind == MK_Z)
         z_layer = self.layer_count - 1 + np.searchsorted(new_lines, mk.line[zi], side="right")
-        for layer, z in zip(z_layer, mk.z_mm[zi]):
+        for layer, z in zip(z_layer, mk.z_mm[zi], strict=True):
             if layer >= 0:
                 self.layer_z[int(layer)] = float(z)
         layer = (self.layer_count - 1 + np.searchsorted(new_lines, row_line, side="left")).astype(np.int32)

@@ -1,18 +1,19 @@
 """Entry points: G-code text or file -> :class:`Toolpath`, read in blocks of whole lines."""
 from __future__ import annotations
 
+import contextlib
 import os
 from collections.abc import Callable, Iterator
 from typing import BinaryIO
 
 from fabric.ahead import ordered_map
-from fabric.wire.errors import NotFound, ValidationError
 from fabric.gcode.dialects import detect_slicer
-from fabric.gcode.interp import Interpreter, LexedBlock, lex_and_tabulate
-from fabric.gcode.material import HEAD_BYTES, read_material
+from fabric.gcode.interp import ChunkSummary, Interpreter, LexedBlock, lex_and_tabulate
+from fabric.gcode.material import HEAD_BYTES, Material, read_material
 from fabric.gcode.toolpath import Toolpath
+from fabric.wire.errors import NotFound, ValidationError
 
-__all__ = ["parse_gcode", "parse_gcode_file", "iter_blocks", "BLOCK_BYTES"]
+__all__ = ["parse_gcode", "parse_gcode_file", "iter_blocks", "ToolpathChunks", "BLOCK_BYTES"]
 
 BLOCK_BYTES = 1 << 19      # ~20k lines (measured fastest with the lexer a block ahead: 0.33 s for 1M moves)
 LEX_AHEAD = 2              # blocks lexed by a worker thread ahead of the interpreter
@@ -97,7 +98,7 @@ def parse_gcode_file(path: str | os.PathLike[str], *, chord_tol_mm: float = 0.01
     _check(chord_tol_mm, block_bytes)
     try:
         size = os.path.getsize(path)
-        stream = open(path, "rb")
+        stream = open(path, "rb")     # noqa: SIM115  (closed by the with block below)
     except FileNotFoundError as exc:
         raise NotFound(f"G-code file not found: {path}", file=str(path)) from exc
     interp = Interpreter(chord_tol_mm, rows_hint=size // 12)      # moves take >= ~12 bytes of text
@@ -116,3 +117,81 @@ def parse_gcode_file(path: str | os.PathLike[str], *, chord_tol_mm: float = 0.01
     tp.slicer = detect_slicer(head[:8192])
     tp.material = read_material(head, tail, tp.n_lines)
     return tp
+
+
+class ToolpathChunks:
+    """G-code (text or bytes in memory, or a file named by a path) interpreted in chunks of about ``chunk_rows``
+    toolpath rows, so that what holds the rows never holds the whole file's (a 500 MB file is ~17 M rows).
+
+    Iterating gives ``(chunk, last)``: each chunk a :class:`Toolpath` ending at a safe cut
+    (:meth:`Interpreter.take_chunk`), ``last`` true for the final one (a chunk is handed over once the
+    next one exists, so the caller knows which is last). The slicer and the stated material come from the
+    file's first and last bytes, read before the first chunk (:meth:`material`); once the iteration has
+    ended, :attr:`summary` holds the lines, layers and unknown commands of the whole file.
+    """
+
+    def __init__(self, source: str | bytes | bytearray | memoryview | os.PathLike[str], *, chunk_rows: int,
+                 chord_tol_mm: float = 0.01, block_bytes: int = BLOCK_BYTES,
+                 progress: Callable[[float], None] | None = None) -> None:
+        _check(chord_tol_mm, block_bytes)
+        self.chunk_rows, self.chord_tol_mm, self.block_bytes = max(int(chunk_rows), 1), chord_tol_mm, block_bytes
+        self.progress = progress
+        self.summary: ChunkSummary | None = None
+        self.path: str | os.PathLike[str] | None = None
+        self.data: bytes | bytearray | None = None
+        if isinstance(source, os.PathLike):
+            self.path = source
+            try:
+                self.size = os.path.getsize(source)
+                with open(source, "rb") as f:
+                    self.head = f.read(HEAD_BYTES)
+                    f.seek(max(self.size - HEAD_BYTES, len(self.head)))
+                    self.tail = f.read(HEAD_BYTES)
+            except FileNotFoundError as exc:
+                raise NotFound(f"G-code file not found: {source}", file=str(source)) from exc
+        else:
+            if isinstance(source, str):
+                self.data = source.encode("utf-8", "surrogateescape")
+            else:
+                self.data = source if isinstance(source, (bytes, bytearray)) else bytes(source)
+            self.size = len(self.data)
+            view = memoryview(self.data).cast("B")
+            self.head = bytes(view[:HEAD_BYTES])
+            self.tail = bytes(view[max(self.size - HEAD_BYTES, HEAD_BYTES):])
+        self.slicer = detect_slicer(self.head[:8192])
+
+    def material(self, n_lines: int = 0) -> Material:
+        """What the file's comments state (``n_lines``, the file's line count, names the lines of errors in its
+        tail; it is known once the chunks are through: :attr:`summary`)."""
+        return read_material(self.head, self.tail, n_lines)
+
+    def __iter__(self) -> Iterator[tuple[Toolpath, bool]]:
+        interp = Interpreter(self.chord_tol_mm, rows_hint=self.chunk_rows + 2 * (self.block_bytes // 12))
+        pending: Toolpath | None = None
+        done = 0
+        with contextlib.ExitStack() as stack:
+            if self.data is not None:
+                view = memoryview(self.data).cast("B")
+                blocks: Iterator[bytes | memoryview] = _memory_blocks(self.data, view, self.block_bytes)
+            else:
+                assert self.path is not None
+                stream = stack.enter_context(open(self.path, "rb"))
+                blocks = iter_blocks(stream, self.block_bytes)
+            for lexed in lexed_blocks(blocks):
+                interp.feed_lexed(lexed)
+                done += len(lexed.block)
+                if self.progress is not None:
+                    self.progress(done / max(self.size, 1))
+                while (tp := interp.take_chunk(self.chunk_rows)) is not None:
+                    if pending is not None:
+                        yield pending, False
+                    pending = tp
+        final = interp.take_chunk(0, final=True)
+        assert final is not None                    # the final chunk is every row left
+        self.summary = interp.chunk_summary()
+        if pending is not None:
+            if len(final) == 0 and len(final.event_row) == 0:
+                yield pending, True                 # nothing after the last cut (it cannot be: kept for safety)
+                return
+            yield pending, False
+        yield final, True

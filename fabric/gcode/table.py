@@ -41,7 +41,7 @@ class CommandTable:
     def __len__(self) -> int:
         return len(self.code)
 
-    def rows(self, sel: np.ndarray) -> "CommandTable":
+    def rows(self, sel: np.ndarray) -> CommandTable:
         """The table of some rows."""
         return CommandTable(self.line[sel], self.code[sel], self.par[sel], self.has[sel])
 
@@ -89,7 +89,7 @@ def _count_unknown(unknown: dict[str, int], letter: np.ndarray, value: np.ndarra
         return
     keys = np.stack([letter[u].astype(np.float64), np.where(status[u] == W_OK, value[u], np.nan)], 1)
     distinct, counts = np.unique(keys, axis=0, return_counts=True)
-    for (let, val), n in zip(distinct, counts):
+    for (let, val), n in zip(distinct, counts, strict=True):
         name = chr(int(let))
         if np.isfinite(val):
             name += str(int(val)) if val == int(val) and abs(val) < 1e15 else f"{val:g}"

@@ -110,7 +110,7 @@ class Toolpath:
         sel = self.event_kind == kind
         return self.event_row[sel], self.event_value[sel], self.event_aux[sel]
 
-    def slice(self, start: int, stop: int) -> "Toolpath":
+    def slice(self, start: int, stop: int) -> Toolpath:
         """Rows ``[start, stop)`` with the events that precede them (event rows made relative)."""
         start, stop = max(0, start), min(len(self), stop)
         sel = (self.event_row >= start) & (self.event_row < stop)

@@ -84,7 +84,7 @@ class Program:
         return len(self.op)
 
     @classmethod
-    def empty(cls, n: int, **meta: Any) -> "Program":
+    def empty(cls, n: int, **meta: Any) -> Program:
         """A program of ``n`` zeroed rows (quaternions identity, lines/layers -1)."""
         cols = {name: np.zeros((n, *shape), dtype=dtype) for name, (dtype, shape) in COLUMNS.items()}
         cols["quat_wxyz"][:, 0] = 1.0
@@ -93,7 +93,7 @@ class Program:
         return cls(**cols, meta=dict(meta))
 
     @classmethod
-    def concat(cls, parts: list["Program"]) -> "Program":
+    def concat(cls, parts: list[Program]) -> Program:
         """Join programs (the first one's ``wobj`` and merged ``meta``)."""
         cols = {name: np.concatenate([getattr(p, name) for p in parts]) for name in COLUMNS}
         meta: dict[str, Any] = {}
@@ -101,7 +101,7 @@ class Program:
             meta.update(p.meta)
         return cls(**cols, wobj=parts[0].wobj, meta=meta)
 
-    def slice(self, start: int, stop: int | None = None) -> "Program":
+    def slice(self, start: int, stop: int | None = None) -> Program:
         cols = {name: getattr(self, name)[start:stop] for name in COLUMNS}
         return Program(**cols, wobj=self.wobj, meta=dict(self.meta))
 

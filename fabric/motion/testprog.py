@@ -15,12 +15,11 @@ from typing import Any
 
 import numpy as np
 
-from fabric.wire.errors import UnreachableError
-from fabric.sim.deposition import bead_area_mm2
+from fabric.motion.program import APPROACH, BED, MOVEJ, MOVEL, NOZZLE, PRINT, RETURN_HOME, SET_TEMP, WAIT_TEMP, Program
 from fabric.robot.frames import inv_T, make_T, quat_from_R, rot_x
 from fabric.robot.kinematics import IK_OK, IK_SINGULAR, ik_reason
-from fabric.motion.program import (APPROACH, BED, MOVEJ, MOVEL, NOZZLE, PRINT, RETURN_HOME, SET_TEMP, WAIT_TEMP,
-                                Program)
+from fabric.sim.deposition import bead_area_mm2
+from fabric.wire.errors import UnreachableError
 
 __all__ = ["square_program"]
 

@@ -66,7 +66,7 @@ class Thermal:
         if not self.states:
             self.states = [HeaterState(0.0, p.ambient_c, 0.0) for p in self.params]
 
-    def copy(self) -> "Thermal":
+    def copy(self) -> Thermal:
         """An independent copy (the states are immutable, the list is not)."""
         return Thermal(self.params, list(self.states))
 

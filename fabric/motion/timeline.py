@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from fabric.robot.frames import inv_T, quat_from_R
 from fabric.motion.program import MOVEJ, MOVEL, Program
+from fabric.robot.frames import inv_T, quat_from_R
 
 __all__ = ["Sample", "SampleBatch", "Timeline"]
 
@@ -266,7 +266,7 @@ class Timeline:
         approximated with a 0.1 ms finite difference of the FK)."""
         h = 1e-4
         qs = np.empty((2 * len(i), q.shape[1]))
-        for k, (ii, tt) in enumerate(zip(i.tolist(), tau.tolist())):
+        for k, (ii, tt) in enumerate(zip(i.tolist(), tau.tolist(), strict=True)):
             traj = self.joint_traj.get(ii)
             if traj is None or tt >= traj.duration:
                 qs[2 * k] = qs[2 * k + 1] = self.program.q_rad[self.start_row + ii]

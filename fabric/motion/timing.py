@@ -28,12 +28,12 @@ from typing import Any
 import numpy as np
 from ruckig import InputParameter, Result, Ruckig, Trajectory
 
-from fabric.wire.errors import ValidationError
 from fabric.motion.lookahead import EPS_MM, PathSteps, linear_profiles
 from fabric.motion.program import MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
 from fabric.motion.thermal import Thermal
 from fabric.motion.timeline import Timeline
 from fabric.robot.frames import inv_T, quat_from_R
+from fabric.wire.errors import ValidationError
 
 __all__ = ["StartState", "time_program", "stop_timeline", "DEFAULT_ACCEL_MM_S2", "DEFAULT_RETRACT_SPEED_MM_S"]
 
@@ -57,7 +57,7 @@ class StartState:
 
     @classmethod
     def at_joints(cls, robot: Any, wobj: np.ndarray, q_rad: np.ndarray, thermal: Thermal | None = None,
-                  t0_s: float = 0.0) -> "StartState":
+                  t0_s: float = 0.0) -> StartState:
         """At rest at joints ``q_rad`` (TCP from forward kinematics, in the plate frame ``wobj``)."""
         q = np.asarray(q_rad, dtype=float).reshape(-1)
         Tp = inv_T(np.asarray(wobj, dtype=float)) @ np.asarray(robot.fk(q[None]))[0]
@@ -211,9 +211,9 @@ def stop_timeline(tl: Timeline, t_s: float) -> tuple[Timeline | None, int, float
     row = tl.start_row + i
     if p.op[row] != MOVEL:
         raise ValueError("stop_timeline needs a linear move")
-    s, v = tl.profile(np.array([i]), np.array([t_s - tl.t_start_s[i]]))
-    s_abs = float(s[0] + (tl.s0_mm if i == 0 else 0.0))
-    v = float(v[0])
+    s_at, v_at = tl.profile(np.array([i]), np.array([t_s - tl.t_start_s[i]]))
+    s_abs = float(s_at[0] + (tl.s0_mm if i == 0 else 0.0))
+    v = float(v_at[0])
     a = tl.accel_mm_s2
     L_row = float(tl.row_length_mm(np.array([i]))[0])
     left = v * v / (2.0 * a)

@@ -5,8 +5,8 @@ from typing import Any
 
 import numpy as np
 
-from fabric.wire.errors import UnreachableError, ValidationError
 from fabric.motion.program import MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
+from fabric.wire.errors import UnreachableError, ValidationError
 
 __all__ = ["validate_program"]
 

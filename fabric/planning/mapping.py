@@ -3,7 +3,8 @@
 Each toolpath row becomes one linear move at ``feed * speed_r`` (capped), with
 the extruder's flow per mm of path ``e * (pi d^2 / 4) / length`` on extruding
 rows and 0 elsewhere. Events become non-motion rows placed before the move
-they precede: temperatures (SET_TEMP, or WAIT_TEMP for M109/M190), dwells
+they precede: temperatures (SET_TEMP; M109/M190 a WAIT_TEMP, after a SET_TEMP of
+its value unless that is the set point already), dwells
 (WAIT), extruder-only moves and firmware retractions (RETRACT, signed filament
 mm); a retraction *during* a move (negative E while moving) becomes a RETRACT
 just before that move. Fan events have no robot instruction and are counted.
@@ -22,11 +23,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fabric.wire.errors import ValidationError
-from fabric.gcode.toolpath import (EV_BED_TEMP, EV_DWELL, EV_EXTRUDE, EV_FAN, EV_FW_RETRACT,
-                                   EV_FW_UNRETRACT, EV_NOZZLE_TEMP, WAIT_NONE, Toolpath)
-from fabric.planning.options import PlanOptions
+from fabric.gcode.toolpath import (
+    EV_BED_TEMP,
+    EV_DWELL,
+    EV_EXTRUDE,
+    EV_FAN,
+    EV_FW_RETRACT,
+    EV_FW_UNRETRACT,
+    EV_NOZZLE_TEMP,
+    WAIT_NONE,
+    Toolpath,
+)
 from fabric.motion.program import BED, MOVEL, NOZZLE, RETRACT, SET_TEMP, WAIT, WAIT_TEMP
+from fabric.motion.thermal import Thermal
+from fabric.planning.options import PlanOptions
+from fabric.wire.errors import GcodeError, ValidationError
 
 __all__ = ["PrintRows", "map_toolpath"]
 
@@ -63,12 +74,25 @@ class PrintRows:
 
 def _events(tp: Toolpath, e: np.ndarray, moving_retract: np.ndarray, opt: PlanOptions
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
-    """Toolpath events (plus retractions while moving) as program ops: (row, op, value, aux, line)."""
+    """Toolpath events (plus retractions while moving) as program ops: (row, op, value, aux, line).
+
+    M109/M190 set the heater's set point and wait for it (as firmware does); a WAIT_TEMP row only waits
+    for the set point in force, so a wait whose value is not already set is preceded by a SET_TEMP row
+    of its own line (``M109 S200`` alone heats to 200 C; after ``M104 S200`` it adds nothing)."""
     kind, aux, val = tp.event_kind, tp.event_aux, tp.event_value
+    ev_row, ev_line = tp.event_row, tp.event_line
+    unset = _unset_waits(kind, aux, val)
+    if len(unset):                                # each such wait twice: its SET_TEMP copy first
+        copies = np.ones(len(kind), np.intp)
+        copies[unset] = 2
+        idx = np.repeat(np.arange(len(kind)), copies)
+        kind, aux, val, ev_row, ev_line = kind[idx], aux[idx].copy(), val[idx], ev_row[idx], ev_line[idx]
+        aux[np.flatnonzero(np.diff(idx) == 0)] = WAIT_NONE
     op = np.full(len(kind), 255, np.uint8)
     heater = np.where(kind == EV_BED_TEMP, BED, NOZZLE)
     temp = (kind == EV_NOZZLE_TEMP) | (kind == EV_BED_TEMP)
     op[temp] = np.where(aux[temp] == WAIT_NONE, SET_TEMP, WAIT_TEMP)
+    _check_set_points(kind, aux, val, ev_line, temp)
     op[kind == EV_DWELL] = WAIT
     op[kind == EV_EXTRUDE] = RETRACT
     value = val.astype(np.float64).copy()
@@ -78,12 +102,45 @@ def _events(tp: Toolpath, e: np.ndarray, moving_retract: np.ndarray, opt: PlanOp
         value[kind == EV_FW_UNRETRACT] = opt.fw_retract_mm
     keep = op != 255
     mr = np.flatnonzero(moving_retract)
-    rows = np.concatenate([tp.event_row[keep], mr])
+    rows = np.concatenate([ev_row[keep], mr])
     order = np.argsort(rows, kind="stable")
     cat = lambda a, b: np.concatenate([a, b])[order]          # noqa: E731
     return (rows[order], cat(op[keep], np.full(len(mr), RETRACT, np.uint8)), cat(value[keep], e[mr]),
             cat(np.where(temp, heater, 0)[keep].astype(np.int16), np.zeros(len(mr), np.int16)),
-            cat(tp.event_line[keep], tp.line[mr]), int((kind == EV_FAN).sum()))
+            cat(ev_line[keep], tp.line[mr]), int((kind == EV_FAN).sum()))
+
+
+def _check_set_points(kind: np.ndarray, aux: np.ndarray, val: np.ndarray, line: np.ndarray,
+                      temp: np.ndarray) -> None:
+    """A set point above its heater's maximum is a GcodeError naming the line (negative ones the reader
+    refuses already)."""
+    params = Thermal().params
+    limit = np.where(kind == EV_BED_TEMP, params[BED].max_c, params[NOZZLE].max_c)
+    bad = np.flatnonzero(temp & (val > limit))
+    if not len(bad):
+        return
+    i = int(bad[0])
+    bed = int(kind[i]) == EV_BED_TEMP
+    code = ("M190" if bed else "M109") if aux[i] != WAIT_NONE else ("M140" if bed else "M104")
+    heater = "bed" if bed else "nozzle"
+    raise GcodeError(f"{heater} set point {val[i]:g} C is above the {heater} heater's maximum {limit[i]:g} C",
+                     line=int(line[i]), text=f"{code} S{val[i]:g}", heater=heater, value=float(val[i]),
+                     limit=float(limit[i]))
+
+
+def _unset_waits(kind: np.ndarray, aux: np.ndarray, val: np.ndarray) -> np.ndarray:
+    """Indices of the temperature waits (M109/M190) whose value differs from the set point the heater's
+    previous temperature event left (or that have none before them)."""
+    out = []
+    for ev in (EV_NOZZLE_TEMP, EV_BED_TEMP):
+        sel = np.flatnonzero(kind == ev)
+        if not len(sel):
+            continue
+        v = val[sel]
+        changed = np.ones(len(sel), bool)
+        changed[1:] = v[1:] != v[:-1]
+        out.append(sel[(aux[sel] != WAIT_NONE) & changed])
+    return np.sort(np.concatenate(out)) if out else np.zeros(0, np.intp)
 
 
 def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0) -> PrintRows:
@@ -142,10 +199,11 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0) -
     del offs
     # columns (views into arrays with room for the approach and return rows)
     size = head + total + tail
-    full = {"op": np.full(size, MOVEL, np.uint8), "xyz_mm": np.zeros((size, 3)), "speed_mm_s": np.zeros(size),
-            "zone_mm": np.zeros(size), "flow_mm3_mm": np.zeros(size), "value": np.zeros(size),
-            "aux": np.zeros(size, np.int16), "gcode_line": np.full(size, -1, np.int64),
-            "layer": np.full(size, -1, np.int32)}
+    full: dict[str, np.ndarray] = {
+        "op": np.full(size, MOVEL, np.uint8), "xyz_mm": np.zeros((size, 3)), "speed_mm_s": np.zeros(size),
+        "zone_mm": np.zeros(size), "flow_mm3_mm": np.zeros(size), "value": np.zeros(size),
+        "aux": np.zeros(size, np.int16), "gcode_line": np.full(size, -1, np.int64),
+        "layer": np.full(size, -1, np.int32)}
     view = {k: v[head:head + total] for k, v in full.items()}
     op, xyz = view["op"], view["xyz_mm"]
     op[ev_pos] = ev_op

@@ -6,9 +6,9 @@ from typing import Any
 
 import numpy as np
 
-from fabric.wire.errors import ValidationError
 from fabric.gcode.material import FILAMENT_DIAMETER_RANGE_MM
 from fabric.planning.material import ASSUMED_FILAMENT_DIAMETER_MM
+from fabric.wire.errors import ValidationError
 
 __all__ = ["PlanOptions"]
 
@@ -34,9 +34,10 @@ class PlanOptions:
     plate z: up, across, down.
     """
 
-    offset_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    tilt_deg: tuple[float, float] = (0.0, 0.0)
-    rot_range_deg: tuple[float, float] = (-180.0, 180.0)
+    # any sequences of 3, 2 and 2 numbers: tuples of floats once checked (__post_init__)
+    offset_mm: tuple[float, ...] = (0.0, 0.0, 0.0)
+    tilt_deg: tuple[float, ...] = (0.0, 0.0)
+    rot_range_deg: tuple[float, ...] = (-180.0, 180.0)
     rot_step_deg: float = 15.0
     speed_r: float = 1.0                 # feed-rate factor applied to every G-code feed
     max_tcp_speed_mm_s: float = 500.0    # cap on any programmed linear speed

@@ -23,22 +23,23 @@ from __future__ import annotations
 import dataclasses
 import os
 import time
-from pathlib import Path
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from fabric.gcode import Toolpath, parse_gcode, parse_gcode_file
+from fabric.motion.cold import first_cold_extrusion
+from fabric.motion.program import APPROACH, MOVEJ, MOVEL, PRINT, RETURN_HOME, SET_TEMP, WAIT, WAIT_TEMP, Program
 from fabric.planning.envelope import envelope_status
 from fabric.planning.mapping import map_toolpath
 from fabric.planning.material import resolve_material
-from fabric.planning.post.names import program_name
 from fabric.planning.options import PlanOptions
+from fabric.planning.post.names import program_name
 from fabric.planning.report import PlanResult, PlanStats, Reachability
 from fabric.robot.frames import inv_T, quat_from_R
 from fabric.robot.kinematics import IK_JUMP, IK_OK
-from fabric.motion.program import APPROACH, MOVEJ, MOVEL, PRINT, RETURN_HOME, SET_TEMP, WAIT, WAIT_TEMP, Program
 
 __all__ = ["plan_gcode", "plan_gcode_file", "plan_toolpath"]
 
@@ -120,8 +121,8 @@ def _assemble(tp: Toolpath, cell: Any, opt: PlanOptions) -> tuple[Program, int]:
     last_motion = np.maximum.accumulate(np.where(motion, np.arange(n), 0))
     rest = np.flatnonzero(~motion)
     prog.xyz_mm[rest] = prog.xyz_mm[last_motion[rest]]
-    prog.meta.update(travel_lifts=pr.n_lifts - dropped_lifts, fan_events_dropped=pr.n_fan_events, approach_speed_mm_s=v_app,
-                     leading_travels_dropped=dropped)
+    prog.meta.update(travel_lifts=pr.n_lifts - dropped_lifts, fan_events_dropped=pr.n_fan_events,
+                     approach_speed_mm_s=v_app, leading_travels_dropped=dropped)
     return prog, len(pr) - dropped
 
 
@@ -224,7 +225,9 @@ def _putter(idx: np.ndarray) -> Callable[[np.ndarray, np.ndarray], None]:
     cut = np.flatnonzero(np.diff(idx) != 1) + 1
     scattered = len(cut) >= 64 + len(idx) // 4096
     starts = [] if scattered else np.concatenate([[0], cut]).tolist()
-    runs = list(zip(starts, idx[starts].tolist() if len(idx) else [], np.diff(starts + [len(idx)]).tolist()))
+    # no runs at all when idx is empty (starts is [0] then, the other two lists empty)
+    runs = list(zip(starts, idx[starts].tolist() if len(idx) else [], np.diff(starts + [len(idx)]).tolist(),
+                    strict=False))
 
     def put(dst: np.ndarray, src: np.ndarray) -> None:
         if scattered:
@@ -285,6 +288,7 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
     envelope = envelope_status(prog.xyz_mm, motion, cell.plate_size_mm)     # over the plate, not below it
     report = Reachability.from_status(status, rot, motion, prog.gcode_line, envelope, opt.allow_off_plate)
     prog.meta.update(print_rows=n_print, options=opt.to_dict(), **material.meta(), **(meta or {}))
+    report.cold = first_cold_extrusion(prog)     # the nozzle's set points against the material's minimum
     if on_program is not None:               # the program is final: the estimate below only reads it
         on_program(prog, report)
     t2 = time.perf_counter()

@@ -6,13 +6,14 @@ from typing import Any
 
 import numpy as np
 
-from fabric.wire.errors import UnreachableError
 from fabric.gcode.material import Material
 from fabric.gcode.toolpath import Toolpath
-from fabric.planning.material import ResolvedMaterial, resolve_material
-from fabric.planning.envelope import ENV_BELOW_PLATE, ENV_OFF_PLATE, ENVELOPE_REASONS
-from fabric.robot.kinematics import IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR
+from fabric.motion.cold import ColdExtrusion
 from fabric.motion.program import Program
+from fabric.planning.envelope import ENV_BELOW_PLATE, ENV_OFF_PLATE, ENVELOPE_REASONS
+from fabric.planning.material import ResolvedMaterial, resolve_material
+from fabric.robot.kinematics import IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR
+from fabric.wire.errors import ColdExtrusionError, UnreachableError
 
 __all__ = ["Reachability", "PlanStats", "PlanResult", "UNREACHABLE_CODES"]
 
@@ -34,11 +35,12 @@ class Reachability:
     counts: dict[str, int] = field(default_factory=dict)   # motion rows by reason
     first_unreachable: tuple[int, str] | None = None        # (G-code line, reason)
     first_unreachable_row: int = -1
+    cold: ColdExtrusion | None = None        # the first move extruding below the material's minimum
 
     @classmethod
     def from_status(cls, status: np.ndarray, rot_deg: np.ndarray, motion: np.ndarray,
                     gcode_line: np.ndarray, envelope: np.ndarray | None = None,
-                    allow_off_plate: bool = False) -> "Reachability":
+                    allow_off_plate: bool = False) -> Reachability:
         """The report of IK ``status`` and, if given, the ``envelope`` statuses (0 inside) of the same rows."""
         allowed: dict[str, int] = {}
         if envelope is not None and envelope.any():
@@ -55,7 +57,7 @@ class Reachability:
         row = -1
         if bad.any():
             row = int(np.argmax(bad))
-            first = (int(gcode_line[row]), REASONS[int(status[row])])
+            first = (_line_of(gcode_line, row), REASONS[int(status[row])])
         ok = ~np.isin(st, UNREACHABLE_CODES)
         return cls(status=status, rot_deg=rot_deg, feasible_r=float(ok.mean()) if len(st) else 1.0,
                    counts=counts, first_unreachable=first, first_unreachable_row=row)
@@ -65,12 +67,30 @@ class Reachability:
         return self.first_unreachable is None
 
     @property
+    def runnable(self) -> bool:
+        """Every target reachable and no move extruding cold."""
+        return self.first_unreachable is None and self.cold is None
+
+    @property
     def n_singular(self) -> int:
         return self.counts.get(IK_REASONS[IK_SINGULAR], 0)
 
     @property
     def n_ok(self) -> int:
         return self.counts.get(IK_REASONS[IK_OK], 0)
+
+
+def _line_of(gcode_line: np.ndarray, row: int) -> int:
+    """The G-code line of ``row``; for a row of no line of its own (the approach above the first point,
+    the move up from the last one), the line of the point it moves to or from: the next row that has a
+    line, else the one before."""
+    if gcode_line[row] >= 0:
+        return int(gcode_line[row])
+    after = np.flatnonzero(gcode_line[row:] >= 0)
+    if len(after):
+        return int(gcode_line[row + after[0]])
+    before = np.flatnonzero(gcode_line[:row] >= 0)
+    return int(gcode_line[before[-1]]) if len(before) else -1
 
 
 @dataclass
@@ -114,8 +134,9 @@ class PlanResult:
     slowed_joint: np.ndarray | None = None    # the limiting joint (0-based) of each
     t_end_s: np.ndarray | None = None         # time each row ends, from home (the estimate's timeline)
 
-    def require_runnable(self) -> "PlanResult":
-        """Raise :class:`UnreachableError` naming the first unreachable G-code line, else return self."""
+    def require_runnable(self) -> PlanResult:
+        """Raise :class:`UnreachableError` naming the first unreachable G-code line, or
+        :class:`ColdExtrusionError` naming the first line that would extrude cold; else return self."""
         first = self.report.first_unreachable
         if first is not None:
             line, reason = first
@@ -124,4 +145,7 @@ class PlanResult:
             raise UnreachableError(f"G-code line {line}: target {xyz} (plate frame, mm) is not reachable: {reason}",
                                    gcode_line=line, reason=reason, row=row, xyz_mm=xyz,
                                    counts=dict(self.report.counts))
+        cold = self.report.cold
+        if cold is not None:
+            raise ColdExtrusionError(cold.message, **cold.details())
         return self

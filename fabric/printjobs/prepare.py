@@ -6,8 +6,8 @@ A stage whose service is gone (``unavailable``) or restarted and forgot the
 job (``not_found``) is retried from its start with a growing pause, within a
 budget: the launcher restarts dead services, and results are content-addressed
 and kept on disk, so a retried stage ends with the same artifact. Any other
-typed error (a broken mesh, an unreachable target, a collision) fails the job
-with that error.
+typed error (a broken mesh, an unreachable target, a move extruding below the
+material's minimum temperature, a collision) fails the job with that error.
 """
 from __future__ import annotations
 
@@ -19,8 +19,15 @@ from collections.abc import Callable
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.wire.errors import CollisionError, FabricError, NotFound, ServiceUnavailable, UnreachableError
 from fabric.store.artifacts import ArtifactStore
+from fabric.wire.errors import (
+    ColdExtrusionError,
+    CollisionError,
+    FabricError,
+    NotFound,
+    ServiceUnavailable,
+    UnreachableError,
+)
 
 __all__ = ["Preparer", "PrepareCancelled", "RETRY_BUDGET_S"]
 
@@ -111,6 +118,10 @@ class Preparer:
             raise UnreachableError(f"the program has unreachable targets, the first at G-code line "
                                    f"{fu.gcode_line}: {fu.reason}", gcode_line=fu.gcode_line, reason=fu.reason,
                                    row=fu.row)
+        cold = summary.cold_extrusion
+        if cold is not None:
+            raise ColdExtrusionError(f"the program would extrude cold: {cold.message}", **{
+                k: v for k, v in s.to_plain(cold).items() if k != "message"})
 
     def _check(self, rec: s.JobRecord) -> None:
         report = self.client.check(s.CollisionRequest(program_id=rec.program_id))

@@ -27,19 +27,21 @@ type- and range-checked when read.
 """
 from __future__ import annotations
 
-try:
-    import tomllib
-except ModuleNotFoundError:  # Python 3.10
-    import tomli as tomllib  # type: ignore[no-redef]
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fabric.wire.errors import ConfigError, NotFound, ValidationError
 from fabric.robot import frames
 from fabric.robot.model import RobotModel, ToolGeometry
+from fabric.wire.errors import ConfigError, NotFound, ValidationError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:
+    import tomli as tomllib
 
 __all__ = ["Cell", "CELLS_DIR", "PACKAGE_DIR", "DEFAULT_CELL"]
 
@@ -163,7 +165,7 @@ class Cell:
 
     # Loading -----------------------------------------------------------
     @classmethod
-    def load(cls, path: str | Path) -> "Cell":
+    def load(cls, path: str | Path) -> Cell:
         """Read a cell file; relative robot paths resolve against the fabric package, then the file's folder."""
         p = Path(path)
         if not p.is_file():
@@ -171,12 +173,12 @@ class Cell:
         return cls.from_toml_text(p.read_text(), p.resolve().parent, source=str(p))
 
     @classmethod
-    def load_or_builtin(cls, path: str | Path | None) -> "Cell":
+    def load_or_builtin(cls, path: str | Path | None) -> Cell:
         """The cell file ``path`` (a ``--cell-config`` option), or the built-in ``DEFAULT_CELL`` when None or empty."""
         return cls.load(path) if path else cls.builtin(DEFAULT_CELL)
 
     @classmethod
-    def builtin(cls, name: str = DEFAULT_CELL) -> "Cell":
+    def builtin(cls, name: str = DEFAULT_CELL) -> Cell:
         """One of the cells shipped in ``fabric/cells/`` (``irb140``, ``ur5``)."""
         path = CELLS_DIR / f"{name}.toml"
         if not path.is_file():
@@ -185,7 +187,7 @@ class Cell:
         return cls.load(path)
 
     @classmethod
-    def from_toml_text(cls, text: str, base_dir: str | Path | None = None, source: str = "<cell>") -> "Cell":
+    def from_toml_text(cls, text: str, base_dir: str | Path | None = None, source: str = "<cell>") -> Cell:
         """Parse and validate a cell from TOML text (``base_dir`` resolves relative robot paths)."""
         try:
             doc = tomllib.loads(text)
@@ -266,7 +268,8 @@ class Cell:
                       "lower_deg": deg(r.lower_rad), "upper_deg": deg(r.upper_rad),
                       "vel_deg_s": deg(r.vel_limit_rad_s), "acc_deg_s2": deg(r.acc_limit_rad_s2),
                       "jerk_deg_s3": deg(r.jerk_limit_rad_s3), "base": _xyzrpy(self.base_T)},
-            "tool": {"tcp_xyz_mm": [float(v) + 0.0 for v in tool_xyz], "tcp_rpy_deg": [float(v) + 0.0 for v in tool_rpy],
+            "tool": {"tcp_xyz_mm": [float(v) + 0.0 for v in tool_xyz],
+                     "tcp_rpy_deg": [float(v) + 0.0 for v in tool_rpy],
                      **{k: float(v) for k, v in vars(r.tool).items()}},
             "table": {"size_mm": [float(v) for v in self.table_size_mm], **_xyzrpy(self.table_T)},
             "plate": {"size_mm": [float(v) for v in self.plate_size_mm], **_xyzrpy(self.plate_T),

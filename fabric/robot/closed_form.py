@@ -10,9 +10,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from fabric.robot.kinematics import (IK_JOINT_LIMIT, IK_OK, IK_OUT_OF_REACH, IK_SINGULAR, SphericalWristArm,
-                                   _LIMIT_TOL_RAD, _PI, _TWO_PI, _wrap, _wrap_diff, multi_turn_mask, pose_cols,
-                                   wrist_q6)
+from fabric.robot.kinematics import (
+    _LIMIT_TOL_RAD,
+    _PI,
+    _TWO_PI,
+    IK_JOINT_LIMIT,
+    IK_OK,
+    IK_OUT_OF_REACH,
+    IK_SINGULAR,
+    SphericalWristArm,
+    _wrap,
+    _wrap_diff,
+    multi_turn_mask,
+    pose_cols,
+    wrist_q6,
+)
 
 __all__ = ["ClosedFormIK", "select_branches"]
 
@@ -51,7 +63,7 @@ def select_branches(qb: np.ndarray, allowed: np.ndarray, q_seed: np.ndarray,
             nxts.append(best[moving])
         b = int(marks[0])
         if rows:
-            for i, row in zip(np.concatenate(rows).tolist(), np.concatenate(nxts).tolist()):
+            for i, row in zip(np.concatenate(rows).tolist(), np.concatenate(nxts).tolist(), strict=True):
                 b = row[b]
                 marks[i] = b
     idx = np.maximum.accumulate(np.where(marks >= 0, np.arange(n), 0))
@@ -92,7 +104,7 @@ class ClosedFormIK:
         stay in [-pi, pi] and are placed by unwrapping along the path.
         """
         inlim = np.ones(q.shape[:-1], dtype=bool)
-        for j in np.flatnonzero(~self.multi):
+        for j in np.flatnonzero(~self.multi).tolist():
             inlim &= self._canon_col(j, q[..., j])
         return q, inlim
 
@@ -176,7 +188,7 @@ class ClosedFormIK:
         n = C.shape[1]
         i, b, prev = 0, -1, seed
         window, block = 32, 2048
-        single = np.flatnonzero(~self.multi)
+        single = np.flatnonzero(~self.multi).tolist()
         while i < n:
             if b < 0 or not self.tracking:
                 j = min(n, i + (window if self.tracking else self.max_rows))

@@ -12,6 +12,7 @@ Conventions used everywhere in the fabric:
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = [
     "rot_x", "rot_y", "rot_z", "rpy_to_R", "R_to_rpy", "make_T", "xyzrpy_to_T", "T_to_xyzrpy",
@@ -63,7 +64,7 @@ def R_to_rpy(R: np.ndarray) -> np.ndarray:
     return np.stack([roll, pitch, yaw], axis=-1)
 
 
-def make_T(R: np.ndarray, p: np.ndarray) -> np.ndarray:
+def make_T(R: ArrayLike, p: ArrayLike) -> np.ndarray:
     """Homogeneous transforms (..., 4, 4) from rotations (..., 3, 3) and translations (..., 3)."""
     R = np.asarray(R, dtype=float)
     p = np.asarray(p, dtype=float)
@@ -75,7 +76,7 @@ def make_T(R: np.ndarray, p: np.ndarray) -> np.ndarray:
     return T
 
 
-def xyzrpy_to_T(xyz_mm: np.ndarray, rpy_deg: np.ndarray) -> np.ndarray:
+def xyzrpy_to_T(xyz_mm: ArrayLike, rpy_deg: ArrayLike) -> np.ndarray:
     """Pose from a position in mm and URDF roll-pitch-yaw in degrees."""
     return make_T(rpy_to_R(np.radians(np.asarray(rpy_deg, dtype=float))), xyz_mm)
 

@@ -30,11 +30,11 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from fabric.wire.errors import ConfigError, NotFound, ValidationError
 from fabric.robot import frames
 from fabric.robot.closed_form import ClosedFormIK
 from fabric.robot.kinematics import IRB140_ARM
 from fabric.robot.numeric import NumericIK
+from fabric.wire.errors import ConfigError, NotFound, ValidationError
 
 __all__ = ["RobotModel", "ToolGeometry", "DEFAULT_TOOL_T", "ACC_PER_S", "JERK_PER_S2", "IRB140_URDF"]
 
@@ -99,7 +99,8 @@ def _tool_urdf(robot_urdf: str, flange_frame: str, tool_T: np.ndarray, tool: Too
   <joint name="flange-tcp" type="fixed"><parent link="{flange_frame}"/><child link="tcp"/>
     <origin xyz="{tcp_xyz}" rpy="{tcp_rpy}"/></joint>
   <link name="tool_nozzle"><collision><origin xyz="0 0 {_f(nz)}" rpy="0 0 0"/>
-    <geometry><cylinder radius="{_f(tool.nozzle_diameter_mm * m / 2)}" length="{_f(tool.nozzle_length_mm * m)}"/></geometry>
+    <geometry><cylinder radius="{_f(tool.nozzle_diameter_mm * m / 2)}"
+                        length="{_f(tool.nozzle_length_mm * m)}"/></geometry>
   </collision></link>
   <joint name="tcp-tool_nozzle" type="fixed"><parent link="tcp"/><child link="tool_nozzle"/>
     <origin xyz="0 0 0" rpy="0 0 0"/></joint>
@@ -125,7 +126,11 @@ def _default_flange(urdf_text: str) -> str:
     revolute = [j for j in root.findall("joint") if j.get("type") in ("revolute", "continuous")]
     if not revolute:
         raise ConfigError("URDF has no revolute joint to find a flange after", field="robot.flange_frame")
-    return str(revolute[-1].find("child").get("link"))
+    child = revolute[-1].find("child")
+    link = child.get("link") if child is not None else None
+    if link is None:
+        raise ConfigError(f"URDF joint {revolute[-1].get('name')!r} names no child link", field="robot.flange_frame")
+    return link
 
 
 class RobotModel:
@@ -173,7 +178,7 @@ class RobotModel:
     @classmethod
     def from_urdf(cls, path_or_text: str | Path, tool_T: np.ndarray = DEFAULT_TOOL_T,
                   flange_frame: str = "flange", name: str = "irb140",
-                  tool: ToolGeometry | None = None) -> "RobotModel":
+                  tool: ToolGeometry | None = None) -> RobotModel:
         """Load a URDF file (or URDF text); meshes resolve relative to the file's directory."""
         text = str(path_or_text)
         package_dirs: list[str] = []
@@ -188,7 +193,7 @@ class RobotModel:
     @classmethod
     def from_example_robot_data(cls, name: str, tool_T: np.ndarray = DEFAULT_TOOL_T,
                                 flange_frame: str | None = None,
-                                tool: ToolGeometry | None = None) -> "RobotModel":
+                                tool: ToolGeometry | None = None) -> RobotModel:
         """Any arm of example-robot-data by loader name (``"ur5"``, ``"panda"``, ...).
 
         ``flange_frame`` defaults to the URDF's ``tool0`` / ``flange`` / ``ee_link`` /
@@ -208,7 +213,7 @@ class RobotModel:
 
     def with_limits(self, lower_rad: np.ndarray | None = None, upper_rad: np.ndarray | None = None,
                     vel_limit_rad_s: np.ndarray | None = None, acc_limit_rad_s2: np.ndarray | None = None,
-                    jerk_limit_rad_s3: np.ndarray | None = None) -> "RobotModel":
+                    jerk_limit_rad_s3: np.ndarray | None = None) -> RobotModel:
         """Override limits in place (cell ``[limits]``); position limits may only narrow the URDF's."""
         for attr, val in (("lower_rad", lower_rad), ("upper_rad", upper_rad), ("vel_limit_rad_s", vel_limit_rad_s),
                           ("acc_limit_rad_s2", acc_limit_rad_s2), ("jerk_limit_rad_s3", jerk_limit_rad_s3)):

@@ -12,8 +12,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fabric.wire.errors import ValidationError
 from fabric.robot import frames
+from fabric.wire.errors import ValidationError
 
 __all__ = ["NozzleFrames", "FrameCols", "unit_axes"]
 

@@ -45,11 +45,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fabric.wire.errors import ValidationError
 from fabric.robot.joint_jumps import joint_jumps
 from fabric.robot.kinematics import IK_JUMP, IK_OK
 from fabric.robot.model import RobotModel
 from fabric.robot.nozzle_frames import NozzleFrames, unit_axes
+from fabric.wire.errors import ValidationError
 
 __all__ = ["PathIK", "solve_path", "candidate_rotations_deg", "joint_jumps"]
 
@@ -99,7 +99,7 @@ class _Rank(NamedTuple):
     candidate: int
 
 
-def candidate_rotations_deg(rot_range_deg: tuple[float, float], rot_step_deg: float) -> np.ndarray:
+def candidate_rotations_deg(rot_range_deg: tuple[float, ...], rot_step_deg: float) -> np.ndarray:
     """Candidate rotations, ordered by |theta| (so ties prefer the smallest rotation)."""
     lo, hi = float(rot_range_deg[0]), float(rot_range_deg[1])
     if not (np.isfinite(lo) and np.isfinite(hi) and hi >= lo) or not rot_step_deg > 0:
@@ -112,7 +112,7 @@ def candidate_rotations_deg(rot_range_deg: tuple[float, float], rot_step_deg: fl
 
 
 def solve_path(robot: RobotModel, xyz_mm: np.ndarray, z_axis: np.ndarray, q_start: np.ndarray,
-               rot_range_deg: tuple[float, float] = (-180.0, 180.0), rot_step_deg: float = 15.0,
+               rot_range_deg: tuple[float, ...] = (-180.0, 180.0), rot_step_deg: float = 15.0,
                x_ref: np.ndarray | None = None, jump_deg: float = 10.0) -> PathIK:
     """Joints for TCP positions ``xyz_mm`` (N, 3) with nozzle axes ``z_axis`` ((3,) or (N, 3)), robot base frame.
 
@@ -178,6 +178,7 @@ class _PathSolver:
         x0, y0, z0 = self.fr.cols(rows)
         th = np.radians(theta_deg)
         c, s = np.cos(th), np.sin(th)
+        assert self.cf is not None, "flange columns feed the closed-form IK only"
         ti = self.cf.tool_inv_T
         p = self.p[:, rows]
         out = np.empty((9, p.shape[1]))
@@ -232,7 +233,7 @@ class _PathSolver:
         q, status = self.ik(slice(None), rot, self.q_start)
 
         def poses(rows: np.ndarray) -> np.ndarray:
-            return self.poses(rows, rot if np.ndim(rot) == 0 else rot[rows])
+            return self.poses(rows, rot[rows] if isinstance(rot, np.ndarray) and rot.ndim else rot)
 
         jump = joint_jumps(self.robot, q, poses, self.jump_rad)
         status[jump & (status == IK_OK)] = IK_JUMP

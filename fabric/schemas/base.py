@@ -187,9 +187,10 @@ def _array(value: Any, fpath: str, spec: FieldSpec | None) -> np.ndarray:
         raise _fail(fpath, f"expected a packed array, got {type(value).__name__}")
     if spec and spec.dtype and value.dtype != np.dtype(spec.dtype):
         raise _fail(fpath, f"dtype {value.dtype.str}, expected {np.dtype(spec.dtype).str}")
-    if spec and spec.shape is not None:
-        if value.ndim != len(spec.shape) or any(s is not None and s != d for s, d in zip(spec.shape, value.shape)):
-            raise _fail(fpath, f"shape {value.shape}, expected {spec.shape}")
+    if spec and spec.shape is not None and (
+            value.ndim != len(spec.shape)
+            or any(s is not None and s != d for s, d in zip(spec.shape, value.shape, strict=True))):
+        raise _fail(fpath, f"shape {value.shape}, expected {spec.shape}")
     if value.dtype.kind == "f" and not np.all(np.isfinite(value)):
         raise _fail(fpath, "contains NaN or infinity")
     return value

@@ -5,9 +5,9 @@ from typing import Any
 
 import numpy as np
 
-from fabric.wire.errors import UNREACHABLE_REASONS
 from fabric.schemas.base import f, schema
 from fabric.schemas.common import ErrorReply
+from fabric.wire.errors import COLD_EXTRUSION_REASONS, UNREACHABLE_REASONS
 
 BACKENDS = ("builtin", "prusaslicer", "slic3r")
 EXPORT_FORMATS = ("rapid", "krl", "urscript", "csv")
@@ -83,6 +83,23 @@ class UnreachableTarget:
     row: int = -1
 
 
+@schema("planner.ColdExtrusion")
+class ColdExtrusion:
+    """The first move that would extrude below the material's minimum extrusion temperature ``min_c``:
+    where (G-code line, program row), why, the nozzle's set point then (``nozzle_c``, set at
+    ``set_line``, -1: never) and the temperature last waited for (``waited_c``, at ``wait_line``; None:
+    nothing waited); ``message`` says it in a sentence (``fabric.motion.cold``)."""
+    gcode_line: int
+    reason: str = f(choices=COLD_EXTRUSION_REASONS)
+    row: int = -1
+    nozzle_c: float = 0.0
+    min_c: float = 0.0
+    set_line: int = -1
+    waited_c: float | None = None
+    wait_line: int = -1
+    message: str = ""
+
+
 @schema("planner.SlowedMove")
 class SlowedMove:
     """The first linear move slowed down to keep a joint within its velocity limit."""
@@ -91,12 +108,14 @@ class SlowedMove:
     joint: int = f(ge=1)        # the limiting axis, 1-based (A1 = 1)
 
 
-@schema("planner.PlanSummary", version=3)
+@schema("planner.PlanSummary", version=4)
 class PlanSummary:
     """What a plan produced. The material: ``filament_diameter_mm`` turned E into ``extruded_mm3``; it came
     from ``material_source`` (the request's option, the G-code's comments, or assumed: then ``warnings``
     says so); name, density and minimum extrusion temperature as the G-code states them (else empty).
-    ``unreachable_by_reason`` counts targets by reason, "off the plate" and "below the plate" included."""
+    ``unreachable_by_reason`` counts targets by reason, "off the plate" and "below the plate" included.
+    Not ``runnable``: a target is unreachable (``first_unreachable``) or a move would extrude below the
+    material's minimum temperature (``cold_extrusion``)."""
     program_id: str
     targets: int
     moves: int
@@ -119,6 +138,7 @@ class PlanSummary:
     mass_g: float | None = None                # extruded_mm3 times the density, when the density is known
     warnings: list[str] = f(factory=list)
     allow_off_plate: bool = False              # targets off the plate or below it were allowed (still counted)
+    cold_extrusion: ColdExtrusion | None = None
 
 
 @schema("planner.ProgramMsg")

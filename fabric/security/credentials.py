@@ -16,10 +16,10 @@ import secrets
 from dataclasses import dataclass
 from pathlib import Path
 
-from fabric.wire.errors import ConfigError
 from fabric.security import pki
 from fabric.security.roles import ROLES, access_control
 from fabric.security.zconfigs import client_config, hub_config, read_json5, write_json5
+from fabric.wire.errors import ConfigError
 
 __all__ = ["Credentials", "DEFAULT_SECURE_HUB"]
 
@@ -65,7 +65,7 @@ class Credentials:
 
     # --- reading --------------------------------------------------------------
 
-    def check(self) -> "Credentials":
+    def check(self) -> Credentials:
         """Raise ConfigError naming the first missing file (a folder not made by ``auth init``)."""
         for path in (self.ca_cert, self.passwords, self.hub_config, self.cert("hub"), self.key("hub"),
                      *(self.config(r) for r in ROLES)):
@@ -86,7 +86,7 @@ class Credentials:
 
     @classmethod
     def init(cls, root: str | Path, hub: str = DEFAULT_SECURE_HUB, listen: str | None = None,
-             hosts: list[str] | None = None, force: bool = False) -> "Credentials":
+             hosts: list[str] | None = None, force: bool = False) -> Credentials:
         """Make a CA, certificates, passwords and every config in ``root`` (refuses to overwrite unless ``force``).
 
         ``hub``: where clients connect (``tls/<host>:<port>``); ``listen``: where the hub listens (default:

@@ -6,8 +6,8 @@ from dataclasses import replace
 
 import zenoh
 
-from fabric.wire.config import SessionSettings, zenoh_config
 from fabric.security.credentials import Credentials
+from fabric.wire.config import SessionSettings, zenoh_config
 
 __all__ = ["hub_zenoh_config", "role_settings"]
 

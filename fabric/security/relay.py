@@ -11,11 +11,11 @@ import json
 
 import zenoh
 
-from fabric.wire.config import SessionSettings
 from fabric.security.credentials import Credentials
 from fabric.security.hub import hub_zenoh_config
 from fabric.security.roles import relay_access_control
 from fabric.security.zconfigs import read_json5
+from fabric.wire.config import SessionSettings
 
 __all__ = ["relay_zenoh_config"]
 

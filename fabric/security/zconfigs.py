@@ -84,7 +84,7 @@ def role_of_config(path: str | Path | None) -> str | None:
     """The fabric role a Zenoh config file declares in ``metadata`` (None: no file, or no role)."""
     if not path:
         return None
-    import zenoh                       # here: reading a config is all this module needs from zenoh
+    import zenoh  # here: reading a config is all this module needs from zenoh
     try:
         meta = json.loads(zenoh.Config.from_file(str(path)).get_json("metadata"))
     except (zenoh.ZError, json.JSONDecodeError, ValueError):

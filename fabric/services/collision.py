@@ -11,14 +11,14 @@ import zenoh
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.wire.errors import BadRequest
-from fabric.programs import program_from_artifact
-from fabric.wire.config import add_cell_argument, service_data_dir
-from fabric.server.service import Service
-from fabric.robot.cell import Cell
 from fabric.collision.sweep import CollisionChecker, layer_boxes
-from fabric.motion.timing import time_program
 from fabric.motion.program import Program
+from fabric.motion.timing import time_program
+from fabric.programs import program_from_artifact
+from fabric.robot.cell import Cell
+from fabric.server.service import Service
+from fabric.wire.config import add_cell_argument, service_data_dir
+from fabric.wire.errors import BadRequest
 
 __all__ = ["CollisionService", "build", "add_arguments", "sweep_program"]
 

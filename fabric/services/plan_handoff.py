@@ -9,13 +9,13 @@ for the times. A job that fails hands its error to the exports waiting on it.
 from __future__ import annotations
 
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
 from fabric import schemas as s
-from fabric.wire.errors import FabricError, UnreachableError
 from fabric.motion.program import Program
+from fabric.wire.errors import ColdExtrusionError, FabricError, UnreachableError
 
 __all__ = ["PlanHandoff"]
 
@@ -31,6 +31,7 @@ class PlanHandoff:
         self._cond = threading.Condition()
         self._program: Program | None = None
         self._unreachable: s.UnreachableTarget | None = None
+        self._cold: s.ColdExtrusion | None = None
         self._timed = False
         self._t_end_s: np.ndarray | None = None
         self._error: FabricError | None = None
@@ -41,9 +42,10 @@ class PlanHandoff:
         with self._cond:
             return self._error is not None or bool(self.program_id)
 
-    def program_ready(self, program: Program, unreachable: s.UnreachableTarget | None) -> None:
+    def program_ready(self, program: Program, unreachable: s.UnreachableTarget | None,
+                      cold: s.ColdExtrusion | None = None) -> None:
         with self._cond:
-            self._program, self._unreachable = program, unreachable
+            self._program, self._unreachable, self._cold = program, unreachable, cold
             self._cond.notify_all()
 
     def times_ready(self, t_end_s: np.ndarray | None) -> None:
@@ -76,10 +78,12 @@ class PlanHandoff:
             if err is not None and not ready():
                 self._error = err
         if not ready():
-            raise self._error                           # type: ignore[misc]  (set: the wait ended)
+            assert self._error is not None              # the wait ended, not ready: on an error
+            raise self._error
 
     def program(self, fmt: str, job_failed: Callable[[], FabricError | None]) -> Program:
-        """The final program, once there is one; a controller format of an unreachable program is refused."""
+        """The final program, once there is one; a controller format of a program that is not runnable
+        (an unreachable target, a move extruding cold) is refused."""
         with self._cond:
             self._wait(lambda: self._program is not None, job_failed)
             fu = self._unreachable
@@ -87,6 +91,11 @@ class PlanHandoff:
                 raise UnreachableError(f"program is not runnable: first unreachable target at G-code line "
                                        f"{fu.gcode_line} ({fu.reason})", gcode_line=fu.gcode_line,
                                        reason=fu.reason, row=fu.row)
+            cold = self._cold
+            if cold is not None and fmt != "csv":
+                raise ColdExtrusionError(f"program is not runnable: {cold.message}", **{
+                    k: v for k, v in s.to_plain(cold).items() if k != "message"})
+            assert self._program is not None            # the wait ended ready
             return self._program
 
     def t_end_s(self, job_failed: Callable[[], FabricError | None]) -> np.ndarray | None:

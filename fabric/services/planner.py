@@ -111,8 +111,9 @@ class PlannerService(Service):
 
     def on_plan(self, req: s.PlanRequest) -> s.JobAccepted:
         if not req.gcode and not req.gcode_id and not req.upload_id:
-            raise BadRequest("give the G-code inline (gcode), uploaded (upload_id) or a slicer artifact id "
-                             "(gcode_id)", field="gcode")
+            raise BadRequest(f"no G-code to plan in {req.filename!r}: it is empty (give the G-code inline (gcode), "
+                             "uploaded (upload_id) or a slicer artifact id (gcode_id))", field="gcode",
+                             file=req.filename)
         size = self.uploads.path(req.upload_id).stat().st_size if req.upload_id else len(req.gcode)
         require_room(self.data_dir, PROGRAM_PER_GCODE_BYTE * size, self.name, "planning this G-code")
         wobj = None

@@ -301,7 +301,7 @@ class SupervisorService(Service):
                 self.client.load(head.program_id, job_id=head.job_id)
             except (DiskFull, BadRequest) as err:  # a load that cannot succeed is not tried again: the job fails
                 self.log.warning("job %s cannot be loaded: %s: %s", head.job_id, err.code, err.message)
-                self._step(lambda: self._fail(head.job_id, err))
+                self._step(lambda e=err: self._fail(head.job_id, e))
                 self._release_if_final(head)
                 self.wake.set()
                 return
@@ -311,7 +311,7 @@ class SupervisorService(Service):
                 return
             except NotFound as err:             # its program is gone (never acknowledged durably): plan again
                 self.log.warning("job %s: %s; preparing it again", head.job_id, err.message)
-                self._step(lambda: self._prepare_again(head.job_id, err.message))
+                self._step(lambda why=err.message: self._prepare_again(head.job_id, why))
                 self.wake.set()
                 return
             start, rtf = self._step(lambda: self._loaded(head.job_id))

@@ -5,14 +5,13 @@ from typing import Any
 
 import numpy as np
 
-from fabric.wire.codec import pack
-from fabric.motion.program import Program
+from fabric.motion.program import Program, mini_program
 from fabric.motion.timeline import Timeline
-from fabric.motion.program import mini_program
 from fabric.motion.timing import StartState, stop_timeline, time_program
 from fabric.sim.config import TwinConfig
 from fabric.sim.legs import AuxLegSpec, LegSpec, PoseSpec, ProgramLegSpec, ProgramStart, StopLegSpec
 from fabric.sim.state import TwinState
+from fabric.wire.codec import pack
 
 __all__ = ["LegBuilder"]
 
@@ -40,7 +39,10 @@ class LegBuilder:
             tl = self.time_from(spec, start)
         elif isinstance(spec, StopLegSpec):
             parent = self.build(spec.parent, t0, freeze=freeze, cache=cache)
-            tl, _row, _s = stop_timeline(parent, spec.tau_s)
+            stop_tl, _row, _s = stop_timeline(parent, spec.tau_s)
+            # a stop leg is only made from a stop that moves, and the same inputs give the same stop
+            assert stop_tl is not None, "a stop leg rebuilt to no motion"
+            tl = stop_tl
         else:
             tl = self.aux(spec)
         if cache is not None:

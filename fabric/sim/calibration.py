@@ -26,8 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from fabric.wire.errors import ConfigError
 from fabric.robot.frames import T_to_xyzrpy, inv_T, xyzrpy_to_T
+from fabric.wire.errors import ConfigError
 
 __all__ = ["CalibrationResult", "ProbePlan", "probe_plan", "simulate_touches", "fit_plate", "top_plane_frame",
            "calibrate_plate", "TOP", "SIDE_X", "SIDE_Y"]

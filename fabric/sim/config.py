@@ -5,8 +5,8 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from fabric.wire.errors import ValidationError
 from fabric.motion.timing import DEFAULT_ACCEL_MM_S2, DEFAULT_RETRACT_SPEED_MM_S
+from fabric.wire.errors import ValidationError
 
 __all__ = ["TwinConfig"]
 
@@ -62,7 +62,7 @@ class TwinConfig:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "TwinConfig":
+    def from_dict(cls, data: dict[str, Any]) -> TwinConfig:
         """The inverse of :meth:`to_dict` (unknown keys are an error)."""
         unknown = set(data) - set(cls.__dataclass_fields__)
         if unknown:

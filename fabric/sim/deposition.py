@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from fabric.wire.errors import ValidationError
 from fabric.motion.program import MOVEL, Program
+from fabric.wire.errors import ValidationError
 
 __all__ = ["Deposition", "VolumeReport", "bead_area_mm2"]
 
@@ -141,7 +141,7 @@ class Deposition:
         return {k: self._buf[k][first: self._n].copy() for k in _FIELDS}
 
     @classmethod
-    def from_arrays(cls, program: Program | None, arrays: dict[str, np.ndarray]) -> "Deposition":
+    def from_arrays(cls, program: Program | None, arrays: dict[str, np.ndarray]) -> Deposition:
         """The beads saved by :meth:`to_arrays`, for ``program`` (which sets the bead shape of new beads)."""
         if set(arrays) != set(_FIELDS):
             raise ValidationError(f"bead arrays {sorted(arrays)}, expected {sorted(_FIELDS)}", field="beads")
@@ -200,7 +200,8 @@ class Deposition:
         if fmt not in ("stl", "glb"):
             raise ValidationError(f"mesh format {fmt!r}: use 'stl' or 'glb'", field="fmt")
         data = self.mesh().export(file_type=fmt)
-        return data if isinstance(data, bytes) else bytes(data)
+        assert isinstance(data, bytes), "trimesh writes binary STL and GLB as bytes"
+        return data
 
     def export_csv(self) -> bytes:
         """The bead list, one row per bead in deposition order (plate frame; full precision)."""

@@ -18,14 +18,14 @@ timeline is a function of its spec alone.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Union
+from typing import Any
 
 import numpy as np
 
-from fabric.wire.errors import ValidationError
 from fabric.motion.program import MOVEL, RETRACT, SET_TEMP, WAIT_TEMP
 from fabric.motion.thermal import HeaterParams, HeaterState, Thermal
 from fabric.motion.timeline import Timeline
+from fabric.wire.errors import ValidationError
 
 __all__ = ["AuxLegSpec", "Leg", "LegSpec", "PoseSpec", "ProgramLegSpec", "ProgramStart", "StopLegSpec",
            "spec_from_dict", "thermal_from_dict", "thermal_to_dict"]
@@ -44,7 +44,7 @@ class PoseSpec:
                 "quat_wxyz": np.asarray(self.quat_wxyz, float)}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "PoseSpec":
+    def from_dict(cls, d: dict[str, Any]) -> PoseSpec:
         return cls(np.asarray(d["q_rad"], float), np.asarray(d["xyz_mm"], float), np.asarray(d["quat_wxyz"], float))
 
 
@@ -63,7 +63,7 @@ class ProgramStart:
                 "speed_r": self.speed_r, "flow_r": self.flow_r}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "ProgramStart":
+    def from_dict(cls, d: dict[str, Any]) -> ProgramStart:
         return cls(float(d["t0_s"]), PoseSpec.from_dict(d["pose"]), thermal_from_dict(d["thermal"]),
                    float(d["speed_r"]), float(d["flow_r"]))
 
@@ -84,7 +84,7 @@ class ProgramLegSpec:
                 "frozen": self.frozen.to_dict() if self.frozen else None}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "ProgramLegSpec":
+    def from_dict(cls, d: dict[str, Any]) -> ProgramLegSpec:
         return cls(int(d["row"]), PoseSpec.from_dict(d["pose"]) if d["pose"] is not None else None,
                    float(d["s_mm"]), float(d["v_mm_s"]),
                    ProgramStart.from_dict(d["frozen"]) if d["frozen"] is not None else None)
@@ -94,14 +94,14 @@ class ProgramLegSpec:
 class StopLegSpec:
     """A controlled stop of the timeline of ``parent`` from its local time ``tau_s``."""
 
-    parent: "LegSpec"
+    parent: LegSpec
     tau_s: float
 
     def to_dict(self) -> dict[str, Any]:
         return {"kind": "stop", "parent": self.parent.to_dict(), "tau_s": self.tau_s}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "StopLegSpec":
+    def from_dict(cls, d: dict[str, Any]) -> StopLegSpec:
         return cls(spec_from_dict(d["parent"]), float(d["tau_s"]))
 
 
@@ -123,14 +123,15 @@ class AuxLegSpec:
                 "thermal": thermal_to_dict(self.thermal) if self.thermal is not None else None, "t0_s": self.t0_s}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "AuxLegSpec":
+    def from_dict(cls, d: dict[str, Any]) -> AuxLegSpec:
         thermal = thermal_from_dict(d["thermal"]) if d.get("thermal") is not None else None
         return cls([dict(r) for r in d["rows"]], PoseSpec.from_dict(d["start"]), np.asarray(d["wobj"], float),
                    thermal, float(d.get("t0_s", 0.0)))
 
 
-LegSpec = Union[ProgramLegSpec, StopLegSpec, AuxLegSpec]
-_SPECS = {"program": ProgramLegSpec, "stop": StopLegSpec, "aux": AuxLegSpec}
+LegSpec = ProgramLegSpec | StopLegSpec | AuxLegSpec
+_SPECS: dict[str, type[ProgramLegSpec] | type[StopLegSpec] | type[AuxLegSpec]] = {
+    "program": ProgramLegSpec, "stop": StopLegSpec, "aux": AuxLegSpec}
 
 
 def spec_from_dict(d: dict[str, Any]) -> LegSpec:
@@ -183,6 +184,13 @@ class Leg:
     vol_mm3: np.ndarray = field(default_factory=lambda: np.zeros(0))
     cumvol_mm3: np.ndarray = field(default_factory=lambda: np.zeros(1))
 
+    @property
+    def timeline(self) -> Timeline:
+        """The built timeline: every leg that is placed, or restored and rebuilt, has one."""
+        if self.tl is None:
+            raise RuntimeError("the leg's timeline is not built yet")
+        return self.tl
+
     def place(self, t0: float, tl: Timeline) -> None:
         """Start the leg at absolute time ``t0`` with its timeline ``tl``."""
         self.tl = tl
@@ -193,7 +201,7 @@ class Leg:
 
     def derive(self) -> None:
         """The per-row arrays the runner needs: extruder changes, rows of interest, volumes."""
-        tl = self.tl
+        tl = self.timeline
         p = tl.program
         rows = tl.rows
         op, flow, layer = p.op[rows], p.flow_mm3_mm[rows], p.layer[rows]
@@ -218,34 +226,34 @@ class Leg:
 
     def row_at(self, tau_s: float) -> int:
         """Local row running at local time ``tau_s`` (within the owned rows)."""
-        return int(min(self.tl.locate(np.array([tau_s]))[0], self.n_rows - 1))
+        return int(min(self.timeline.locate(np.array([tau_s]))[0], self.n_rows - 1))
 
     def cut_at(self, tau_s: float) -> None:
         """End the leg at local time ``tau_s``: the row running then is left unfinished."""
         j = self.row_at(tau_s)
         self.n_rows, self.t_cut = j + 1, float(tau_s)
-        self.partial_end = tau_s < self.tl.t_end_s[j]
+        self.partial_end = tau_s < self.timeline.t_end_s[j]
 
     def cut_before(self, j: int) -> None:
         """End the leg when local row ``j`` would start (it owns rows ``0 .. j-1``)."""
-        self.n_rows, self.t_cut, self.partial_end = j, float(self.tl.t_start_s[j]), False
+        self.n_rows, self.t_cut, self.partial_end = j, float(self.timeline.t_start_s[j]), False
 
     def cut_after(self, j: int) -> None:
         """End the leg when local row ``j`` completes."""
-        self.n_rows, self.t_cut, self.partial_end = j + 1, float(self.tl.t_end_s[j]), False
+        self.n_rows, self.t_cut, self.partial_end = j + 1, float(self.timeline.t_end_s[j]), False
 
     def cursor(self, tau_s: float, final: bool) -> tuple[int, int]:
         """Rows started and rows completed by local time ``tau_s`` (all owned ones when ``final``)."""
         if final:
             return self.n_rows, self.n_rows - int(self.partial_end)
-        tl = self.tl
+        tl = self.timeline
         ns = int(np.searchsorted(tl.t_start_s, tau_s, side="right"))
         nd = int(np.searchsorted(tl.t_end_s, tau_s, side="right"))
         return min(ns, self.n_rows), min(nd, self.n_rows - int(self.partial_end))
 
     def end_pose(self) -> PoseSpec:
         """Joints and TCP (plate frame of the leg's program) where the leg ends."""
-        tl = self.tl
+        tl = self.timeline
         smp = tl.sample(self.t_cut if (self.n_rows or self.placed) else tl.total_s)
         return PoseSpec(np.asarray(smp.q_rad, float), np.asarray(smp.xyz_mm, float),
                         np.asarray(smp.quat_wxyz, float))
@@ -260,7 +268,7 @@ class Leg:
                 "placed": self.placed}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "Leg":
+    def from_dict(cls, d: dict[str, Any]) -> Leg:
         """A leg with its cursors; the caller rebuilds ``tl`` from ``spec`` and calls :meth:`derive`."""
         return cls(spec_from_dict(d["spec"]), bool(d["main"]), [str(k) for k in d["end_kinds"]],
                    t0=float(d["t0"]), t_cut=float(d["t_cut"]), n_rows=int(d["n_rows"]),

@@ -17,17 +17,17 @@ from typing import Any
 
 import numpy as np
 
-from fabric.wire.errors import UnreachableError, ValidationError
 from fabric.motion.program import BED, MOVEJ, MOVEL, NOZZLE, RETRACT, SET_TEMP, WAIT, WAIT_TEMP
 from fabric.motion.timing import stop_timeline
-from fabric.robot.kinematics import ik_reason
 from fabric.robot.frames import R_from_quat, inv_T, make_T, quat_from_R
+from fabric.robot.kinematics import ik_reason
 from fabric.sim.builder import LegBuilder
 from fabric.sim.config import TwinConfig
 from fabric.sim.legs import AuxLegSpec, Leg, PoseSpec, ProgramLegSpec, StopLegSpec
 from fabric.sim.runner import LegRunner
 from fabric.sim.state import ResumePoint, TwinState
 from fabric.sim.types import IK_ACCEPT
+from fabric.wire.errors import UnreachableError, ValidationError
 
 __all__ = ["MotionPlanner"]
 
@@ -108,6 +108,7 @@ class MotionPlanner:
         wobj = st.program.wobj if st.program is not None else st.work_T
         if legs:                                    # a lazy program leg: it ends on the last row
             p = st.program
+            assert p is not None, "a program leg without a loaded program"
             return PoseSpec(p.q_rad[-1], p.xyz_mm[-1], p.quat_wxyz[-1]), wobj
         Tp = inv_T(wobj) @ st.rest_T
         return PoseSpec(st.rest_q_rad.copy(), Tp[:3, 3].copy(), quat_from_R(Tp[:3, :3])), wobj
@@ -132,7 +133,7 @@ class MotionPlanner:
         tau = min(max(st.t_sim_s - head.t0, 0.0), head.t_cut)
         queue: list[Leg] = []
         if head.main:
-            tl = head.tl
+            tl = head.timeline
             j = head.row_at(tau)
             r = tl.start_row + j
             op = tl.program.op[r]
@@ -162,7 +163,7 @@ class MotionPlanner:
             # going back down to resume: that resume never completes; lift again from where it ends
             head.end_kinds = []
             pose = head.end_pose()
-        wobj = (queue[-1] if queue else head).tl.program.wobj
+        wobj = (queue[-1] if queue else head).timeline.program.wobj
         st.legs = [head] + queue
         st.legs.append(self._lift_leg(pose, wobj, end_kind))
         self.pause_preview_s = None
@@ -177,7 +178,7 @@ class MotionPlanner:
         head = st.legs[0]
         head.cut_before(j)
         head.end_kinds = []
-        tl = head.tl
+        tl = head.timeline
         smp = tl.sample(head.t_cut)
         pose = PoseSpec(np.asarray(smp.q_rad, float), np.asarray(smp.xyz_mm, float),
                         np.asarray(smp.quat_wxyz, float))
@@ -207,7 +208,7 @@ class MotionPlanner:
         st.legs = [head]
         point = None
         if head.main:
-            tl = head.tl
+            tl = head.timeline
             j = head.n_rows - 1
             r = tl.start_row + j
             smp = tl.sample(tau)
@@ -255,6 +256,7 @@ class MotionPlanner:
     def layer_start_row(self, layer: int) -> int:
         """The first program row of ``layer`` (0-based, as in events)."""
         p = self.state.program
+        assert p is not None, "no program loaded"
         rows = np.flatnonzero(p.layer == layer)
         if layer < 0 or not len(rows):
             top = int(p.layer.max())
@@ -268,6 +270,7 @@ class MotionPlanner:
         starts, straight down, then the program from ``row``. ``end_kind`` fires once down."""
         st, cfg = self.state, self.config
         p = st.program
+        assert p is not None, "no program loaded"
         start, wobj = self.queue_end()
         target = PoseSpec(p.q_rad[row - 1], p.xyz_mm[row - 1], p.quat_wxyz[row - 1])
         rows: list[dict[str, Any]] = []
@@ -293,6 +296,7 @@ class MotionPlanner:
         """Joints where the robot rests and joints above where ``row`` starts (the restart's joint move)."""
         st = self.state
         p = st.program
+        assert p is not None, "no program loaded"
         target = PoseSpec(p.q_rad[row - 1], p.xyz_mm[row - 1], p.quat_wxyz[row - 1])
         above = np.asarray(target.xyz_mm, dtype=float) + [0.0, 0.0, max(self.config.lift_mm, 1.0)]
         start, wobj = self.queue_end()
@@ -304,7 +308,7 @@ class MotionPlanner:
         """Re-time the program after the running row (or redo a heat-up whose set point changed)."""
         st = self.state
         head = st.legs[0]
-        tl = head.tl
+        tl = head.timeline
         p = tl.program
         tau = min(max(st.t_sim_s - head.t0, 0.0), head.t_cut)
         j = head.row_at(tau)
@@ -346,7 +350,7 @@ class MotionPlanner:
             if st.job.resume_at is None or st.program is None:
                 return 0.0
             legs = self._resume_legs()
-            t = st.t_sim_s + self.remaining_s() + legs[0].tl.total_s
+            t = st.t_sim_s + self.remaining_s() + legs[0].timeline.total_s
             rest = self.builder.build(legs[1].spec, t, freeze=False).total_s if len(legs) > 1 else 0.0
-            self.pause_preview_s = legs[0].tl.total_s + rest
+            self.pause_preview_s = legs[0].timeline.total_s + rest
         return self.pause_preview_s

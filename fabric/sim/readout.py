@@ -35,7 +35,7 @@ class Readout:
             return None, None
         key = (self.state.t_sim_s, id(leg), leg.t_cut)
         if self._cache is None or self._cache[0] != key:
-            smp = leg.tl.sample(min(max(self.state.t_sim_s - leg.t0, 0.0), leg.t_cut))
+            smp = leg.timeline.sample(min(max(self.state.t_sim_s - leg.t0, 0.0), leg.t_cut))
             self._cache = (key, smp)
         return self._cache[1], leg
 
@@ -43,14 +43,15 @@ class Readout:
         """Where the robot is now (commanded pose of the twin)."""
         smp, leg = self._now_sample()
         work_T = self.state.work_T
-        if smp is not None and np.array_equal(leg.tl.program.wobj, work_T):
-            return Pose(np.array(smp.q_rad, dtype=float), np.array(smp.xyz_mm, dtype=float),
-                        np.array(smp.quat_wxyz, dtype=float), np.array(smp.base_xyz_mm, dtype=float))
-        if smp is None:
+        if smp is None or leg is None:
             q, T = self.state.rest_q_rad, self.state.rest_T
         else:
+            wobj = leg.timeline.program.wobj
+            if np.array_equal(wobj, work_T):
+                return Pose(np.array(smp.q_rad, dtype=float), np.array(smp.xyz_mm, dtype=float),
+                            np.array(smp.quat_wxyz, dtype=float), np.array(smp.base_xyz_mm, dtype=float))
             q = smp.q_rad
-            T = leg.tl.program.wobj @ make_T(R_from_quat(smp.quat_wxyz), smp.xyz_mm)
+            T = wobj @ make_T(R_from_quat(smp.quat_wxyz), smp.xyz_mm)
         Tp = inv_T(work_T) @ T
         return Pose(np.array(q, dtype=float), Tp[:3, 3].copy(), quat_from_R(Tp[:3, :3]), T[:3, 3].copy())
 
@@ -59,12 +60,13 @@ class Readout:
         smp, leg = self._now_sample()
         job = self.state.job
         flow, extra = 0.0, 0.0
-        if smp is not None and leg.main and smp.extruding:
+        if smp is not None and leg is not None and leg.main and smp.extruding:
             flow = smp.flow_mm3_s
-            j = smp.row - leg.tl.start_row
+            tl = leg.timeline
+            j = smp.row - tl.start_row
             if j >= leg.done:   # the row in progress: the part covered so far
-                s0 = leg.tl.s0_mm if j == 0 else 0.0
-                extra = float(leg.tl.program.flow_mm3_mm[smp.row]) * leg.tl.flow_r * (smp.s_mm - s0)
+                s0 = tl.s0_mm if j == 0 else 0.0
+                extra = float(tl.program.flow_mm3_mm[smp.row]) * tl.flow_r * (smp.s_mm - s0)
         vol = job.extruded_mm3 + extra
         program = self.state.program
         g = int(program.gcode_line[job.row]) if program is not None else -1

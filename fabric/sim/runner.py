@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from fabric.motion.cold import DEFAULT_MIN_EXTRUDE_C, min_extrude_c
 from fabric.motion.program import MOVEL, NOZZLE, RETRACT, SET_TEMP, WAIT_TEMP
 from fabric.motion.thermal import HEATER_NAMES
 from fabric.robot.frames import R_from_quat, inv_T, make_T
@@ -27,8 +28,6 @@ from fabric.sim.state import TwinState
 from fabric.sim.types import Event
 
 __all__ = ["DEFAULT_MIN_EXTRUDE_C", "Interlock", "LegRunner"]
-
-DEFAULT_MIN_EXTRUDE_C = 170.0
 
 
 @dataclass
@@ -93,7 +92,7 @@ class LegRunner:
                 self._deposit(leg, leg.done, nd)
                 job.extruded_mm3 += float(leg.cumvol_mm3[nd] - leg.cumvol_mm3[leg.done])
             if ns > 0:
-                job.row = leg.tl.start_row + ns - 1
+                job.row = leg.timeline.start_row + ns - 1
         leg.started, leg.done = ns, nd
 
     def min_extrude_c(self) -> float | None:
@@ -104,27 +103,22 @@ class LegRunner:
         if p is None:
             return None
         if self._min_c is None or self._min_c[0] != id(p):
-            if "min_extrude_temp_c" in p.meta:
-                value: float | None = float(p.meta["min_extrude_temp_c"])
-            else:
-                heats = bool(np.any((p.op == SET_TEMP) & (p.aux == NOZZLE) & (p.value > 0)))
-                value = DEFAULT_MIN_EXTRUDE_C if heats else None
-            self._min_c = (id(p), value)
+            self._min_c = (id(p), min_extrude_c(p))      # the planner's check uses the same rule
         return self._min_c[1]
 
     def _too_cold(self, leg: Leg, j: int) -> bool:
         min_c = self.min_extrude_c()
         if min_c is None:
             return False
-        t = leg.t0 + float(leg.tl.t_start_s[j])
+        t = leg.t0 + float(leg.timeline.t_start_s[j])
         nozzle_c = self.state.thermal.temp_at(NOZZLE, t)
         if nozzle_c >= min_c:
             return False
-        self.tripped = Interlock(t, leg.tl.start_row + j, j, nozzle_c, min_c)
+        self.tripped = Interlock(t, leg.timeline.start_row + j, j, nozzle_c, min_c)
         return True
 
     def _row_start(self, leg: Leg, j: int, events: list[Event]) -> None:
-        tl, job = leg.tl, self.state.job
+        tl, job = leg.timeline, self.state.job
         p, r, t = tl.program, tl.start_row + j, leg.t0 + float(tl.t_start_s[j])
         if leg.main:
             job.row = r
@@ -137,7 +131,7 @@ class LegRunner:
             self.state.thermal.set_target(int(p.aux[r]), float(p.value[r]), t)
 
     def _row_done(self, leg: Leg, j: int, events: list[Event]) -> None:
-        tl, job, thermal = leg.tl, self.state.job, self.state.thermal
+        tl, job, thermal = leg.timeline, self.state.job, self.state.thermal
         p, r, t = tl.program, tl.start_row + j, leg.t0 + float(tl.t_end_s[j])
         if p.op[r] == WAIT_TEMP:
             h = int(p.aux[r])
@@ -149,7 +143,7 @@ class LegRunner:
 
     def _deposit(self, leg: Leg, a: int, b: int) -> None:
         """Record the beads of main-program rows ``a .. b-1`` of ``leg`` (just completed), vectorised."""
-        tl = leg.tl
+        tl = leg.timeline
         p = tl.program
         j = np.arange(a, b)
         r = tl.start_row + j
@@ -172,7 +166,7 @@ class LegRunner:
     def finish_leg(self, leg: Leg, events: list[Event]) -> None:
         """The head leg ended: keep the unfinished row's volume, record the pose, fire its end events."""
         st = self.state
-        tl = leg.tl
+        tl = leg.timeline
         p = tl.program
         if leg.partial_end and leg.main:
             j = leg.n_rows - 1
@@ -207,10 +201,11 @@ class LegRunner:
         elif kind in ("resumed", "recovered", "at_layer"):
             job.resume_at = None
             self.emit(events, t, kind)
-        elif kind == "paused" and job.resume_at is not None:
+        elif kind == "paused":          # why: the operator, or the cold-extrusion interlock (its reason)
             at = job.resume_at
-            self.emit(events, t, kind, {"resume_row": at.row, "resume_s_mm": at.s_mm,
-                                        "xyz_mm": at.pose.xyz_mm.tolist()})
+            where = {} if at is None else {"resume_row": at.row, "resume_s_mm": at.s_mm,
+                                           "xyz_mm": at.pose.xyz_mm.tolist()}
+            self.emit(events, t, kind, {**where, "reason": st.reason})
         else:
             self.emit(events, t, kind)
 

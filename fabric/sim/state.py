@@ -17,12 +17,12 @@ from typing import Any
 
 import numpy as np
 
-from fabric.wire.errors import ValidationError
 from fabric.motion.program import Program
 from fabric.motion.thermal import Thermal
 from fabric.sim.deposition import Deposition
 from fabric.sim.legs import Leg, PoseSpec, thermal_from_dict, thermal_to_dict
 from fabric.sim.types import Event
+from fabric.wire.errors import ValidationError
 
 __all__ = ["JobState", "ResumePoint", "TwinState", "SNAPSHOT_VERSION"]
 
@@ -41,7 +41,7 @@ class ResumePoint:
         return {"row": self.row, "s_mm": self.s_mm, "pose": self.pose.to_dict()}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "ResumePoint":
+    def from_dict(cls, d: dict[str, Any]) -> ResumePoint:
         return cls(int(d["row"]), float(d["s_mm"]), PoseSpec.from_dict(d["pose"]))
 
 
@@ -73,7 +73,7 @@ class JobState:
                 "pause_retract_mm": self.pause_retract_mm}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "JobState":
+    def from_dict(cls, d: dict[str, Any]) -> JobState:
         return cls(float(d["extruded_mm3"]), float(d["retract_total_mm"]), bool(d["retracted"]),
                    {int(r): float(v) for r, v in d["carry_mm3"]}, bool(d["extruder_on"]), int(d["layer"]),
                    int(d["row"]), ResumePoint.from_dict(d["resume_at"]) if d["resume_at"] else None,
@@ -125,7 +125,7 @@ class TwinState:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], program: Program | None,
-                  beads: dict[str, np.ndarray] | None = None) -> "TwinState":
+                  beads: dict[str, np.ndarray] | None = None) -> TwinState:
         """The state saved by :meth:`to_dict`, with ``program`` the one it was running (and ``beads``,
         when they were saved apart). Leg timelines are left unbuilt: the twin rebuilds them."""
         if d.get("version") != SNAPSHOT_VERSION:

@@ -311,8 +311,10 @@ class Twin:
                 st.job.pause_retract_mm = 0.0        # the pause's retraction had not happened yet
             at = st.job.resume_at
             st.state, st.reason = "interrupted", reason
+            # what the print deposited so far travels with the event (the job's record shows it)
             self.runner.emit(events, t, "interrupted", {"reason": reason, "resume_row": at.row,
-                                                        "resume_s_mm": at.s_mm, "xyz_mm": at.pose.xyz_mm.tolist()})
+                                                        "resume_s_mm": at.s_mm, "xyz_mm": at.pose.xyz_mm.tolist(),
+                                                        **self.runner._totals(t)})
         elif was == "stopped" and st.t_ended_s is None:
             self.runner.on_end("stopped", t, events)
 

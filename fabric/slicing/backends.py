@@ -15,13 +15,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import metadata
 
-from fabric.wire.errors import NotFound
 from fabric.slicing.builtin.slicer import slice_mesh
 from fabric.slicing.external import EXTERNAL, external_version, run_external
 from fabric.slicing.gcode_stats import gcode_stats
 from fabric.slicing.mesh import load_mesh
 from fabric.slicing.placement import Placement, place_mesh
 from fabric.slicing.profile import Profile
+from fabric.wire.errors import NotFound
 
 __all__ = ["SliceResult", "slice_model", "available_backends", "BACKENDS"]
 
@@ -86,7 +86,7 @@ def slice_model(data: bytes, filename: str, profile: Profile, backend: str = "bu
     report(0.0)
     mesh = load_mesh(data, filename)
     warnings = [f"repair: {note}" for note in mesh.metadata.get("repairs", [])]
-    placed = place_mesh(mesh, placement, plate_size_mm, build_height_mm)
+    placed = place_mesh(mesh, placement, plate_size_mm, build_height_mm, notes=warnings)
     report(0.05)
 
     def sub(lo: float, hi: float) -> Callable[[float], None]:

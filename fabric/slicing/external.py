@@ -28,8 +28,8 @@ from pathlib import Path
 
 import trimesh
 
-from fabric.wire.errors import NotFound, SlicerError
 from fabric.slicing.profile import Profile
+from fabric.wire.errors import NotFound, SlicerError
 
 __all__ = ["EXTERNAL", "external_version", "run_external", "prusaslicer_ini", "slic3r_ini"]
 
@@ -119,7 +119,7 @@ def _write_ini(options: dict[str, str], path: Path) -> None:
     path.write_text("".join(f"{k} = {v}\n" for k, v in options.items()), encoding="utf-8")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def external_version(name: str) -> str | None:
     """Installed version of an external back-end, or None when it is not installed."""
     spec = EXTERNAL.get(name)
@@ -190,7 +190,7 @@ def run_external(name: str, mesh: trimesh.Trimesh, profile: Profile, plate_size_
     with tempfile.TemporaryDirectory(prefix=f"fabric-{name}-") as tmp:
         work = Path(tmp)
         model = work / "model.stl"
-        model.write_bytes(mesh.export(file_type="stl"))
+        mesh.export(model, file_type="stl")
         ini = work / "profile.ini"
         _write_ini(spec["ini"](profile, plate_size_mm, build_height_mm), ini)
         out = work / "out.gcode"

@@ -21,8 +21,8 @@ from pathlib import PurePath
 import numpy as np
 import trimesh
 
-from fabric.wire.errors import MeshError
 from fabric.slicing.mesh3mf import read_3mf
+from fabric.wire.errors import MeshError
 
 __all__ = ["load_mesh", "repair_mesh", "MAX_HOLE_EDGES"]
 

@@ -54,7 +54,7 @@ def read_3mf(data: bytes, filename: str) -> tuple[np.ndarray, np.ndarray]:
                         reason="format") from None
     scale = _UNITS_MM.get(root.get("unit", "millimeter"), 1.0)
     try:
-        objects = {obj.get("id"): obj for obj in root.iter() if _tag(obj) == "object"}
+        objects = {oid: obj for obj in root.iter() if _tag(obj) == "object" and (oid := obj.get("id")) is not None}
         build = [item for item in root.iter() if _tag(item) == "item"]
         if not build:  # no build section: print every object once
             build = [ET.Element("item", objectid=oid) for oid in objects]

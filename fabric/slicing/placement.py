@@ -5,7 +5,10 @@ edges, Z up from its surface; every back-end writes G-code in these
 coordinates. A placement rotates the part about Z, drops it onto the plate
 (lowest point at Z = 0) and moves the centre of its XY bounding box to
 ``center_xy_mm`` (the centre of the plate when None). The check then says
-which dimension overflows and by how much.
+which dimension overflows and by how much. A part modelled wholly off the
+plate and moved to its centre (no centre asked for) is moved with a note
+saying from where, so the user learns that the file's own position was not
+kept.
 """
 from __future__ import annotations
 
@@ -30,8 +33,9 @@ class Placement:
 
 def place_mesh(mesh: trimesh.Trimesh, placement: Placement | None,
                plate_size_mm: tuple[float, float] = (250.0, 250.0),
-               build_height_mm: float = 250.0) -> trimesh.Trimesh:
-    """A placed copy of ``mesh`` in bed coordinates; PlacementError if it does not fit."""
+               build_height_mm: float = 250.0, notes: list[str] | None = None) -> trimesh.Trimesh:
+    """A placed copy of ``mesh`` in bed coordinates; PlacementError if it does not fit. ``notes`` gets
+    a line when a part modelled off the plate was re-centred on it (see the module docstring)."""
     placement = placement or Placement()
     plate = np.asarray(plate_size_mm, dtype=np.float64)
     if plate.shape != (2,) or not np.isfinite(plate).all() or (plate <= 0).any() or build_height_mm <= 0:
@@ -47,6 +51,10 @@ def place_mesh(mesh: trimesh.Trimesh, placement: Placement | None,
         raise PlacementError(f"invalid placement centre {placement.center_xy_mm}",
                              center_xy_mm=placement.center_xy_mm)
     shift = np.array([centre[0] - (lo[0] + hi[0]) / 2.0, centre[1] - (lo[1] + hi[1]) / 2.0, -lo[2]])
+    if notes is not None and placement.center_xy_mm is None and _off_plate(lo, hi, plate):
+        notes.append(f"the model lies off the {plate[0]:g} x {plate[1]:g} mm plate (X {lo[0]:.1f} to "
+                     f"{hi[0]:.1f}, Y {lo[1]:.1f} to {hi[1]:.1f} mm): centred on the plate, moved by "
+                     f"({shift[0]:.1f}, {shift[1]:.1f}) mm (--center X Y places it elsewhere)")
     out.apply_translation(shift)
     lo, hi = out.bounds
     size = hi - lo
@@ -67,3 +75,8 @@ def place_mesh(mesh: trimesh.Trimesh, placement: Placement | None,
                                  f"{name} max (centre {centre[axis]:.2f} mm is too close to the edge)",
                                  axis=name, side="max", excess_mm=float(hi[axis] - plate[axis]))
     return out
+
+
+def _off_plate(lo: np.ndarray, hi: np.ndarray, plate: np.ndarray) -> bool:
+    """The part's XY bounding box does not touch the plate at all."""
+    return bool(hi[0] < 0.0 or hi[1] < 0.0 or lo[0] > plate[0] or lo[1] > plate[1])

@@ -75,4 +75,6 @@ def sphere(radius_mm: float = 15.0, subdivisions: int = 5) -> trimesh.Trimesh:
 
 def to_stl_bytes(mesh: trimesh.Trimesh) -> bytes:
     """Binary STL of a mesh (what the slicer service receives)."""
-    return mesh.export(file_type="stl")
+    data = mesh.export(file_type="stl")
+    assert isinstance(data, bytes), "trimesh writes binary STL as bytes"
+    return data

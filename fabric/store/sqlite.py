@@ -179,14 +179,22 @@ class Database:
                                  version=v, reason="migration") from exc
 
     def _damaged(self, what: str) -> StoreError:
-        return StoreError(f"{self.path} is damaged ({what}): move it aside (or restore it from a backup) and "
-                          f"start again; the service then begins with an empty store", file=str(self.path),
-                          reason="damaged")
+        return _damaged(self.path, what)
 
     def _error(self, exc: sqlite3.Error) -> StoreError:
-        if getattr(exc, "sqlite_errorname", "") in _DAMAGED_CODES:
-            return self._damaged(str(exc))
-        return StoreError(f"cannot open {self.path}: {exc}", file=str(self.path), reason="open")
+        return _open_error(self.path, exc)
+
+
+def _damaged(path: Path, what: str) -> StoreError:
+    return StoreError(f"{path} is damaged ({what}): move it aside (or restore it from a backup) and "
+                      f"start again; the service then begins with an empty store", file=str(path),
+                      reason="damaged", problem=what)
+
+
+def _open_error(path: Path, exc: sqlite3.Error) -> StoreError:
+    if getattr(exc, "sqlite_errorname", "") in _DAMAGED_CODES:
+        return _damaged(path, str(exc))
+    return StoreError(f"cannot open {path}: {exc}", file=str(path), reason="open")
 
 
 def run_script(conn: sqlite3.Connection, script: str) -> None:
@@ -206,9 +214,19 @@ def open_db(path: str | Path, schema: str, *, synchronous: str = "NORMAL") -> sq
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     db = sqlite3.connect(str(path), timeout=BUSY_TIMEOUT_MS / 1000.0, check_same_thread=False,
                          isolation_level="DEFERRED")
-    db.execute("PRAGMA journal_mode=WAL")
-    db.execute(f"PRAGMA synchronous={synchronous}")
-    db.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
-    db.executescript(schema)
-    db.commit()
+    try:            # a damaged file is refused as Database refuses it: a StoreError naming it
+        rows = db.execute("PRAGMA quick_check").fetchall()
+        if [tuple(r) for r in rows] != [("ok",)]:
+            raise _damaged(Path(path), "; ".join(str(r[0]) for r in rows[:3]))
+        db.execute("PRAGMA journal_mode=WAL")
+        db.execute(f"PRAGMA synchronous={synchronous}")
+        db.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
+        db.executescript(schema)
+        db.commit()
+    except StoreError:
+        db.close()
+        raise
+    except sqlite3.Error as exc:
+        db.close()
+        raise _open_error(Path(path), exc) from exc
     return db

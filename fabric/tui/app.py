@@ -41,8 +41,9 @@ from fabric.wire.errors import FabricError
 __all__ = ["FabricConsole"]
 
 GCODE_SUFFIXES = (".gcode", ".gco", ".g", ".nc")
-EVENT_TOASTS: dict[str, SeverityLevel] = {"fault": "error", "interlock": "error", "stall": "error", "interrupted": "error",
-                "stopped": "warning", "finished": "information", "paused": "warning"}
+EVENT_TOASTS: dict[str, SeverityLevel] = {"fault": "error", "interlock": "error", "stall": "error",
+                                          "interrupted": "error", "stopped": "warning", "finished": "information",
+                                          "paused": "warning"}
 
 
 class FabricConsole(App):

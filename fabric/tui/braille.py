@@ -36,7 +36,7 @@ class BrailleCanvas:
         x, y = x[keep], y[keep]
         cx, cy = x // 2, y // 4
         np.bitwise_or.at(self.bits, (cy, cx), _DOT_BITS[y % 4, x % 2])
-        for row, col in set(zip(cy.tolist(), cx.tolist())):
+        for row, col in set(zip(cy.tolist(), cx.tolist(), strict=True)):
             if rank >= self.ranks[row, col]:
                 self.ranks[row, col] = rank
                 self.styles[row][col] = style

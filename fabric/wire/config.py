@@ -129,9 +129,9 @@ def _file_settings(path: str) -> dict:
     except zenoh.ZError as exc:
         raise ConfigError(f"cannot read the Zenoh config {path}: {exc}", field="--config", value=path) from None
     found = {}
-    for name, field in (("mode", "mode"), ("connect", "connect/endpoints"), ("listen", "listen/endpoints")):
+    for name, key in (("mode", "mode"), ("connect", "connect/endpoints"), ("listen", "listen/endpoints")):
         try:
-            value = json.loads(conf.get_json(field))
+            value = json.loads(conf.get_json(key))
         except (zenoh.ZError, ValueError):
             continue
         if (name == "mode" and value in MODES) or (name != "mode" and isinstance(value, list) and value):

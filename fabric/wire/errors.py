@@ -42,7 +42,8 @@ may rely on, by class (others may be present)::
     NotFound           what was looked for (job_id, artifact_id, backend, ...): str
     ServiceUnavailable key: str, timeout_s: float, or missing: list[str]
     PermissionDenied   role: str, service: str, command: str
-    StoreError         file: str, reason: str ("damaged", "newer", "migration", "open"), and for
+    StoreError         file: str, reason: str ("damaged", "newer", "migration", "open"), for "damaged"
+                       problem: str (what SQLite or its quick_check found), and for
                        "newer" and "migration" table: str, version: int
     DiskFull           service: str, path: str, free_mb: float, need_mb: float
 """

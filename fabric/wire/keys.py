@@ -68,6 +68,8 @@ _TABLE = [
     _ep("station", "recover", s.StartRequest, s.Ack, 30.0,
         "collision-checked move back to an interrupted print's spot, then go on"),
     _ep("station", "stop", s.Empty, s.Ack, doc="abort safely, keep the deposit record"),
+    _ep("station", "clear_plate", s.Empty, s.Ack,
+        doc="the operator took the part off: the plate is clear (a print from the start needs it)"),
     _ep("station", "collisions", s.Empty, s.CollisionReport, 120.0, "sweep the loaded program"),
     _ep("station", "calibrate", s.Empty, s.CalibrationReport, 30.0, "probe the plate, fit the work object"),
     _ep("station", "ready", s.Empty, s.ReadyReport, 120.0, "checklist with pass/fail per item"),

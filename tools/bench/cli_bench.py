@@ -146,7 +146,7 @@ def summarise(samples: dict[str, list[dict]], baseline: str) -> dict:
     out = {}
     for name, runs in samples.items():
         walls = [r["wall_s"] for r in runs]
-        pairs = [r["wall_s"] / b["wall_s"] for r, b in zip(runs, base_runs)]
+        pairs = [r["wall_s"] / b["wall_s"] for r, b in zip(runs, base_runs, strict=True)]
         out[name] = {"wall_s": spread(walls), "cpu_s": spread([r["cpu_s"] for r in runs]),
                      "ratio_of_medians": statistics.median(walls) / base_median,
                      "pairwise_ratio": spread(pairs)}

@@ -74,11 +74,11 @@ def main(argv: list[str]) -> None:
     seed = np.radians([0.0, 10.0, -10.0, 0.0, 90.0, 0.0])
     T = _raster_targets(robot, n_dls)
     t0 = time.perf_counter()
-    q, ok = dls_ik(robot, T, seed)
+    _q, ok = dls_ik(robot, T, seed)
     dt_dls = time.perf_counter() - t0
     Tc = _raster_targets(robot, n_cf)
     t0 = time.perf_counter()
-    qc, st = robot.ik(Tc, seed)
+    _qc, st = robot.ik(Tc, seed)
     dt_cf = time.perf_counter() - t0
     print(f"DLS baseline : {n_dls} targets in {dt_dls:.3f} s = {n_dls / dt_dls:,.0f} targets/s "
           f"({ok.mean():.1%} converged)")

@@ -38,20 +38,20 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
 
 import zenoh
 
-from fabric.wire import codec
 from fabric import schemas as s
 from fabric.client import Client
+from fabric.wire import codec
 from fabric.wire.config import SessionSettings, zenoh_config
 from fabric.wire.qos import INTERACTIVE_QOS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from load_report import DATA, HELD, HUB, PAPER, PEER, report  # noqa: E402  (a sibling script, not a package)
+from load_report import DATA, HELD, HUB, PAPER, PEER, report  # a sibling script, not a package
 
 HERE = Path(__file__).resolve()
 
@@ -118,7 +118,7 @@ class Monitor:
     proc: subprocess.Popen
 
     @classmethod
-    def start(cls, connect: str, cell: str) -> "Monitor":
+    def start(cls, connect: str, cell: str) -> Monitor:
         return cls(subprocess.Popen([sys.executable, str(HERE), "monitor", connect, cell], stdin=subprocess.PIPE,
                                     stdout=subprocess.PIPE, text=True))
 
@@ -133,7 +133,7 @@ class Monitor:
         self.proc.wait(timeout=30)
         t0, t1 = print_window
         walls = [w for w in seen["pose_walls"] if t0 <= w <= t1]
-        lat = [lat for lat, w in zip(seen["lat_ms"], seen["pose_walls"]) if t0 <= w <= t1]
+        lat = [lat for lat, w in zip(seen["lat_ms"], seen["pose_walls"], strict=True) if t0 <= w <= t1]
         ext = [w for w in seen["extrusion_walls"] if t0 <= w <= t1]
         return {"pose_hz": len(walls) / max(t1 - t0, 1e-9), "extrusion_hz": len(ext) / max(t1 - t0, 1e-9),
                 "lat_p50_ms": pct(lat, 0.5),

@@ -35,15 +35,15 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from fabric.cli.up import CellProcesses                       # noqa: E402
-from fabric.wire.config import SessionSettings                   # noqa: E402
-from fabric.gcode import parse_gcode_file                   # noqa: E402
-from fabric.planning import PlanOptions, plan_gcode_file    # noqa: E402
-from fabric.robot.cell import Cell                            # noqa: E402
-from fabric.robot.frames import R_from_quat, make_T           # noqa: E402
+from fabric.cli.up import CellProcesses  # noqa: E402
+from fabric.gcode import parse_gcode_file  # noqa: E402
+from fabric.planning import PlanOptions, plan_gcode_file  # noqa: E402
+from fabric.robot.cell import Cell  # noqa: E402
+from fabric.robot.frames import R_from_quat, make_T  # noqa: E402
+from fabric.wire.config import SessionSettings  # noqa: E402
 
 try:
-    from ik_baseline import dls_ik                          # the IK engineer's baseline
+    from ik_baseline import dls_ik  # the IK engineer's baseline
 except ImportError:                                         # pragma: no cover - fallback kept in sync
     dls_ik = None
 

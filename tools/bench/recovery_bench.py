@@ -26,8 +26,8 @@ import json
 import platform
 import random
 import signal
-import statistics
 import socket
+import statistics
 import sys
 import tempfile
 import threading
@@ -36,21 +36,21 @@ from pathlib import Path
 
 import zenoh
 
+from fabric import schemas as s
 from fabric.cli.up import CellProcesses, hub_settings
 from fabric.client import Client
-from fabric.wire.config import SessionSettings, zenoh_config
 from fabric.demo import sample_model
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.programs import program_artifact
 from fabric.robot.cell import Cell
 from fabric.services.collision import CollisionService
 from fabric.services.planner import PlannerService
-from fabric import schemas as s
 from fabric.sim.twin import Twin
 from fabric.slicing import load_profile, slice_model
 from fabric.store.artifacts import ArtifactStore
 from fabric.store.journal import StationJournal, StationMeta
 from fabric.store.station import StationStore
+from fabric.wire.config import SessionSettings, zenoh_config
 
 
 def free_port() -> int:
@@ -76,7 +76,7 @@ class Station:
                                                           "WARNING"]})
         self._stop = threading.Event()
 
-    def __enter__(self) -> "Station":
+    def __enter__(self) -> Station:
         self.cell.start(deadline_s=90.0)
         self._thread = threading.Thread(target=self._supervise, daemon=True)
         self._thread.start()
@@ -119,7 +119,7 @@ def checkpoint_cost(settings: SessionSettings, tmp: Path, pid: str, pairs: int) 
                 with Station(settings, tmp / f"cost-{name.replace(' ', '-')}-{k}", period):
                     client.wait_alive(("station",), deadline_s=60)
                     speeds[name].append(print_speed(client, pid))
-    ratios = [a / b for a, b in zip(speeds["default"], speeds["periodic off"])]
+    ratios = [a / b for a, b in zip(speeds["default"], speeds["periodic off"], strict=True)]
     return {"speeds": speeds, "ratios": ratios, "median_ratio": statistics.median(ratios)}
 
 
@@ -235,7 +235,7 @@ def main() -> int:
     lines += ["", "**Checkpoint cost** (prints at max speed, A B A B): simulated seconds per wall second.", "",
               "| pair | default (every 1 s and every command) | baseline: periodic checkpoints off | ratio |",
               "|---|---|---|---|"]
-    for k, (x, y, q) in enumerate(zip(sp["default"], sp["periodic off"], cost["ratios"])):
+    for k, (x, y, q) in enumerate(zip(sp["default"], sp["periodic off"], cost["ratios"], strict=True)):
         lines.append(f"| {k} | {x:,.0f} | {y:,.0f} | {q:.3f} |")
     ck, tk = costs["checkpoint_ms"], costs["tick_ms"]
     lines += ["", f"Median ratio default / baseline: **{cost['median_ratio']:.3f}** "

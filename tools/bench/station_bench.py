@@ -35,14 +35,14 @@ import zenoh
 
 from fabric.cli.up import hub_settings
 from fabric.client import Client
-from fabric.wire.config import SessionSettings, zenoh_config
 from fabric.demo import sample_model
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.programs import program_artifact
-from fabric.services.planner import PlannerService
 from fabric.robot.cell import Cell
+from fabric.services.planner import PlannerService
 from fabric.sim.twin import Twin
 from fabric.slicing import load_profile, slice_model
+from fabric.wire.config import SessionSettings, zenoh_config
 
 
 def free_port() -> int:

@@ -21,11 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from fabric.robot.cell import Cell
-from fabric.robot.frames import make_T, rot_x
-from fabric.motion.timing import StartState, time_program
 from fabric.motion.program import MOVEL, PRINT, Program
 from fabric.motion.testprog import square_program
+from fabric.motion.timing import StartState, time_program
+from fabric.robot.cell import Cell
+from fabric.robot.frames import make_T, rot_x
 from fabric.sim.twin import Twin
 
 
@@ -129,7 +129,7 @@ def report(r: dict) -> str:
              "| advance step | steps | telemetry read per step | wall s | simulated s / wall s "
              "| abs(estimate - executed) / estimate |",
              "|---|---|---|---|---|---|"]
-    for run, tel in zip(sp["runs"], ("yes", "yes", "no")):
+    for run, tel in zip(sp["runs"], ("yes", "yes", "no"), strict=True):
         step = "whole job" if run["step_s"] >= 1e6 else f"{run['step_s'] * 1e3:g} ms"
         lines.append(f"| {step} | {run['steps']} | {tel} | {run['wall_s']:.4f} | {run['sim_per_wall']:,.0f} | "
                      f"{run['estimate_error_rel']:.1e} |")

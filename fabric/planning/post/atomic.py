@@ -33,7 +33,7 @@ class AtomicFiles:
         self._open.append((fh, Path(tmp), path))
         return fh
 
-    def __enter__(self) -> "AtomicFiles":
+    def __enter__(self) -> AtomicFiles:
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,

@@ -6,9 +6,9 @@ from typing import TextIO
 
 import numpy as np
 
-from fabric.wire.errors import ValidationError
-from fabric.robot.frames import R_from_quat
 from fabric.motion.program import MOVEL, Program
+from fabric.robot.frames import R_from_quat
+from fabric.wire.errors import ValidationError
 
 __all__ = ["check_program", "row_blocks", "extrusion_rate", "quat_to_rotvec", "R_to_zyx_deg",
            "quat_to_zyx_deg", "write_lines", "write_ascii"]

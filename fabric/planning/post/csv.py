@@ -6,9 +6,9 @@ from typing import TextIO
 import numpy as np
 
 from fabric.ahead import ordered_map
+from fabric.motion.program import MOVEL, Program
 from fabric.planning.post.common import check_program, row_blocks, write_ascii
 from fabric.planning.post.numtext import FixedColumn, format_rows
-from fabric.motion.program import MOVEL, Program
 
 __all__ = ["write_csv", "csv_rows", "CSV_COLUMNS"]
 

@@ -6,13 +6,13 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from fabric.wire.errors import ValidationError
+from fabric.motion.program import Program
 from fabric.planning.post.csv import write_csv
 from fabric.planning.post.krl import write_krl
 from fabric.planning.post.names import program_name
 from fabric.planning.post.rapid import RapidOptions, write_rapid
 from fabric.planning.post.urscript import write_urscript
-from fabric.motion.program import Program
+from fabric.wire.errors import ValidationError
 
 __all__ = ["export_program", "write_export", "FORMATS"]
 
@@ -41,7 +41,7 @@ def export_program(program: Program, fmt: str, path: str | Path, *, tool_T: np.n
         streams = []
 
         def sink(module: str):
-            f = open(path / f"{module}.mod", "w", encoding="latin-1", newline="\n")
+            f = open(path / f"{module}.mod", "w", encoding="latin-1", newline="\n")  # noqa: SIM115  (closed below)
             streams.append(f)
             files.append(path / f"{module}.mod")
             return f

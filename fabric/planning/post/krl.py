@@ -16,17 +16,38 @@ length / 10 mm to ``$ANOUT[4]`` and pulses ``$OUT[2]``.
 """
 from __future__ import annotations
 
+import itertools
 from typing import TextIO
 
 import numpy as np
 
-from fabric.wire.errors import ValidationError
-from fabric.planning.post.common import (R_to_zyx_deg, check_program, extrusion_rate, quat_to_zyx_deg, write_ascii,
-                                         write_lines)
-from fabric.planning.post.numtext import ChoiceColumn, Column, FixedColumn, format_rows
-from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LinearMove,
-                                       LinearRun, Retract, RowWalker, SetTemp, Wait, WaitTemp, heater_index)
 from fabric.motion.program import MOVEL, Program
+from fabric.planning.post.common import (
+    R_to_zyx_deg,
+    check_program,
+    extrusion_rate,
+    quat_to_zyx_deg,
+    write_ascii,
+    write_lines,
+)
+from fabric.planning.post.numtext import ChoiceColumn, Column, FixedColumn, format_rows
+from fabric.planning.post.walk import (
+    Block,
+    Event,
+    ExtruderOff,
+    ExtruderOn,
+    ExtruderRate,
+    JointMove,
+    LinearMove,
+    LinearRun,
+    Retract,
+    RowWalker,
+    SetTemp,
+    Wait,
+    WaitTemp,
+    heater_index,
+)
+from fabric.wire.errors import ValidationError
 
 __all__ = ["write_krl"]
 
@@ -121,7 +142,7 @@ class _Formatter:
         speed, zone = p.speed_mm_s[run.start:run.stop], p.zone_mm[run.start:run.stop]
         changes = np.flatnonzero((speed[1:] != speed[:-1]) | (zone[1:] != zone[:-1])) + 1
         cuts = [0, *changes.tolist(), run.stop - run.start]
-        for a, b in zip(cuts[:-1], cuts[1:]):
+        for a, b in itertools.pairwise(cuts):
             lines: list[str] = []
             self._linear(LinearMove(run.start + a), lines)
             write_lines(out, lines)

@@ -21,6 +21,8 @@ A :class:`ChoiceColumn` writes one of a few fixed texts per row (names).
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 __all__ = ["format_rows", "FixedColumn", "ChoiceColumn", "Column", "trimmed_text"]
@@ -113,7 +115,7 @@ def _cells(col: FixedColumn) -> np.ndarray:
         iv = rounded.astype(np.int64)
     if iv.max(initial=0) < 2**32:
         iv = iv.astype(np.uint32)                   # the fast integer division path
-    ip, fp = _divmod(iv, 10 ** d) if d else (iv, None)
+    ip, fp = _divmod(iv, 10 ** d) if d else (iv, iv)     # integer and fractional digits (fp unread if d is 0)
     n_int = _digits_count(ip)
     slow_rows = np.flatnonzero(slow)
     slow_text = [_python_text(float(v[i]), d, col.trim) for i in slow_rows]
@@ -144,7 +146,7 @@ def _cells(col: FixedColumn) -> np.ndarray:
             cells[pos - j] *= n_int > j
     rows = np.flatnonzero(neg & (iv != 0) if col.trim else neg)
     cells[pos - n_int[rows], rows] = _MINUS         # the sign
-    for i, text in zip(slow_rows, slow_text):       # the values Python formats
+    for i, text in zip(slow_rows, slow_text, strict=True):       # the values Python formats
         cells[:, i] = 0
         cells[width - len(text):, i] = np.frombuffer(text, dtype=np.uint8)
     return cells
@@ -162,7 +164,7 @@ def _choice_cells(col: ChoiceColumn) -> np.ndarray:
 Column = FixedColumn | ChoiceColumn | bytes
 
 
-def format_rows(columns: list[Column], sep: bytes = b",") -> bytes:
+def format_rows(columns: Sequence[Column], sep: bytes = b",") -> bytes:
     """Text of rows: the columns in order, ``sep`` between them, ``\\n`` after each row.
 
     A ``bytes`` column is a constant written on every row (e.g. ``b""`` for an empty field).

@@ -29,20 +29,35 @@ pulse on ``doRetract``).
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Callable, TextIO
+from typing import TextIO
 
 import numpy as np
 
-from fabric.wire.errors import ValidationError
 from fabric.ahead import AHEAD, WORKERS
+from fabric.motion.program import MOVEJ, MOVEL, Program
 from fabric.planning.post.common import check_program, write_ascii, write_lines
 from fabric.planning.post.numtext import ChoiceColumn, Column, FixedColumn, format_rows, trimmed_text
-from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LayerStart,
-                                       LinearMove, LinearRun, Retract, RowWalker, SetTemp, Wait, WaitTemp)
+from fabric.planning.post.walk import (
+    Block,
+    Event,
+    ExtruderOff,
+    ExtruderOn,
+    ExtruderRate,
+    JointMove,
+    LayerStart,
+    LinearMove,
+    LinearRun,
+    Retract,
+    RowWalker,
+    SetTemp,
+    Wait,
+    WaitTemp,
+)
 from fabric.robot.frames import quat_from_R
-from fabric.motion.program import MOVEJ, MOVEL, Program
+from fabric.wire.errors import ValidationError
 
 __all__ = ["RapidOptions", "RapidExport", "write_rapid"]
 
@@ -162,7 +177,7 @@ def _open(sink: TextIO | Callable[[str], TextIO], name: str) -> TextIO:
 
 
 def _write_main(out: TextIO, name: str, program: Program, opt: RapidOptions, names: _Names,
-                tool: np.ndarray, n_mod: int, bounds: dict[str, tuple[int, int]], ctx: "_Emitter") -> None:
+                tool: np.ndarray, n_mod: int, bounds: dict[str, tuple[int, int]], ctx: _Emitter) -> None:
     tq = quat_from_R(tool[:3, :3])
     wq = quat_from_R(program.wobj[:3, :3])
     cog = ",".join(_num(c) for c in opt.tool_cog_mm)
@@ -334,7 +349,7 @@ class _MoveLText:
     starts: np.ndarray         # (M + 1,) where each line starts in ``text`` (and the end)
 
     @classmethod
-    def of(cls, emitter: _Emitter, start: int, stop: int) -> "_MoveLText":
+    def of(cls, emitter: _Emitter, start: int, stop: int) -> _MoveLText:
         p = emitter.p
         stop = min(stop, len(p))
         rows = np.flatnonzero(p.op[start:stop] == MOVEL) + start

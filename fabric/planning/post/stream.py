@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import queue
 import threading
-from typing import Callable, TextIO
+from collections.abc import Callable
+from typing import TextIO
 
 from fabric.wire.errors import BadRequest, FabricError, InternalError, ServiceUnavailable
 
@@ -41,7 +42,7 @@ class _ChunkSink:
     as bytes with :meth:`write_bytes` (no decoding and encoding back).
     """
 
-    def __init__(self, out: "queue.Queue[bytes | _Done]", piece_bytes: int, cancelled: threading.Event) -> None:
+    def __init__(self, out: queue.Queue[bytes | _Done], piece_bytes: int, cancelled: threading.Event) -> None:
         self._out = out
         self._piece_bytes = piece_bytes
         self._cancelled = cancelled
@@ -66,7 +67,7 @@ class _ChunkSink:
         self._size = 0
         self.put(piece)
 
-    def put(self, item: "bytes | _Done") -> None:
+    def put(self, item: bytes | _Done) -> None:
         while True:
             if self._cancelled.is_set():
                 raise _Cancelled()
@@ -95,14 +96,14 @@ class ExportStream:
     def _run(self, write: Callable[[TextIO], None]) -> None:
         try:
             try:
-                write(self._sink)  # type: ignore[arg-type]  (write() is all a post-processor uses)
+                write(self._sink)  # type: ignore[arg-type]  # write() is all a post-processor uses
                 self._sink.flush()
                 end = _Done()
             except FabricError as err:
                 end = _Done(err)
             except _Cancelled:
                 return
-            except Exception as exc:  # a bug in a writer: the reader gets an internal error with its name
+            except Exception as exc:  # noqa: BLE001 - a bug in a writer: the reader gets an internal error
                 end = _Done(InternalError(f"export writer failed: {type(exc).__name__}: {exc}"))
             self._sink.put(end)
         except _Cancelled:
@@ -142,7 +143,7 @@ class ExportStream:
                 self.done = True
                 return []
             self._pending = memoryview(item)
-        parts = [self._take(limit_bytes)]
+        parts: list[memoryview | bytes] = [self._take(limit_bytes)]
         size = len(parts[0])
         while True:
             if not self._pending:

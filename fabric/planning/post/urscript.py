@@ -19,13 +19,27 @@ from typing import TextIO
 
 import numpy as np
 
-from fabric.wire.errors import ValidationError
+from fabric.motion.program import MOVEL, Program
 from fabric.planning.post.common import check_program, extrusion_rate, quat_to_rotvec, write_ascii, write_lines
 from fabric.planning.post.numtext import Column, FixedColumn, format_rows
-from fabric.planning.post.walk import (Block, Event, ExtruderOff, ExtruderOn, ExtruderRate, JointMove, LinearMove,
-                                       LinearRun, Retract, RowWalker, SetTemp, Wait, WaitTemp, heater_index)
+from fabric.planning.post.walk import (
+    Block,
+    Event,
+    ExtruderOff,
+    ExtruderOn,
+    ExtruderRate,
+    JointMove,
+    LinearMove,
+    LinearRun,
+    Retract,
+    RowWalker,
+    SetTemp,
+    Wait,
+    WaitTemp,
+    heater_index,
+)
 from fabric.robot.frames import quat_from_R
-from fabric.motion.program import MOVEL, Program
+from fabric.wire.errors import ValidationError
 
 __all__ = ["write_urscript"]
 

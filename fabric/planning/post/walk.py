@@ -39,9 +39,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fabric.wire.errors import ValidationError
-from fabric.planning.post.common import BLOCK_ROWS, extrusion_rate, row_blocks
 from fabric.motion.program import BED, MOVEJ, MOVEL, PRINT, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
+from fabric.planning.post.common import BLOCK_ROWS, extrusion_rate, row_blocks
+from fabric.wire.errors import ValidationError
 
 __all__ = ["RowWalker", "Event", "Block", "LayerStart", "JointMove", "LinearMove", "LinearRun", "ExtruderOn",
            "ExtruderRate",
@@ -207,19 +207,20 @@ class RowWalker:
 
     def _plain_runs(self, a: int, b: int, walk_start: int) -> list[tuple[int, int]]:
         """``[start, stop)`` of the runs of at least ``MIN_RUN_ROWS`` plain rows in ``[a, b)`` (module docstring)."""
-        p = self.program
+        p, rate = self.program, self.rounded_rate_mm3_s
+        assert rate is not None, "runs are looked for only by a walker made with runs=True"
         lo = max(a, walk_start + 1)                 # a plain row follows a row of this walk
         if b - lo < MIN_RUN_ROWS:
             return []
         prev, cur = slice(lo - 1, b - 1), slice(lo, b)
         in_print = p.section[lo - 1:b] == PRINT
         plain = ((p.op[cur] == MOVEL) & (p.op[prev] == MOVEL)
-                 & (self.rounded_rate_mm3_s[cur] == self.rounded_rate_mm3_s[prev])
+                 & (rate[cur] == rate[prev])
                  & (~in_print[1:] | (in_print[:-1] & (p.layer[cur] == p.layer[prev]))))
         edges = np.diff(plain.astype(np.int8), prepend=np.int8(0), append=np.int8(0))
         starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
         keep = stops - starts >= MIN_RUN_ROWS
-        return [(lo + int(s0), lo + int(s1)) for s0, s1 in zip(starts[keep], stops[keep])]
+        return [(lo + int(s0), lo + int(s1)) for s0, s1 in zip(starts[keep], stops[keep], strict=True)]
 
     def _switch(self, i: int) -> ExtruderOn | ExtruderRate | ExtruderOff | None:
         # the rate a linear move programs, against what the extruder does now

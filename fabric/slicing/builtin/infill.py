@@ -63,11 +63,16 @@ class Segments:
     def __len__(self) -> int:
         return len(self.k)
 
+    def ends(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where the free ends may extend to (``e0``, ``e1``; set from ``y0``, ``y1`` on construction)."""
+        return (self.y0 if self.e0 is None else self.e0), (self.y1 if self.e1 is None else self.e1)
+
     def take(self, mask: np.ndarray) -> Segments:
         """The segments selected by a boolean mask (or index array)."""
+        e0, e1 = self.ends()
         return Segments(self.k[mask], self.x[mask], self.y0[mask], self.y1[mask], self.r0[mask],
                         self.s0[mask], self.r1[mask], self.s1[mask], self.angle_rad, self.rings,
-                        self.e0[mask], self.e1[mask])
+                        e0[mask], e1[mask])
 
     def to_bed(self, xr: np.ndarray, yr: np.ndarray) -> np.ndarray:
         """Rotate rotated-frame points back to bed coordinates, (n, 2)."""
@@ -204,8 +209,9 @@ def chain_segments(seg: Segments, start_bed: tuple[float, float], link_max_mm: f
     idx = np.asarray(order)
     ya = np.where(flipped, seg.y1[idx], seg.y0[idx])
     yb = np.where(flipped, seg.y0[idx], seg.y1[idx])
-    xa = np.where(flipped, seg.e1[idx], seg.e0[idx])        # extended ends
-    xb = np.where(flipped, seg.e0[idx], seg.e1[idx])
+    e0, e1 = seg.ends()
+    xa = np.where(flipped, e1[idx], e0[idx])        # extended ends
+    xb = np.where(flipped, e0[idx], e1[idx])
     if link_max_mm <= 0 or seg.rings is None:
         return list(np.stack([seg.to_bed(seg.x[idx], xa), seg.to_bed(seg.x[idx], xb)], axis=1))
     ra = np.where(flipped, seg.r1[idx], seg.r0[idx])

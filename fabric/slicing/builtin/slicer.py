@@ -22,7 +22,6 @@ import numpy as np
 import shapely
 import trimesh
 
-from fabric.wire.errors import MeshError
 from fabric.slicing.builtin.infill import chain_segments, extend_to, scan_segments
 from fabric.slicing.builtin.layers import (
     layer_heights,
@@ -46,6 +45,7 @@ from fabric.slicing.builtin.toolpath import (
 from fabric.slicing.builtin.writer import GcodeWriter
 from fabric.slicing.flow import bead_spacing_mm, width_for_spacing_mm
 from fabric.slicing.profile import Profile
+from fabric.wire.errors import MeshError
 
 __all__ = ["BuiltinOutput", "slice_mesh"]
 

@@ -56,7 +56,8 @@ class EventsScreen(Screen):
         self.load(self.kind)            # the console switched cells: that cell's history
 
     def _on_event(self, e: Any) -> None:
-        if e is not None and (self.kind is None or e.kind == self.kind) and (not self.rows or e.seq > self.rows[-1].seq):
+        if (e is not None and (self.kind is None or e.kind == self.kind)
+                and (not self.rows or e.seq > self.rows[-1].seq)):
             self.rows.append(e)
             if self._matches(e, self._search()):
                 self.query_one(DataTable).add_row(*self._cells(e))

@@ -1,4 +1,5 @@
-"""Submit a print job: a model (STL, 3MF, OBJ) or G-code from a file picker, with the slicer's back-ends and profiles."""
+"""Submit a print job: a model (STL, 3MF, OBJ) or G-code from a file picker, with the slicer's back-ends and
+profiles."""
 from __future__ import annotations
 
 from dataclasses import dataclass

@@ -52,7 +52,8 @@ class TempsPanel(Static):
         return text
 
     def _graph(self, width: int, height: int) -> Text:
-        """Temperatures over the last HISTORY_S (or since the console started): dotted set points, solid readings; the top value on the left."""
+        """Temperatures over the last HISTORY_S (or since the console started): dotted set points, solid
+        readings; the top value on the left."""
         h = np.array(self.history)
         top_c = max(50.0, float(h[:, 1:].max()) * 1.1)
         canvas = BrailleCanvas(width, height)
