@@ -2,12 +2,12 @@
 from __future__ import annotations
 
 import errno
+import itertools
 import threading
 import time
 
 import pytest
 
-from fabric import schemas as s
 from fabric.client import Client
 from fabric.motion.testprog import square_program
 from fabric.programs import program_artifact
@@ -61,7 +61,7 @@ def test_a_clock_that_keeps_failing_backs_off_faults_the_print_and_says_why(sess
             assert h.state == "degraded" and "No space left on device" in h.reasons[0]
             assert h.reasons[0].startswith("clock:")
             # backing off: the pauses grow (0.05, 0.1, 0.2, 0.4, ... s), not a hot loop
-            gaps = [b - a for a, b in zip(calls, calls[1:])]
+            gaps = [b - a for a, b in itertools.pairwise(calls)]
             assert len(calls) < 12 and gaps[-1] > 4 * gaps[0]
             st = client.state()                         # commands are still served while the clock fails
             assert st.state == "fault" and "No space left" in st.reason

@@ -54,7 +54,7 @@ def test_the_part_on_the_plate_blocks_a_reprint_until_cleared_and_survives_a_res
             after = client.state()
             assert after.state == st.state and after.deposited_mm3 == st.deposited_mm3   # nothing changed
             assert not client.ready().ready
-            assert [c for c in client.ready().checks if c.name == "plate clear"][0].ok is False
+            assert next(c for c in client.ready().checks if c.name == "plate clear").ok is False
             # going on at a layer of this part is what a restart at a layer is for
             assert _print_to_end(client, from_layer=2).kind == "finished"
             with pytest.raises(StateError):

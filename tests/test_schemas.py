@@ -8,11 +8,12 @@ from typing import Any, Union
 import msgpack
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
+from fabric.schemas import REGISTRY
 from fabric.wire import codec
 from fabric.wire.errors import DecodeError, ValidationError
-from fabric.schemas import REGISTRY
 
 SCHEMAS = sorted(REGISTRY.items())
 FAST = settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -21,7 +22,7 @@ FAST = settings(max_examples=25, deadline=None, suppress_health_check=[HealthChe
 def _strategy(tp: Any, spec=None) -> st.SearchStrategy:
     origin = typing.get_origin(tp)
     if origin in (Union, types.UnionType):
-        inner = [a for a in typing.get_args(tp) if a is not type(None)][0]
+        inner = next(a for a in typing.get_args(tp) if a is not type(None))
         return st.one_of(st.none(), _strategy(inner, spec))
     if tp is Any:
         return st.one_of(st.integers(-5, 5), st.text(max_size=5), st.booleans())
@@ -72,7 +73,7 @@ def _equal(a: Any, b: Any) -> bool:
     if isinstance(a, dict):
         return isinstance(b, dict) and a.keys() == b.keys() and all(_equal(a[k], b[k]) for k in a)
     if isinstance(a, (list, tuple)):
-        return len(a) == len(b) and all(_equal(x, y) for x, y in zip(a, b))
+        return len(a) == len(b) and all(_equal(x, y) for x, y in zip(a, b, strict=True))
     return a == b
 
 
@@ -120,7 +121,7 @@ def test_version_and_type_are_checked():
     from fabric.schemas import Overrides, Pose
     with pytest.raises(DecodeError, match="version"):
         codec.decode(codec.pack({"_t": "station.Overrides", "_v": 99}), Overrides)
-    with pytest.raises(DecodeError, match="expected station.Pose"):
+    with pytest.raises(DecodeError, match=r"expected station\.Pose"):
         codec.decode(codec.encode(Overrides()), Pose)
 
 
@@ -196,8 +197,8 @@ def test_nested_schema_is_validated_with_its_dotted_path():
 
 
 def test_unreachable_reason_is_one_word_of_the_vocabulary():
-    from fabric.wire.errors import UNREACHABLE_REASONS, UnreachableError, error_from_code
     from fabric.robot.kinematics import IK_OK, IK_REASONS, ik_reason
+    from fabric.wire.errors import UNREACHABLE_REASONS, UnreachableError, error_from_code
     err = UnreachableError("far", reason="out of reach", gcode_line=6)
     assert err.details == {"reason": "out of reach", "gcode_line": 6}
     with pytest.raises(TypeError, match="reason"):

@@ -5,11 +5,13 @@ import argparse
 import queue
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from fabric import schemas as s
-from fabric.cli.output import emit
 from fabric.cli.inputs import read_whole
+from fabric.cli.output import emit
 from fabric.cli.pipeline_cmds import parse_sets
 from fabric.client import Client
 from fabric.client.follow import follow_print
@@ -18,6 +20,12 @@ __all__ = ["register"]
 
 GCODE_SUFFIXES = (".gcode", ".gco", ".g", ".nc")
 
+
+
+def _shown(reply: Any, a: argparse.Namespace, text: Callable[[Any], str]) -> int:
+    """Print a reply (JSON or text) and succeed."""
+    emit(reply, a.json, text)
+    return 0
 
 def _settled(rec: s.JobRecord) -> bool:
     """Submission is over: the job is on the station, prepared and waiting for something, or ended."""
@@ -116,17 +124,17 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--limit", type=int, default=100, help=f"show at most this many (up to {s.MAX_JOBS_PAGE})")
     p.add_argument("--state", action="append", default=[], choices=s.PRINT_JOB_STATES,
                    help="only jobs in this state (repeat for several)")
-    p.set_defaults(run=lambda c, a: (emit(c.jobs(a.offset, a.limit, a.state), a.json, _list_text), 0)[1])
+    p.set_defaults(run=lambda c, a: _shown(c.jobs(a.offset, a.limit, a.state), a, _list_text))
     for name in ("show", "status"):
         p = jsub.add_parser(name, parents=[common], help="one job's whole record")
         p.add_argument("job_id")
-        p.set_defaults(run=lambda c, a: (emit(c.job(a.job_id), a.json, _record_text), 0)[1])
+        p.set_defaults(run=lambda c, a: _shown(c.job(a.job_id), a, _record_text))
     p = jsub.add_parser("remove", parents=[common], help="remove a job that is not on the station")
     p.add_argument("job_id")
-    p.set_defaults(run=lambda c, a: (emit(c.job_remove(a.job_id), a.json, lambda r: r.message), 0)[1])
+    p.set_defaults(run=lambda c, a: _shown(c.job_remove(a.job_id), a, lambda r: r.message))
     p = jsub.add_parser("move", parents=[common], help="move a waiting job to a place in the queue (0 = next)")
     p.add_argument("job_id")
     p.add_argument("position", type=int)
-    p.set_defaults(run=lambda c, a: (emit(c.job_move(a.job_id, a.position), a.json, _list_text), 0)[1])
+    p.set_defaults(run=lambda c, a: _shown(c.job_move(a.job_id, a.position), a, _list_text))
     p = jsub.add_parser("next", parents=[common], help="the plate is clear: load and start the next job")
-    p.set_defaults(run=lambda c, a: (emit(c.job_next(), a.json, lambda r: r.message), 0)[1])
+    p.set_defaults(run=lambda c, a: _shown(c.job_next(), a, lambda r: r.message))

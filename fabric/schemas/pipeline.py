@@ -28,10 +28,10 @@ class SliceRequest:
     model: bytes
     filename: str = f(max_len=255)
     profile: str = "taz-pla-medium"
-    backend: str = f("builtin", choices=BACKENDS)
+    backend: str = f(default="builtin", choices=BACKENDS)
     overrides: dict[str, str] = f(factory=dict)
-    center_xy_mm: list[float] | None = f(None, shape=(2,))
-    upload_id: str = f("", max_len=64)          # a model sent in chunks to slicer/upload (then ``model`` is empty)
+    center_xy_mm: list[float] | None = f(default=None, shape=(2,))
+    upload_id: str = f(default="", max_len=64)      # a model sent in chunks to slicer/upload (``model`` is empty)
 
 
 @schema("slicer.SliceResult")
@@ -66,13 +66,13 @@ class PlanRequest:
     filename: str = "part.gcode"
     offset_mm: list[float] = f(factory=lambda: [0.0, 0.0, 0.0], shape=(3,))
     tilt_deg: list[float] = f(factory=lambda: [0.0, 0.0], shape=(2,))
-    speed_r: float = f(1.0, ge=0.05, le=4.0)
-    rot_step_deg: float = f(15.0, ge=0.5, le=90.0)
-    wobj_xyz_mm: list[float] | None = f(None, shape=(3,))     # work object override (e.g. after calibration)
-    wobj_rpy_deg: list[float] | None = f(None, shape=(3,))
-    filament_diameter_mm: float | None = f(None, ge=0.5, le=5.0)
+    speed_r: float = f(default=1.0, ge=0.05, le=4.0)
+    rot_step_deg: float = f(default=15.0, ge=0.5, le=90.0)
+    wobj_xyz_mm: list[float] | None = f(default=None, shape=(3,))     # work object override (e.g. after calibration)
+    wobj_rpy_deg: list[float] | None = f(default=None, shape=(3,))
+    filament_diameter_mm: float | None = f(default=None, ge=0.5, le=5.0)
     allow_off_plate: bool = False               # targets off the plate or below it: counted, not fatal
-    upload_id: str = f("", max_len=64)
+    upload_id: str = f(default="", max_len=64)
 
 
 @schema("planner.UnreachableTarget")
@@ -130,8 +130,8 @@ class PlanSummary:
     elapsed_s: float = 0.0
     slowed_targets: int = 0                    # linear moves slowed to respect a joint velocity limit
     first_slowed: SlowedMove | None = None
-    filament_diameter_mm: float = f(1.75, ge=0.5, le=5.0)
-    material_source: str = f("assumed", choices=MATERIAL_SOURCES)
+    filament_diameter_mm: float = f(default=1.75, ge=0.5, le=5.0)
+    material_source: str = f(default="assumed", choices=MATERIAL_SOURCES)
     material: str = ""
     density_g_cm3: float | None = None
     min_extrude_temp_c: float | None = None
@@ -155,7 +155,7 @@ class ProgramMsg:
 class ExportRequest:
     program_id: str
     fmt: str = f(choices=EXPORT_FORMATS)
-    module_targets: int = f(5000, ge=10, le=1_000_000)
+    module_targets: int = f(default=5000, ge=10, le=1_000_000)
 
 
 # --- collision ---------------------------------------------------------------
@@ -166,7 +166,7 @@ class CollisionRequest:
     program_id: str = ""
     q_from_deg: list[float] | None = None
     q_to_deg: list[float] | None = None
-    step_deg: float = f(2.0, ge=0.1, le=30.0)
+    step_deg: float = f(default=2.0, ge=0.1, le=30.0)
     include_part: bool = True
 
 
@@ -179,7 +179,7 @@ class CollisionHit:
     row: int = -1                              # program row (-1 for a single joint move)
     gcode_line: int = -1
     layer: int = -1
-    move_r: float = f(0.0, ge=0.0, le=1.0)     # where along a single joint move (0 = start, 1 = end)
+    move_r: float = f(default=0.0, ge=0.0, le=1.0)     # where along a single joint move (0 = start, 1 = end)
 
 
 @schema("collision.Report", version=2)
@@ -199,7 +199,7 @@ class ServiceInfo:
     name: str
     alive: bool
     since_s: float = 0.0
-    health: str = f("", choices=("", "ok", "degraded"))   # "": not known (not alive, or did not answer)
+    health: str = f(default="", choices=("", "ok", "degraded"))   # "": not known (not alive, or did not answer)
     reasons: list[str] = f(factory=list)                  # why it is degraded (see common.Health)
 
 
@@ -212,19 +212,19 @@ class JobRecord:
     Times ending in ``_s`` without "elapsed" are wall-clock epoch seconds (0 = not yet)."""
     job_id: str
     filename: str
-    source: str = f("model", choices=JOB_SOURCES)      # a model to slice, or G-code to plan as it is
+    source: str = f(default="model", choices=JOB_SOURCES)      # a model to slice, or G-code to plan as it is
     profile: str = ""
     backend: str = ""
     model_id: str = ""                          # the submitted file (an artifact at the supervisor)
     overrides: dict[str, str] = f(factory=dict)  # slicing profile overrides
     start: bool = False                         # start printing once loaded
-    rtf: float = f(1.0, ge=0.0, le=1e6)
-    state: str = f("queued", choices=PRINT_JOB_STATES)
+    rtf: float = f(default=1.0, ge=0.0, le=1e6)
+    state: str = f(default="queued", choices=PRINT_JOB_STATES)
     prepared: bool = False                      # sliced, planned and checked: can be loaded
-    waiting_for: str = f("", choices=WAITING_FOR)   # why a prepared job is not loaded yet ("": it will be)
+    waiting_for: str = f(default="", choices=WAITING_FOR)   # why a prepared job is not loaded yet ("": it will be)
     reason: str = ""                            # why it is in its state (a failure, an interruption, a stop)
     stage: str = ""                             # what it is doing now, in words
-    progress_r: float = f(0.0, ge=0.0, le=1.0)
+    progress_r: float = f(default=0.0, ge=0.0, le=1.0)
     layer: int = -1                             # the last layer begun (0-based), while printing
     created_s: float = 0.0
     updated_s: float = 0.0
@@ -245,7 +245,7 @@ class JobRecord:
 class JobMove:
     """Put a waiting job at ``position`` of the queue (0 = next)."""
     job_id: str = f(max_len=128)
-    position: int = f(0, ge=0, le=100000)
+    position: int = f(default=0, ge=0, le=100000)
 
 
 @schema("supervisor.Status", version=2)
@@ -262,12 +262,12 @@ class JobSubmit:
     (``source`` "gcode") -> plan -> check -> load (-> start)."""
     model: bytes
     filename: str = f(max_len=255)
-    source: str = f("model", choices=JOB_SOURCES)
+    source: str = f(default="model", choices=JOB_SOURCES)
     profile: str = "taz-pla-medium"
-    backend: str = f("builtin", choices=BACKENDS)
+    backend: str = f(default="builtin", choices=BACKENDS)
     overrides: dict[str, str] = f(factory=dict)
     start: bool = False
-    rtf: float = f(0.0, ge=0.0, le=1e6)
+    rtf: float = f(default=0.0, ge=0.0, le=1e6)
 
 
 MAX_JOBS_PAGE = 10_000              # the most records one supervisor/jobs reply carries

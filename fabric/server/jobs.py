@@ -14,13 +14,13 @@ import threading
 import time
 import traceback
 import uuid
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
-from fabric.server.disk import disk_full_of
-from fabric.wire.errors import FabricError, InternalError, NotFound
-from fabric.server.service import Publisher
 from fabric.schemas import ErrorReply, JobStatus
+from fabric.server.disk import disk_full_of
+from fabric.server.service import Publisher
+from fabric.wire.errors import FabricError, InternalError, NotFound
 
 __all__ = ["Job", "JobRunner"]
 
@@ -31,7 +31,7 @@ PROGRESS_PERIOD_S = 0.1
 class Job:
     """Handle given to the job function: report progress through it."""
 
-    def __init__(self, runner: "JobRunner", status: JobStatus) -> None:
+    def __init__(self, runner: JobRunner, status: JobStatus) -> None:
         self._runner, self.status = runner, status
         self._last_pub = 0.0
 
@@ -108,7 +108,7 @@ class JobRunner:
                 st.state, st.progress_r = "done", 1.0
             except FabricError as err:
                 _fail(st, err)
-            except Exception as exc:  # a full disk, or a bug (keep the trace): fail the job, keep running
+            except Exception as exc:  # noqa: BLE001 - a full disk, or a bug (traced): fail the job, keep running
                 full = disk_full_of(exc, self.name, self.data_dir or ".")
                 if full is not None:
                     log.error("%s job %s: %s", self.name, st.job_id, full.message)

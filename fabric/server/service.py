@@ -5,8 +5,9 @@ with :meth:`Service.handle` (one per endpoint of ``fabric.wire.keys.ENDPOINTS``
 for that service; :meth:`Service.start` refuses to start when one is missing or
 unknown) and publishers with :meth:`Service.publisher`; :meth:`Service.start`
 declares the queryables, then the liveliness token (so "alive" means "ready
-to serve"). Every service answers ``health`` (:mod:`fabric.server.health`). Queries arrive in a FIFO channel and are answered by a worker
-thread: nothing runs inside a Zenoh callback. A handler returns the reply
+to serve"). Every service answers ``health`` (:mod:`fabric.server.health`).
+Queries arrive in a FIFO channel and are answered by a worker thread: nothing
+runs inside a Zenoh callback. A handler returns the reply
 message or raises a :class:`~fabric.wire.errors.FabricError`, which becomes a
 ``reply_err`` with a code, a message and details. Any other exception is logged
 with its traceback, answered as ``internal`` and marks the service degraded
@@ -16,26 +17,28 @@ from __future__ import annotations
 
 import fcntl
 import logging
+import os
 import tempfile
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from pathlib import Path
-from typing import IO, Any, Callable
+from typing import IO, Any
 
 import zenoh
 
-from fabric.wire import codec
-from fabric.wire.errors import FabricError, InternalError, NotFound, StateError, ValidationError
-from fabric.server.disk import disk_full_of
-from fabric.server.health import Health
-from fabric.wire.keys import ENDPOINTS, SERVICES, TOPICS, Endpoint, Keys, endpoints_of
-from fabric.wire.qos import reply_qos
 from fabric.client import Client
 from fabric.client.sessions import wait_connected
 from fabric.schemas import Ack, Artifact, ErrorReply, PinRequest
+from fabric.server.disk import disk_full_of
+from fabric.server.health import Health
 from fabric.store.artifacts import ArtifactStore
 from fabric.store.records import RecordStore
+from fabric.wire import codec
+from fabric.wire.errors import FabricError, InternalError, NotFound, StateError, ValidationError
+from fabric.wire.keys import ENDPOINTS, SERVICES, TOPICS, Endpoint, Keys, endpoints_of
+from fabric.wire.qos import reply_qos
 
 __all__ = ["Service", "Publisher", "reply_error"]
 
@@ -53,7 +56,7 @@ def reply_error(query: zenoh.Query, err: FabricError) -> None:
 class Publisher:
     """A declared publisher for one telemetry topic; ``send`` encodes a schema message."""
 
-    def __init__(self, session: zenoh.Session, key: str, msg_type: type, lossless: bool) -> None:
+    def __init__(self, session: zenoh.Session, key: str, msg_type: type[Any], lossless: bool) -> None:
         self.key, self.msg_type = key, msg_type
         cc = zenoh.CongestionControl.BLOCK if lossless else zenoh.CongestionControl.DROP
         self._pub = session.declare_publisher(key, congestion_control=cc,
@@ -96,7 +99,7 @@ class Service:
         self._threads: list[threading.Thread] = []
         self._token: Any = None
         self._tmp = tempfile.TemporaryDirectory(prefix=f"am-fabric-{self.name}-") if data_dir is None else None
-        self.data_dir = Path(self._tmp.name if self._tmp is not None else data_dir)
+        self.data_dir = Path(self._tmp.name) if self._tmp is not None else Path(str(data_dir))
         self._dir_lock = _lock_dir(self.data_dir, self.name, cell_id)
         self.artifacts = ArtifactStore(self.data_dir / "artifacts")
         self.records = RecordStore(self.data_dir / "records.sqlite")
@@ -165,7 +168,7 @@ class Service:
             raise StateError(f"a {self.name} is already serving cell {self.keys.cell!r}: stop it first, or run this "
                              f"one with another --cell", state="running", command="start", service=self.name)
         for command, (ep, fn) in self._handlers.items():
-            self._serve(self.keys.cmd(self.name, command), lambda q, ep=ep, fn=fn: self._answer(q, ep, fn))
+            self._serve(self.keys.cmd(self.name, command), self._answerer(ep, fn))
         for command, (ep, current) in self._snapshots.items():
             answer = lambda q, ep=ep, current=current: self._answer_snapshot(q, ep, current)  # noqa: E731
             self._queryables.append(self.session.declare_queryable(self.keys.cmd(self.name, command), answer))
@@ -197,16 +200,21 @@ class Service:
             with query:
                 answer(query)
 
+    def _answerer(self, ep: Endpoint, fn: Handler) -> Callable[[zenoh.Query], None]:
+        def answer(query: zenoh.Query) -> None:
+            self._answer(query, ep, fn)
+        return answer
+
     def _answer(self, query: zenoh.Query, ep: Endpoint, fn: Handler) -> None:
         try:
             payload = query.payload.to_bytes() if query.payload is not None else b""
-            req = codec.decode(payload, ep.request)
+            req: Any = codec.decode(payload, ep.request)
             reply = fn(req)
             query.reply(query.key_expr, codec.encode(reply), **reply_qos(ep))
         except FabricError as err:
             self.log.info("%s/%s: %s: %s", self.name, ep.command, err.code, err.message)
             reply_error(query, err)
-        except Exception as exc:  # a full disk, or a bug: answer, log, mark degraded, keep serving
+        except Exception as exc:  # noqa: BLE001 - a full disk, or a bug: answer, log, mark degraded, keep serving
             full = disk_full_of(exc, self.name, self.data_dir)
             if full is not None:
                 self.health.degrade("disk", full.message)
@@ -261,13 +269,49 @@ class Service:
 
 def _lock_dir(path: Path, name: str, cell: str) -> IO[bytes]:
     """Hold an exclusive lock on ``path`` for this process's life: two services of one role and cell on
-    one host would write the same durable state (the liveliness check covers other hosts)."""
+    one host would write the same durable state (the liveliness check covers other hosts).
+
+    The lock is ``flock`` on ``path/lock``: the kernel releases it when its holder dies, however it
+    dies, so a dead holder never blocks (the descriptor is close-on-exec, so no program the service
+    runs inherits it). The file records the holder's pid and command line, for the refusal to name."""
     path.mkdir(parents=True, exist_ok=True)
-    fh = open(path / "lock", "wb")
+    # held for the life of the process; "a", not "w": a refused contender must not erase the holder's pid
+    fh = open(path / "lock", "a+b")  # noqa: SIM115
     try:
         fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
+        fh.seek(0)
+        holder = fh.read(512).decode("utf-8", "replace").strip()
         fh.close()
-        raise StateError(f"a {name} of cell {cell!r} is already running on this host (it holds {path}/lock)",
+        raise StateError(f"a {name} of cell {cell!r} is already running on this host (it holds {path}/lock"
+                         + (f": {_lock_holder(holder)}" if holder else "") + ")",
                          state="running", command="start", service=name) from None
+    fh.truncate(0)
+    fh.write(f"{os.getpid()} {_command_line(os.getpid())}\n".encode())
+    fh.flush()
     return fh
+
+
+def _command_line(pid: int) -> str:
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as cmd:
+            return cmd.read().replace(b"\0", b" ").decode("utf-8", "replace").strip()[:300]
+    except OSError:
+        return ""
+
+
+def _lock_holder(recorded: str) -> str:
+    """Who holds a lock, from what the lock file records (``pid command``)."""
+    pid_text, _, command = recorded.partition(" ")
+    try:
+        pid = int(pid_text)
+    except ValueError:
+        return recorded[:200]
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        # the recorded holder is dead, so whoever holds the lock now inherited its descriptor
+        return f"pid {pid} recorded it, but is gone: another process inherited the lock"
+    except PermissionError:
+        pass
+    return f"pid {pid}" + (f", {command}" if command else "")

@@ -35,31 +35,32 @@ import sys
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import zenoh
 
-from fabric.wire import codec
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.wire.errors import CollisionError, FabricError, NotFound, StateError, ValidationError
 from fabric.programs import content_id, program_from_artifact
-from fabric.services.readiness import ReadyFacts, print_temp_c, ready_report
-from fabric.wire.config import add_cell_argument, service_data_dir
-from fabric.wire.keys import endpoints_of
+from fabric.robot.cell import Cell
+from fabric.robot.frames import T_to_xyzrpy
 from fabric.server.disk import require_room
 from fabric.server.health import Backoff
 from fabric.server.service import Service
 from fabric.server.writer import Stale, Writer
+from fabric.services.readiness import ReadyFacts, print_temp_c, ready_report
 from fabric.services.station_messages import StationMessages
-from fabric.robot.cell import Cell
-from fabric.robot.frames import T_to_xyzrpy
 from fabric.sim.deposition import Deposition
 from fabric.sim.twin import EVENT_KINDS, Twin
 from fabric.store.journal import DEFAULT_CHECKPOINT_PERIOD_S, StationJournal, StationMeta
 from fabric.store.station import StationStore
+from fabric.wire import codec
+from fabric.wire.config import add_cell_argument, service_data_dir
+from fabric.wire.errors import CollisionError, FabricError, NotFound, StateError, ValidationError
+from fabric.wire.keys import endpoints_of
 
 __all__ = ["StationService", "build", "add_arguments"]
 
@@ -176,7 +177,7 @@ class StationService(Service):
         while not self.clock_stop.is_set():
             try:
                 self._run_clock()
-            except Exception as exc:  # a bug or a full disk: fault the print, say why, try again later
+            except Exception as exc:  # noqa: BLE001 - a bug or a full disk: fault the print, say why, try later
                 pause_s = backoff.failed()
                 why = f"{type(exc).__name__}: {exc}"
                 self.health.degrade("clock", f"{why} (failed {backoff.failures}x; next try in {pause_s:.2f} s)")
@@ -350,13 +351,13 @@ class StationService(Service):
             where = "" if layer is None else f" from layer {layer + 1} (heating, then the move above it)"
             return self._ack(f"printing{where} at {self._rtf_text()}")
 
-        def plan() -> tuple[tuple[np.ndarray, np.ndarray], tuple]:
+        def plan(layer: int) -> tuple[tuple[np.ndarray, np.ndarray], tuple]:
             self._refuse_on_part("start", layer)
             return self.twin.layer_move(layer), self._stamp()
 
         stamp = None
         if layer is not None:
-            (q_from, q_to), stamp = self._step(plan)
+            (q_from, q_to), stamp = self._step(lambda: plan(layer))
             self._check_move(q_from, q_to, f"the move to layer {layer + 1}")
         return self._step(act)
 

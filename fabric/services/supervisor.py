@@ -36,9 +36,6 @@ import zenoh
 
 from fabric import schemas as s
 from fabric.client import Client
-from fabric.wire.config import service_data_dir
-from fabric.wire.errors import BadRequest, DiskFull, FabricError, NotFound, StateError, ValidationError
-from fabric.wire.keys import SERVICES, parse_alive
 from fabric.printjobs.events import apply_event, job_id_of_event
 from fabric.printjobs.follower import EventFollower
 from fabric.printjobs.prepare import PrepareCancelled, Preparer
@@ -48,6 +45,9 @@ from fabric.server.disk import require_room
 from fabric.server.service import Service
 from fabric.server.writer import Writer
 from fabric.store.jobs import JobStore
+from fabric.wire.config import service_data_dir
+from fabric.wire.errors import BadRequest, DiskFull, FabricError, NotFound, StateError, ValidationError
+from fabric.wire.keys import SERVICES, parse_alive
 
 __all__ = ["SupervisorService", "build", "add_arguments"]
 
@@ -301,7 +301,8 @@ class SupervisorService(Service):
                 self.client.load(head.program_id, job_id=head.job_id)
             except (DiskFull, BadRequest) as err:  # a load that cannot succeed is not tried again: the job fails
                 self.log.warning("job %s cannot be loaded: %s: %s", head.job_id, err.code, err.message)
-                self._step(lambda e=err: self._fail(head.job_id, e))
+                failure = err
+                self._step(lambda: self._fail(head.job_id, failure))
                 self._release_if_final(head)
                 self.wake.set()
                 return
@@ -311,7 +312,8 @@ class SupervisorService(Service):
                 return
             except NotFound as err:             # its program is gone (never acknowledged durably): plan again
                 self.log.warning("job %s: %s; preparing it again", head.job_id, err.message)
-                self._step(lambda why=err.message: self._prepare_again(head.job_id, why))
+                why = err.message
+                self._step(lambda: self._prepare_again(head.job_id, why))
                 self.wake.set()
                 return
             start, rtf = self._step(lambda: self._loaded(head.job_id))

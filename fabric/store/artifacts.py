@@ -24,11 +24,11 @@ import threading
 import time
 from pathlib import Path
 
-from fabric.wire import codec
-from fabric.wire.errors import DecodeError, NotFound, ValidationError
 from fabric.programs import content_id
 from fabric.schemas import Artifact
 from fabric.store.sqlite import open_db
+from fabric.wire import codec
+from fabric.wire.errors import DecodeError, NotFound, ValidationError
 
 __all__ = ["ArtifactStore", "DEFAULT_MAX_BYTES"]
 

@@ -108,7 +108,8 @@ class JobStore:
         """Write changed records (and, with them, how far the station's events were applied), all or none."""
         with self.db.write() as conn:
             for rec in records:
-                cur = conn.execute(f"UPDATE jobs SET {_COLUMNS} WHERE job_id = ?", (*_columns(rec), codec.encode(rec), rec.job_id))
+                cur = conn.execute(f"UPDATE jobs SET {_COLUMNS} WHERE job_id = ?",
+                                   (*_columns(rec), codec.encode(rec), rec.job_id))
                 if cur.rowcount == 0:
                     raise NotFound(f"no job {rec.job_id}", job_id=rec.job_id)
             if last_event_seq is not None:
@@ -180,7 +181,7 @@ class JobStore:
         with self.db.write() as conn:
             slots = sorted(float(r[0]) for r in conn.execute(
                 f"SELECT position FROM jobs WHERE job_id IN ({','.join('?' * len(among))})", among))
-            for pos, jid in zip(slots, order):
+            for pos, jid in zip(slots, order, strict=True):
                 conn.execute("UPDATE jobs SET position = ? WHERE job_id = ?", (pos, jid))
 
     # Following the station, and the plate --------------------------------------------------------

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from typing import Any
 
 from fabric import schemas as s
 
@@ -24,7 +25,7 @@ SERVICES = ("station", "slicer", "planner", "collision", "supervisor")
 _CELL_RE = re.compile(r"^[A-Za-z0-9_\-]{1,64}$")
 
 # Telemetry topics: (service, topic) -> payload type.
-TOPICS: dict[tuple[str, str], type] = {
+TOPICS: dict[tuple[str, str], type[Any]] = {
     ("station", "pose"): s.Pose,
     ("station", "extrusion"): s.Extrusion,
     ("station", "state"): s.StationState,
@@ -45,8 +46,8 @@ class Endpoint:
     unbatched (see ``fabric.client`` and ``fabric.server.service``)."""
     service: str
     command: str
-    request: type
-    reply: type
+    request: type[Any]
+    reply: type[Any]
     timeout_s: float = 5.0
     doc: str = ""
     bulk: bool = False
@@ -137,7 +138,7 @@ class Keys:
         self.prefix = f"{ROOT}/{cell}"
 
     @classmethod
-    def every_cell(cls) -> "Keys":
+    def every_cell(cls) -> Keys:
         """Key expressions that match every cell (``am/*/...``): access-control rules, fabric-wide listings."""
         keys = cls.__new__(cls)
         keys.cell, keys.prefix = "*", f"{ROOT}/*"
@@ -173,7 +174,7 @@ class Keys:
 
     def parse_artifact(self, key: str) -> str:
         """The artifact id of an artifact key (the last chunk after ``/artifact/``)."""
-        head, sep, tail = key.rpartition("/artifact/")
+        _, sep, tail = key.rpartition("/artifact/")
         if not sep or "/" in tail:
             raise ValueError(f"not an artifact key: {key}")
         return tail
