@@ -19,6 +19,7 @@ class StandInStation(Service):
     """Answers ``state`` and ``events`` from fixed values and publishes events when told to."""
 
     name = "station"
+    partial = True
 
     def __init__(self, session, cell: str, state: str, history: list[s.Event]) -> None:
         super().__init__(session, cell)

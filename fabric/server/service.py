@@ -80,6 +80,7 @@ class Service:
     """Base of the five services; see the module docstring for the life cycle."""
 
     name = "service"
+    partial = False             # a stand-in for tests may serve only some of its endpoints (never unknown ones)
 
     def __init__(self, session: zenoh.Session, cell_id: str, data_dir: str | Path | None = None) -> None:
         """``cell_id``: the cell's name on the fabric; ``data_dir``: this service's folder of durable state
@@ -98,6 +99,7 @@ class Service:
         self._queryables: list[Any] = []
         self._threads: list[threading.Thread] = []
         self._token: Any = None
+        self._served: frozenset[str] = frozenset()      # the commands served, once started (see _answer_unknown)
         self._tmp = tempfile.TemporaryDirectory(prefix=f"am-fabric-{self.name}-") if data_dir is None else None
         self.data_dir = Path(self._tmp.name) if self._tmp is not None else Path(str(data_dir))
         self._dir_lock = _lock_dir(self.data_dir, self.name, cell_id)
@@ -173,6 +175,9 @@ class Service:
             answer = lambda q, ep=ep, current=current: self._answer_snapshot(q, ep, current)  # noqa: E731
             self._queryables.append(self.session.declare_queryable(self.keys.cmd(self.name, command), answer))
         self._serve(self.keys.artifact_all(self.name), self._answer_artifact)
+        # last of the queryables: the catch-all that answers the commands this service does not serve
+        self._served = frozenset(self._handlers) | frozenset(self._snapshots)
+        self._queryables.append(self.session.declare_queryable(self.keys.cmd(self.name, "**"), self._answer_unknown))
         self._token = self.session.liveliness().declare_token(self.keys.alive(self.name))
         self.log.info("%s serving %d commands on %s", self.name, len(self._handlers) + len(self._snapshots),
                       self.keys.prefix)
@@ -181,7 +186,7 @@ class Service:
         """Every endpoint of this service in the table has exactly one handler, and nothing else does."""
         declared = {e.command for e in endpoints_of(self.name)}
         served = list(self._handlers) + list(self._snapshots)
-        missing, extra = declared - set(served), set(served) - declared
+        missing, extra = (set() if self.partial else declared - set(served)), set(served) - declared
         twice = set(self._handlers) & set(self._snapshots)
         if missing or extra or twice:
             raise TypeError(f"{self.name} serves {sorted(served)} but the endpoint table declares "
@@ -234,6 +239,22 @@ class Service:
                 query.reply(query.key_expr, current(), **reply_qos(ep))
             except FabricError as err:
                 reply_error(query, err)
+
+    def _answer_unknown(self, query: zenoh.Query) -> None:
+        """The catch-all on ``am/<cell>/<service>/cmd/**``, in Zenoh's callback (never blocks): a key of a command
+        this service does not serve gets a typed ``not_found`` at once, naming the commands it serves. A command
+        it serves is left to that command's queryable (this one drops the query unanswered), and so is a wildcard
+        query (``am/<cell>/*/cmd/health``): every command has exactly one reply."""
+        with query:
+            key = str(query.key_expr)
+            prefix = self.keys.cmd(self.name, "")
+            command = key[len(prefix):] if key.startswith(prefix) else ""
+            if "*" in key or command in self._served:
+                return
+            served = sorted(self._served)
+            reply_error(query, NotFound(f"the {self.name} of cell {self.keys.cell!r} has no command {command!r}; "
+                                        f"its commands: {', '.join(served)}", service=self.name, command=command,
+                                        commands=served))
 
     def _answer_artifact(self, query: zenoh.Query) -> None:
         try:
