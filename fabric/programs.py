@@ -2,12 +2,14 @@
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Iterable, Iterator
 from typing import cast
 
 import numpy as np
 
 from fabric import schemas as s
 from fabric.motion.program import COLUMNS, Program
+from fabric.motion.program_file import PIECE_BYTES, column_pieces
 from fabric.wire import codec
 from fabric.wire.errors import DecodeError, ValidationError
 
@@ -56,13 +58,32 @@ def program_artifact_pieces(program: Program, name: str = "program") -> tuple[st
     whose artifact is some 160 MB."""
     body = codec.encode_pieces(program_to_msg(program))
     digest = hashlib.sha256()
-    for piece in body:
+    for piece in _paged(body):
         digest.update(piece)
     artifact_id = digest.hexdigest()
     # the codec writes a Spliced as the bytes field it stands in for (the body is never joined)
     art = s.Artifact(artifact_id=artifact_id, name=name, media_type=PROGRAM_MEDIA_TYPE,
                      data=cast(bytes, codec.Spliced(body)))
-    return artifact_id, codec.encode_pieces(art)
+    return artifact_id, _PagedPieces(codec.encode_pieces(art))
+
+
+class _PagedPieces(list):
+    """Pieces of an encoded message that, iterated, give a large column in parts (the same bytes): a column
+    mapped from a file (:mod:`fabric.motion.program_file`) is then read through, hashed or written, with
+    one part of it resident at a time, not the whole. (A list still: joined, it is the whole message.)"""
+
+    def __iter__(self) -> Iterator[codec.Buffer]:
+        return _paged(list.__iter__(self))
+
+
+def _paged(pieces: Iterable[codec.Buffer]) -> Iterator[codec.Buffer]:
+    """The pieces, each large view of an array's data as parts of it (:func:`column_pieces`)."""
+    for piece in pieces:
+        arr = piece.obj if isinstance(piece, memoryview) else None
+        if isinstance(arr, np.ndarray) and piece.nbytes > PIECE_BYTES and arr.nbytes == piece.nbytes:
+            yield from column_pieces(arr)
+        else:
+            yield piece
 
 
 def program_from_artifact(art: s.Artifact) -> Program:

@@ -6,12 +6,23 @@ from collections.abc import Callable
 
 import pytest
 
-from fabric.motion.program import Program
+from fabric.motion.program import NOZZLE, Program
 from fabric.motion.testprog import square_program
+from fabric.motion.thermal import Thermal
 from fabric.robot.cell import Cell
 from fabric.sim.twin import Twin
 from fabric.wire.codec import pack
 from fabric.wire.errors import FabricError, StateError, ValidationError
+
+
+def _heat_s(nozzle_c: float) -> float:
+    """How long the nozzle takes from the room to ``nozzle_c`` (the program's M109), with the twin's heater."""
+    th = Thermal()
+    th.set_target(NOZZLE, nozzle_c, 0.0)
+    return th.wait_s(NOZZLE, 0.0)
+
+
+MID_FIRST_LAYER_S = _heat_s(200.0) + 2.56        # heated, then printing the first layer
 
 
 @pytest.fixture(scope="module")
@@ -33,11 +44,12 @@ def finish(twin: Twin) -> list:
     raise AssertionError("did not settle")
 
 
-def test_a_cold_nozzle_never_extrudes_and_the_print_pauses_with_the_reason(cell: Cell, hot: Program) -> None:
-    twin = Twin(cell)
-    twin.load(hot)
+def test_a_cold_nozzle_never_extrudes_and_the_print_pauses_with_the_reason(cell: Cell) -> None:
+    tall = square_program(cell, size_mm=20, layers=40, layer_height_mm=0.5, speed_mm_s=30, nozzle_c=200.0)
+    twin = Twin(cell)                       # tall enough to outlast the passive cool-down (about 50 s to 170 C)
+    twin.load(tall)
     twin.start()
-    twin.advance(92.0)                                     # hot, printing the first layer
+    twin.advance(MID_FIRST_LAYER_S)                        # hot, printing the first layer
     twin.set_overrides(nozzle_c=0.0)                        # heater off (allowed): the nozzle cools down
     events = finish(twin)
     kinds = [e.kind for e in events]
@@ -84,7 +96,7 @@ def twin_in(cell: Cell, prog: Program, state: str) -> Twin:
     if state == "ready":
         return twin
     twin.start()
-    twin.advance(92.0)
+    twin.advance(MID_FIRST_LAYER_S)
     if state == "paused":
         twin.pause()
         twin.advance(2.0)

@@ -5,12 +5,23 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fabric.motion.program import Program
+from fabric.motion.program import NOZZLE, Program
 from fabric.motion.testprog import square_program
+from fabric.motion.thermal import Thermal
 from fabric.robot.cell import Cell
 from fabric.sim.twin import Twin
 from fabric.wire.codec import pack, unpack
 from fabric.wire.errors import CollisionError, StateError, ValidationError
+
+
+def _heat_s(nozzle_c: float) -> float:
+    """How long the nozzle takes from the room to ``nozzle_c`` (the program's M109), with the twin's heater."""
+    th = Thermal()
+    th.set_target(NOZZLE, nozzle_c, 0.0)
+    return th.wait_s(NOZZLE, 0.0)
+
+
+MID_FIRST_LAYER_S = _heat_s(200.0) + 2.56        # heated, then printing the first layer
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +97,7 @@ def test_random_crash_instants_recover_to_identical_beads(cell: Cell, prog: Prog
                                                           seed: int) -> None:
     rng = np.random.default_rng(seed)
     total = reference.time_info().total_s
-    first_bead = 89.5                                    # the heat-up takes most of the job's time
+    first_bead = _heat_s(200.0) + 0.06                  # the heat-up takes most of the job's time
     t_crash = float(rng.uniform(first_bead if seed < 15 else 1.0, total - 0.3))
     t_checkpoint = float(max(0.0, t_crash - rng.uniform(0.0, 3.0)))
     twin = crash_and_recover(cell, prog, t_checkpoint, t_crash)
@@ -95,10 +106,12 @@ def test_random_crash_instants_recover_to_identical_beads(cell: Cell, prog: Prog
     assert twin.extrusion().extruded_mm3 == pytest.approx(reference.extrusion().extruded_mm3, rel=1e-9)
 
 
-@pytest.mark.parametrize("t_crash", [92.0 + 0.004, 92.0 + 0.05, 92.0 + 2.0])   # stopping, lifting, paused
+@pytest.mark.parametrize("t_crash", [MID_FIRST_LAYER_S + 0.004, MID_FIRST_LAYER_S + 0.05,     # stopping, lifting,
+                                     MID_FIRST_LAYER_S + 2.0])                                 # paused
 def test_crash_during_a_pause_recovers_to_identical_beads(cell: Cell, prog: Program, reference: Twin,
                                                           t_crash: float) -> None:
-    twin = crash_and_recover(cell, prog, t_checkpoint=92.002, t_crash=t_crash, pause_at=92.0)
+    twin = crash_and_recover(cell, prog, t_checkpoint=MID_FIRST_LAYER_S + 0.002, t_crash=t_crash,
+                             pause_at=MID_FIRST_LAYER_S)
     assert_same_beads(twin, reference)
 
 
@@ -108,7 +121,7 @@ def test_recover_is_refused_unless_interrupted_and_checked(cell: Cell, prog: Pro
     with pytest.raises(StateError):
         twin.recover()
     twin.start()
-    twin.advance(92.0)
+    twin.advance(MID_FIRST_LAYER_S)
     twin.interrupt("station restarted")
     rest, spot = twin.recovery_move()
     np.testing.assert_allclose(rest, spot, atol=1e-12)               # it stopped dead on the path
@@ -158,7 +171,7 @@ def test_recover_at_a_layer_records_the_cut_row_and_goes_on_from_there(cell: Cel
     twin = Twin(cell)
     twin.load(prog)
     twin.start()
-    twin.advance(94.5)                                                  # inside layer 2
+    twin.advance(MID_FIRST_LAYER_S + 2.5)                               # inside layer 2
     twin.interrupt("station restarted")
     at = twin.recovery_move(from_layer=1)
     assert at is not None and not np.allclose(at[0], at[1])

@@ -6,12 +6,23 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from fabric.motion.program import Program
+from fabric.motion.program import NOZZLE, Program
 from fabric.motion.testprog import square_program
+from fabric.motion.thermal import Thermal
 from fabric.robot.cell import Cell
 from fabric.sim.twin import Twin
 from fabric.wire.codec import pack, unpack
 from fabric.wire.errors import ValidationError
+
+
+def _heat_s(nozzle_c: float) -> float:
+    """How long the nozzle takes from the room to ``nozzle_c`` (the program's M109), with the twin's heater."""
+    th = Thermal()
+    th.set_target(NOZZLE, nozzle_c, 0.0)
+    return th.wait_s(NOZZLE, 0.0)
+
+
+MID_FIRST_LAYER_S = _heat_s(200.0) + 2.56        # heated, then printing the first layer
 
 Script = list[tuple[float, Callable[[Twin], None] | None]]
 
@@ -70,15 +81,15 @@ def stop(t: Twin) -> None:
 SCENARIOS: dict[str, tuple[Script, Script]] = {
     "heating": ([(8.0, None)], []),
     "heating, set point changed": ([(8.0, hotter), (3.0, None)], []),
-    "mid-layer": ([(92.0, None)], []),
-    "second layer, paused there": ([(94.5, None)], [(0.3, pause), (2.0, resume)]),
-    "right after a pause": ([(92.0, pause), (0.004, None)], [(2.0, resume)]),
-    "lifting": ([(92.0, pause), (0.05, None)], [(1.0, resume)]),
-    "paused": ([(92.0, pause), (3.0, None)], [(1.0, resume)]),
-    "going back down": ([(92.0, pause), (3.0, resume), (0.05, None)], []),
-    "paused twice": ([(92.0, pause), (3.0, resume), (0.05, pause), (0.01, None)], [(2.0, resume)]),
-    "after an override": ([(92.0, slower), (0.001, None)], []),
-    "stopping": ([(92.0, stop), (0.002, None)], []),
+    "mid-layer": ([(MID_FIRST_LAYER_S, None)], []),
+    "second layer, paused there": ([(MID_FIRST_LAYER_S + 2.5, None)], [(0.3, pause), (2.0, resume)]),
+    "right after a pause": ([(MID_FIRST_LAYER_S, pause), (0.004, None)], [(2.0, resume)]),
+    "lifting": ([(MID_FIRST_LAYER_S, pause), (0.05, None)], [(1.0, resume)]),
+    "paused": ([(MID_FIRST_LAYER_S, pause), (3.0, None)], [(1.0, resume)]),
+    "going back down": ([(MID_FIRST_LAYER_S, pause), (3.0, resume), (0.05, None)], []),
+    "paused twice": ([(MID_FIRST_LAYER_S, pause), (3.0, resume), (0.05, pause), (0.01, None)], [(2.0, resume)]),
+    "after an override": ([(MID_FIRST_LAYER_S, slower), (0.001, None)], []),
+    "stopping": ([(MID_FIRST_LAYER_S, stop), (0.002, None)], []),
 }
 
 
@@ -116,7 +127,7 @@ def test_snapshot_of_a_restored_twin_is_the_same(cell: Cell, prog: Program) -> N
     twin = Twin(cell, retract_mm=0.8)
     twin.load(prog)
     twin.start()
-    twin.advance(92.0)
+    twin.advance(MID_FIRST_LAYER_S)
     twin.pause()
     twin.advance(0.01)
     first = pack(twin.snapshot())

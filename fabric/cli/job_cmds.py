@@ -18,8 +18,6 @@ from fabric.client.follow import follow_print
 
 __all__ = ["register"]
 
-GCODE_SUFFIXES = (".gcode", ".gco", ".g", ".nc")
-
 
 
 def _shown(reply: Any, a: argparse.Namespace, text: Callable[[Any], str]) -> int:
@@ -81,8 +79,8 @@ def _record_text(rec: s.JobRecord) -> str:
 
 
 def cmd_submit(c: Client, a: argparse.Namespace) -> int:
-    source = "gcode" if Path(a.file).suffix.lower() in GCODE_SUFFIXES else "model"
-    req = s.JobSubmit(model=read_whole(a.file), filename=Path(a.file).name, source=source, profile=a.profile,
+    # no --source: the supervisor takes it from the file name (JobSubmit.source "", as any client may send)
+    req = s.JobSubmit(model=read_whole(a.file), filename=Path(a.file).name, source=a.source or "", profile=a.profile,
                       backend=a.backend, overrides=parse_sets(a.set), start=a.start, rtf=a.rtf)
     acc = c.submit(req)
     if not (a.wait or a.follow):
@@ -114,7 +112,10 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--backend", default="builtin", choices=s.pipeline.BACKENDS)
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a profile key")
     p.add_argument("--start", action="store_true", help="start printing once loaded (when the plate is clear)")
-    p.add_argument("--rtf", type=float, default=0.0, help="real-time factor when started (0 = max)")
+    p.add_argument("--rtf", type=float, default=1.0,
+                   help="real-time factor of the print (default 1: real time, as on the wire; 0 = as fast as possible)")
+    p.add_argument("--source", choices=s.pipeline.JOB_SOURCES, default=None,
+                   help="model or gcode (default: from the file name: .gcode/.gco/.g/.nc, .stl/.obj/.3mf)")
     p.add_argument("--wait", action="store_true", help="wait until the job is prepared or loaded")
     p.add_argument("--follow", action="store_true", help="with --start: wait for the print to end")
     p.add_argument("--timeout", type=float, default=None)
@@ -136,5 +137,5 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("job_id")
     p.add_argument("position", type=int)
     p.set_defaults(run=lambda c, a: _shown(c.job_move(a.job_id, a.position), a, _list_text))
-    p = jsub.add_parser("next", parents=[common], help="the plate is clear: load and start the next job")
+    p = jsub.add_parser("next", parents=[common], help="the plate is clear: load the next job (started if submitted with --start)")
     p.set_defaults(run=lambda c, a: _shown(c.job_next(), a, lambda r: r.message))

@@ -8,7 +8,7 @@ import sys
 import threading
 from pathlib import Path
 
-from fabric.cli import auth_cmds, job_cmds, pipeline_cmds, station_cmds
+from fabric.cli import auth_cmds, doctor, job_cmds, pipeline_cmds, station_cmds
 from fabric.cli.output import emit, fail
 from fabric.client import Client
 from fabric.extras import missing_extra, require
@@ -71,6 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
     job_cmds.register(sub, common)
     importlib.import_module("fabric.cli.record_cmds").register(sub, common)     # record, plot, preview
     auth_cmds.register(sub, common)
+    doctor.register(sub, common)                      # check and repair the cell's stores
 
     cell = sub.add_parser("cell", help="the cell configuration")
     csub = cell.add_subparsers(dest="cell_cmd", required=True)

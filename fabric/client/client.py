@@ -15,22 +15,23 @@ from __future__ import annotations
 import os
 import queue
 import time
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any, BinaryIO, Callable, Iterator, Sequence
+from typing import Any, BinaryIO
 
 import zenoh
 
-from fabric.wire import codec
 from fabric import schemas as s
-from fabric.wire.config import SessionSettings
-from fabric.wire.errors import ServiceUnavailable
 from fabric.client.job_waits import wait_job, wait_print_job
-from fabric.wire.keys import ALIVE_EVERY_CELL, ENDPOINTS, SERVICES, TOPICS, Keys, parse_alive
-from fabric.wire.qos import BULK_QOS, command_qos
-from fabric.schemas.upload import UPLOAD_CHUNK_BYTES
 from fabric.client.sessions import CONNECT_WINDOW_S, check_role, error_of, open_session, wait_connected
 from fabric.client.subscriptions import AliveSubscription, Subscription
 from fabric.client.transfers import EXPORT_CHUNK_BYTES, export_to_file, input_size, upload_file
+from fabric.schemas.upload import UPLOAD_CHUNK_BYTES
+from fabric.wire import codec
+from fabric.wire.config import SessionSettings
+from fabric.wire.errors import NotFound, ServiceUnavailable
+from fabric.wire.keys import ALIVE_EVERY_CELL, ENDPOINTS, SERVICES, TOPICS, Endpoint, Keys, parse_alive
+from fabric.wire.qos import BULK_QOS, command_qos
 
 __all__ = ["Client", "Subscription", "AliveSubscription", "wait_connected", "input_size"]
 
@@ -50,7 +51,7 @@ class Client:
 
     @classmethod
     @contextmanager
-    def connect(cls, settings: SessionSettings) -> Iterator["Client"]:
+    def connect(cls, settings: SessionSettings) -> Iterator[Client]:
         """Open a session from ``settings`` and close it on exit."""
         from fabric.security.zconfigs import role_of_config
         session = open_session(settings)
@@ -64,7 +65,9 @@ class Client:
     # --- generic -----------------------------------------------------------
 
     def call(self, service: str, command: str, request: Any = None, timeout: float | None = None) -> Any:
-        ep = ENDPOINTS[(service, command)]
+        """Ask ``service/command`` with ``request`` (None: the endpoint's empty request) and wait at most
+        ``timeout`` (None: the endpoint's); the typed reply, or the typed error of the reply raised."""
+        ep = _endpoint(service, command)
         if self.role is not None:
             check_role(self.role, service, command)
         req = request if request is not None else ep.request()
@@ -73,14 +76,17 @@ class Client:
         return self.call_raw(service, command, codec.encode(req), ep.reply, timeout or ep.timeout_s)
 
     def call_raw(self, service: str, command: str, payload: bytes, reply_type: type, timeout: float) -> Any:
+        """Ask ``service/command`` with an already encoded request (e.g. one of an older version)."""
         key = self.keys.cmd(service, command)
         return self._get_one(key, payload, reply_type, timeout, f"{service}/{command}",
-                             command_qos(ENDPOINTS[(service, command)]))
+                             command_qos(_endpoint(service, command)), service)
 
     def _get_one(self, key: str, payload: bytes | None, reply_type: type, timeout: float, what: str,
-                 qos: dict[str, Any] = BULK_QOS) -> Any:
+                 qos: dict[str, Any] = BULK_QOS, service: str = "") -> Any:
         # A get with no matching queryable returns at once; right after a service (or this session)
-        # starts, its declaration may still be on the way: retry for a short, bounded window.
+        # starts, its declaration may still be on the way: retry for a short, bounded window. The first
+        # reply is taken (no consolidation): a key has one answering queryable (a service's catch-all on
+        # <service>/cmd/** stays silent for the commands it serves), so it is the answer, a success or an error.
         t0 = time.monotonic()
         while True:
             t_get = time.monotonic()
@@ -100,9 +106,35 @@ class Client:
             time.sleep(0.05)
         if timed_out:
             raise ServiceUnavailable(f"no reply from {what} within {waited:.3g} s (the service is there but did "
-                                     f"not answer: busy, frozen or cut off)", key=key, timeout_s=waited)
-        raise ServiceUnavailable(f"no {what} on the fabric (asked for {waited:.2g} s): is the service running "
-                                 f"and is the cell name right?", key=key, timeout_s=waited)
+                                     f"not answer: busy, frozen or cut off)", key=key, timeout_s=waited,
+                                     reason="no_reply")
+        raise self._nobody(what, key, service, waited, timeout)
+
+    def _nobody(self, what: str, key: str, service: str, waited: float, timeout: float) -> ServiceUnavailable:
+        """Nothing serves ``key``: an unknown cell or a service that is not running, told apart by the liveliness
+        of every cell (one query, answered by the hub; bounded by what is left of ``timeout``, at least 0.2 s).
+        ``details['reason']``: ``no_cell`` (``details['cells']``: every cell present and its services),
+        ``service_down`` (``details['alive']``: the cell's services alive), or ``no_queryable``."""
+        head = f"no {what} on the fabric (asked for {waited:.2g} s)"
+        cell = self.keys.cell
+        try:
+            cells = self.cells(timeout=max(0.2, min(1.0, timeout - waited)))
+        except zenoh.ZError:                     # the session closed meanwhile: say what is known
+            return ServiceUnavailable(f"{head}: is the service running and is the cell name right?", key=key,
+                                      timeout_s=waited, reason="no_queryable")
+        if cell not in cells:
+            present = ", ".join(f"{c} ({len(svcs)} services)" for c, svcs in cells.items()) or "none"
+            return ServiceUnavailable(f"{head}: no service of cell {cell!r} is on the fabric (cells present: "
+                                      f"{present}); is the cell name right (--cell, $FABRIC_CELL)?", key=key,
+                                      timeout_s=waited, reason="no_cell", cell=cell, cells=cells)
+        alive = cells[cell]
+        if service and service not in alive:
+            return ServiceUnavailable(f"{head}: cell {cell!r} has no {service} running (alive: {', '.join(alive)}); "
+                                      f"start it (fabric-cli up, or fabric-cli serve {service})", key=key,
+                                      timeout_s=waited, reason="service_down", cell=cell, service=service,
+                                      alive=alive)
+        return ServiceUnavailable(f"{head}: nothing on cell {cell!r} serves {key}", key=key, timeout_s=waited,
+                                  reason="no_queryable", cell=cell, alive=alive)
 
     def subscribe(self, service: str, topic: str) -> Subscription:
         return Subscription(self.session, self.keys.topic(service, topic), TOPICS[(service, topic)])
@@ -190,8 +222,9 @@ class Client:
             changes.close()
 
     def artifact(self, service: str, artifact_id: str, timeout: float = 60.0) -> s.Artifact:
+        """A content-addressed artifact (G-code, a program, a model) by its id, from the service that keeps it."""
         return self._get_one(self.keys.artifact(service, artifact_id), None, s.Artifact, timeout,
-                             f"{service} artifact {artifact_id}")
+                             f"{service} artifact {artifact_id}", service=service)
 
     def wait_job(self, service: str, job_id: str, timeout: float = 600.0,
                  on_progress: Callable[[s.JobStatus], None] | None = None) -> s.JobStatus:
@@ -255,7 +288,7 @@ class Client:
 
     def export_to(self, program_id: str, fmt: str, out: BinaryIO, module_targets: int = 5000,
                   limit_bytes: int = EXPORT_CHUNK_BYTES, *, job_id: str = "") -> int:
-        """Stream an export into ``out``; returns the bytes written (see :func:`fabric.client.transfers.export_to_file`)."""
+        """Stream an export into ``out``; returns the bytes written (``fabric.client.transfers.export_to_file``)."""
         return export_to_file(self, program_id, fmt, out, module_targets, limit_bytes, job_id=job_id)
 
     def check(self, request: s.CollisionRequest) -> s.CollisionReport: return self.call("collision", "check", request)
@@ -278,5 +311,16 @@ class Client:
 
     def wait_print_job(self, job_id: str, done: Callable[[s.JobRecord], bool], timeout: float = 600.0,
                        on_change: Callable[[s.JobRecord], None] | None = None) -> s.JobRecord:
-        """Follow a print job until ``done(record)`` or a final state (see :func:`fabric.client.job_waits.wait_print_job`)."""
+        """Follow a print job until ``done(record)`` or a final state (``fabric.client.job_waits.wait_print_job``)."""
         return wait_print_job(self, job_id, done, timeout, on_change)
+
+
+def _endpoint(service: str, command: str) -> Endpoint:
+    """The endpoint ``service/command`` of the table; NotFound (as a service's catch-all says it) when there is none."""
+    ep = ENDPOINTS.get((service, command))
+    if ep is None:
+        served = sorted(cmd for (svc, cmd) in ENDPOINTS if svc == service)
+        raise NotFound(f"no command {service}/{command}" + (f"; {service} serves {', '.join(served)}" if served else
+                                                           f"; services: {', '.join(SERVICES)}"),
+                       service=service, command=command, commands=served)
+    return ep

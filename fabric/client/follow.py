@@ -2,14 +2,14 @@
 from __future__ import annotations
 
 from fabric import schemas as s
-from fabric.client import Client
+from fabric.client.protocols import Caller
 
 __all__ = ["END_EVENTS", "follow_print"]
 
 END_EVENTS = ("finished", "stopped", "fault")
 
 
-def follow_print(client: Client, timeout_s: float | None = None) -> s.Event:
+def follow_print(client: Caller, timeout_s: float | None = None) -> s.Event:
     """Wait for the station's end-of-print event (finished, stopped or fault) and return it.
 
     Subscribes to the event stream first, then reads the state: a print that is
@@ -19,10 +19,10 @@ def follow_print(client: Client, timeout_s: float | None = None) -> s.Event:
     """
     sub = client.subscribe("station", "events")
     try:
-        last = client.events().last_seq
-        st = client.state()
+        last = client.call("station", "events", s.EventsQuery(limit=1)).last_seq
+        st = client.call("station", "state")
         if st.state not in ("printing", "paused"):
-            for ev in reversed(client.events(max(0, last - 50)).events):
+            for ev in reversed(client.call("station", "events", s.EventsQuery(since_seq=max(0, last - 50))).events):
                 if ev.kind in END_EVENTS:
                     return ev
         while True:

@@ -8,18 +8,15 @@ from __future__ import annotations
 import queue
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 from fabric import schemas as s
+from fabric.client.protocols import Caller
 from fabric.wire.errors import ServiceUnavailable, error_from_code
-
-if TYPE_CHECKING:
-    from fabric.client import Client
 
 __all__ = ["wait_job", "wait_print_job"]
 
 
-def wait_job(client: Client, service: str, job_id: str, timeout: float = 600.0,
+def wait_job(client: Caller, service: str, job_id: str, timeout: float = 600.0,
              on_progress: Callable[[s.JobStatus], None] | None = None) -> s.JobStatus:
     """Follow a job (snapshot, then the progress stream) until it ends; raise its error if it failed."""
     sub = client.subscribe(service, "progress")
@@ -46,14 +43,14 @@ def wait_job(client: Client, service: str, job_id: str, timeout: float = 600.0,
         sub.close()
 
 
-def wait_print_job(client: Client, job_id: str, done: Callable[[s.JobRecord], bool], timeout: float = 600.0,
+def wait_print_job(client: Caller, job_id: str, done: Callable[[s.JobRecord], bool], timeout: float = 600.0,
                    on_change: Callable[[s.JobRecord], None] | None = None) -> s.JobRecord:
     """Follow a print job (its record, then the ``jobs`` stream) until ``done(record)`` or its
     state is final; raise its typed error if it failed."""
     sub = client.subscribe("supervisor", "jobs")
     try:
         end = time.monotonic() + timeout
-        rec = client.job(job_id)
+        rec = _record(client, job_id)
         while not done(rec) and rec.state not in s.FINAL_JOB_STATES:
             if on_change:
                 on_change(rec)
@@ -64,7 +61,7 @@ def wait_print_job(client: Client, job_id: str, done: Callable[[s.JobRecord], bo
             try:
                 msg = sub.get(timeout=min(left, 2.0))
             except queue.Empty:  # a missed message: ask once more (snapshot)
-                rec = client.job(job_id)
+                rec = _record(client, job_id)
                 continue
             if msg.job_id == job_id:
                 rec = msg
@@ -73,3 +70,8 @@ def wait_print_job(client: Client, job_id: str, done: Callable[[s.JobRecord], bo
         return rec
     finally:
         sub.close()
+
+
+def _record(client: Caller, job_id: str) -> s.JobRecord:
+    rec: s.JobRecord = client.call("supervisor", "job", s.JobQuery(job_id=job_id))
+    return rec

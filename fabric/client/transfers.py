@@ -12,14 +12,12 @@ import queue
 import threading
 import uuid
 from collections.abc import Callable
-from typing import TYPE_CHECKING, BinaryIO
+from typing import BinaryIO
 
 from fabric import schemas as s
+from fabric.client.protocols import Caller
 from fabric.schemas.upload import UPLOAD_CHUNK_BYTES, UPLOAD_CHUNK_MAX_BYTES
 from fabric.wire.errors import BadRequest, ValidationError
-
-if TYPE_CHECKING:
-    from fabric.client import Client
 
 __all__ = ["input_size", "upload_file", "export_to_file", "EXPORT_CHUNK_BYTES"]
 
@@ -47,7 +45,7 @@ def input_size(path: str | os.PathLike[str], max_bytes: int, limit_hint: str = "
     return size
 
 
-def upload_file(client: Client, service: str, path: str | os.PathLike[str], max_bytes: int,
+def upload_file(client: Caller, service: str, path: str | os.PathLike[str], max_bytes: int,
                 chunk_bytes: int = UPLOAD_CHUNK_BYTES, on_progress: Callable[[int, int], None] | None = None) -> str:
     """Send a file to ``<service>/upload`` in pieces of ``chunk_bytes`` (its size checked against
     ``max_bytes`` before a byte is read, see :func:`input_size`); returns the upload id to name in the
@@ -70,7 +68,7 @@ def upload_file(client: Client, service: str, path: str | os.PathLike[str], max_
                 return uid
 
 
-def export_to_file(client: Client, program_id: str, fmt: str, out: BinaryIO, module_targets: int = 5000,
+def export_to_file(client: Caller, program_id: str, fmt: str, out: BinaryIO, module_targets: int = 5000,
                    limit_bytes: int = EXPORT_CHUNK_BYTES, *, job_id: str = "") -> int:
     """Stream an export into ``out`` chunk by chunk; returns the bytes written.
 
@@ -81,7 +79,9 @@ def export_to_file(client: Client, program_id: str, fmt: str, out: BinaryIO, mod
     offset = 0
     with _ChunkWriter(out) as writer:
         while True:
-            chunk = client.export_chunk(program_id, fmt, offset, limit_bytes, module_targets, job_id=job_id)
+            chunk = client.call("planner", "export_chunk", s.ExportChunkRequest(
+                program_id=program_id, fmt=fmt, offset=offset, limit_bytes=limit_bytes, module_targets=module_targets,
+                job_id=job_id))
             writer.write(chunk.data)
             offset += len(chunk.data)
             if chunk.done:

@@ -346,7 +346,8 @@ class Interpreter:
             line=cols["line"][:c].copy(), layer=layer.astype(np.int32, copy=False),
             feature=cols["feature"][:c].copy(), feature_names=list(self.layers.features),
             event_row=ev_row[sel], event_kind=ev["ev_kind"][sel].astype("u1", copy=False),
-            event_value=ev["ev_value"][sel].astype("f8", copy=False), event_aux=ev["ev_aux"][sel].astype("i2", copy=False),
+            event_value=ev["ev_value"][sel].astype("f8", copy=False),
+            event_aux=ev["ev_aux"][sel].astype("i2", copy=False),
             event_line=ev["ev_line"][sel].astype("i8", copy=False), layer_z_mm=np.zeros(0),
             unknown_commands={}, n_lines=self.state.lines)
         if c:

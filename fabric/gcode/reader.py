@@ -137,6 +137,8 @@ class ToolpathChunks:
         self.chunk_rows, self.chord_tol_mm, self.block_bytes = max(int(chunk_rows), 1), chord_tol_mm, block_bytes
         self.progress = progress
         self.summary: ChunkSummary | None = None
+        self.fraction = 0.0                          # of the bytes interpreted when the last chunk was handed over
+        self.toolpath: Toolpath | None = None        # (no whole toolpath: see the chunks)
         self.path: str | os.PathLike[str] | None = None
         self.data: bytes | bytearray | None = None
         if isinstance(source, os.PathLike):
@@ -186,9 +188,11 @@ class ToolpathChunks:
                     if pending is not None:
                         yield pending, False
                     pending = tp
+                    self.fraction = done / max(self.size, 1)
         final = interp.take_chunk(0, final=True)
         assert final is not None                    # the final chunk is every row left
         self.summary = interp.chunk_summary()
+        self.fraction = 1.0
         if pending is not None:
             if len(final) == 0 and len(final.event_row) == 0:
                 yield pending, True                 # nothing after the last cut (it cannot be: kept for safety)

@@ -143,7 +143,7 @@ class RowColumns:
 
     def append(self, rows: dict[str, np.ndarray]) -> None:
         """Append a block of rows (every column, same length)."""
-        m = len(rows["line"])
+        m = len(next(iter(rows.values())))
         if self.n + m > self.cap:
             self.cap = max(self.n + m, self.cap + self.cap // 2)
             for k, a in self.cols.items():

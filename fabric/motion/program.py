@@ -70,6 +70,8 @@ class Program:
     layer: np.ndarray
     wobj: np.ndarray = field(default_factory=lambda: np.eye(4))
     meta: dict[str, Any] = field(default_factory=dict)
+    # columns mapped from files (fabric.motion.program_file): gives back the pages of rows read through
+    pager: Any = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         n = len(self.op)
@@ -82,6 +84,13 @@ class Program:
 
     def __len__(self) -> int:
         return len(self.op)
+
+    def release_pages(self, start: int = 0, stop: int | None = None) -> None:
+        """Done with rows ``[start, stop)`` for now: a program mapped from files gives their pages back to the
+        OS (they stay readable, from the page cache); a program in memory does nothing. Code that walks a
+        program in blocks calls this behind itself, so a 17 M-row program never becomes resident whole."""
+        if self.pager is not None:
+            self.pager.release(start, stop)
 
     @classmethod
     def empty(cls, n: int, **meta: Any) -> Program:
@@ -120,13 +129,17 @@ class Program:
         return np.flatnonzero(on & ~prev), np.flatnonzero(~on & prev & self.is_motion())
 
     def section_bounds(self) -> dict[str, tuple[int, int]]:
-        """Row range [start, stop) of each section present."""
-        out: dict[str, tuple[int, int]] = {}
-        for code, name in SECTION_NAMES.items():
-            idx = np.flatnonzero(self.section == code)
-            if len(idx):
-                out[name] = (int(idx[0]), int(idx[-1]) + 1)
-        return out
+        """Row range [start, stop) of each section present (found in blocks of rows)."""
+        found: dict[str, tuple[int, int]] = {}
+        block = 1 << 20
+        for a in range(0, len(self), block):
+            sec = self.section[a:a + block]
+            for code, name in SECTION_NAMES.items():
+                idx = np.flatnonzero(sec == code)
+                if len(idx):
+                    lo, _hi = found.get(name, (a + int(idx[0]), 0))
+                    found[name] = (lo, a + int(idx[-1]) + 1)
+        return {name: found[name] for name in SECTION_NAMES.values() if name in found}
 
     def path_length_mm(self) -> np.ndarray:
         """TCP path length of each row's move (0 for the first row and non-motion rows)."""

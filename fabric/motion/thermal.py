@@ -1,17 +1,47 @@
-"""Nozzle and bed heaters as first-order models with closed-form heating times.
+"""Nozzle and bed heaters: a lumped thermal mass driven at full power up to its set point, closed form.
 
-Each heater follows ``dT/dt = (T_eff - T) / tau`` where ``T_eff`` is the set
-point, or the ambient temperature when the heater is off (set point below
-ambient, e.g. ``M104 S0``). From a temperature ``T0`` at time ``t0`` the
-response is ``T(t) = T_eff + (T0 - T_eff) * exp(-(t - t0) / tau)``: a closed
-form, so the state is only re-anchored when a set point changes and the
-temperature at any time is exact however the simulation is stepped.
+Each heater is one lumped mass of heat capacity ``C`` (J/K) losing heat to the
+room through a thermal resistance ``R`` (K/W), driven by a heater of full power
+``P`` (W): ``C dT/dt = u P - (T - T_amb) / R`` with ``u`` in [0, 1]. The twin's
+regulator is ideal (as a tuned PID or MPC controller is, to within a degree):
+full power while below the set point, off while above it, and exactly the power
+that holds the set point once there. So from a temperature ``T0`` at ``t0``:
+
+- heating (``T0`` below the set point): ``T = T_max + (T0 - T_max) exp(-dt / tau)``
+  with ``T_max = T_amb + P R`` (the temperature full power would reach) and
+  ``tau = R C``, until the set point is reached, then the set point;
+- cooling (above it, or the heater off: set point below ambient, ``M104 S0``):
+  ``T = T_amb + (T0 - T_amb) exp(-dt / tau)``, down to the set point (or ambient).
+
+Heating is fast (driven against ``T_max``, far above any set point) and cooling
+slow (passive, towards the room): the two are not the same exponential, which a
+single first-order lag towards the set point would make them. The response is a
+closed form, re-anchored only when a set point changes, so the temperature at
+any time is exact however the simulation is stepped.
 
 ``SET_TEMP`` (M104/M140) changes the set point and returns at once;
-``WAIT_TEMP`` (M109/M190) waits until ``|T - set point| <= tol_c``. From the
-closed form the wait is ``tau * ln(|T0 - T_eff| / tol_c)`` (0 when already
-within tolerance, or when the heater is off: there is nothing to wait for).
-The wait is symmetric: cooling down to a lower set point waits too.
+``WAIT_TEMP`` (M109/M190) waits until ``|T - set point| <= tol_c``, which the
+closed form gives as a logarithm (0 when already within tolerance, or when the
+heater is off: there is nothing to wait for). Cooling down to a lower set point
+waits too.
+
+The constants (see :func:`_default_params`):
+
+- nozzle: the E3D V6 hotend with its 40 W cartridge as Prusa Research's
+  firmware models it for the Original Prusa i3 MK3S (``Firmware/thermal_model/e3d_v6.h``
+  in github.com/prusa3d/Prusa-Firmware: heater power 38 W, heat block capacitance
+  12.1 J/K, block-to-ambient resistance 20.5 K/W with the print fan off). That
+  gives ``tau`` 248 s: 25 -> 215 C in about 69 s at full power, and a passive
+  cool-down from 225 C to 60 C in about 7 minutes;
+- bed: a 250 x 250 mm bed of 3 mm aluminium under a 0.5 mm spring-steel sheet
+  with a 200 W silicone heater. We found no published curve of such a bed to
+  cite, so its constants are computed from material properties (aluminium 506 g
+  at 0.90 J/(g K) plus steel 245 g at 0.49 J/(g K): 575 J/K; natural convection
+  and radiation of both faces, about 18 W/(m2 K) over 0.0625 m2: 0.89 K/W):
+  ``tau`` 512 s, 25 -> 60 C in about 2 minutes, 60 -> 40 C in about 7 minutes,
+  the order of the time constants RepRapFirmware's heater tuning (M303, the C of
+  M307) reports for printer beds (a few hundred seconds). These are estimates,
+  not a measurement.
 """
 from __future__ import annotations
 
@@ -28,12 +58,25 @@ HEATER_NAMES = ("nozzle", "bed")
 
 @dataclass(frozen=True)
 class HeaterParams:
-    """Time constant, tolerance of a wait, ambient temperature and the highest set point allowed."""
+    """A heater and what it heats: full power (W), heat capacity (J/K), thermal resistance to the room
+    (K/W); the tolerance of a wait, the ambient temperature and the highest set point allowed."""
 
-    tau_s: float
+    power_w: float
+    capacity_j_k: float
+    resistance_k_w: float
     tol_c: float = 2.0
     ambient_c: float = AMBIENT_C
     max_c: float = 300.0
+
+    @property
+    def tau_s(self) -> float:
+        """The time constant of heating and of cooling (R C)."""
+        return self.capacity_j_k * self.resistance_k_w
+
+    @property
+    def full_power_c(self) -> float:
+        """The temperature full power would hold (far above any set point allowed)."""
+        return self.ambient_c + self.power_w * self.resistance_k_w
 
 
 @dataclass(frozen=True)
@@ -45,9 +88,14 @@ class HeaterState:
     target_c: float
 
 
+# E3D V6, 40 W cartridge: Prusa-Firmware Firmware/thermal_model/e3d_v6.h (P 38 W, C 12.1 J/K, R 20.5 K/W).
+NOZZLE_E3D_V6 = HeaterParams(power_w=38.0, capacity_j_k=12.1, resistance_k_w=20.5, tol_c=2.0, max_c=300.0)
+# 250 x 250 mm aluminium bed with a steel sheet, 200 W: estimated from material properties (module docstring).
+BED_250_MM = HeaterParams(power_w=200.0, capacity_j_k=575.0, resistance_k_w=0.89, tol_c=1.0, max_c=120.0)
+
+
 def _default_params() -> tuple[HeaterParams, HeaterParams]:
-    return (HeaterParams(tau_s=20.0, tol_c=2.0, max_c=300.0),
-            HeaterParams(tau_s=90.0, tol_c=1.0, max_c=120.0))
+    return (NOZZLE_E3D_V6, BED_250_MM)
 
 
 @dataclass
@@ -63,6 +111,10 @@ class Thermal:
     states: list[HeaterState] = field(default_factory=list)
 
     def __post_init__(self) -> None:
+        for p in self.params:
+            if p.full_power_c <= p.max_c:
+                raise ValidationError(f"a heater of {p.power_w:g} W and {p.resistance_k_w:g} K/W cannot reach its "
+                                      f"highest set point {p.max_c:g} C", field="params")
         if not self.states:
             self.states = [HeaterState(0.0, p.ambient_c, 0.0) for p in self.params]
 
@@ -75,6 +127,7 @@ class Thermal:
             raise ValidationError(f"unknown heater id {heater} (0 nozzle, 1 bed)", field="aux", value=heater)
 
     def _eff(self, heater: int, target_c: float) -> float:
+        """Where the heater settles: its set point, or the room when it is off (or set below the room)."""
         return max(target_c, self.params[heater].ambient_c)
 
     def temp_at(self, heater: int, t_s: float) -> float:
@@ -83,7 +136,12 @@ class Thermal:
         st, p = self.states[heater], self.params[heater]
         eff = self._eff(heater, st.target_c)
         dt = max(0.0, t_s - st.t_s)
-        return eff + (st.temp_c - eff) * math.exp(-dt / p.tau_s)
+        t0 = st.temp_c
+        if t0 < eff:                    # full power towards T_max, held at the set point once there
+            t_max = p.full_power_c
+            return min(t_max + (t0 - t_max) * math.exp(-dt / p.tau_s), eff)
+        # passive cooling towards the room, held at the set point (or the room) once there
+        return max(p.ambient_c + (t0 - p.ambient_c) * math.exp(-dt / p.tau_s), eff)
 
     def target(self, heater: int) -> float:
         """Current set point (C; 0 = off)."""
@@ -109,7 +167,10 @@ class Thermal:
         st, p = self.states[heater], self.params[heater]
         if st.target_c <= p.ambient_c:
             return 0.0
-        gap = abs(self.temp_at(heater, t_s) - st.target_c)
-        if gap <= p.tol_c:
+        now_c = self.temp_at(heater, t_s)
+        if abs(now_c - st.target_c) <= p.tol_c:
             return 0.0
-        return p.tau_s * math.log(gap / p.tol_c)
+        if now_c < st.target_c:         # heating at full power up to the set point less the tolerance
+            t_max = p.full_power_c
+            return p.tau_s * math.log((t_max - now_c) / (t_max - (st.target_c - p.tol_c)))
+        return p.tau_s * math.log((now_c - p.ambient_c) / (st.target_c + p.tol_c - p.ambient_c))

@@ -22,20 +22,23 @@ only turns the tool takes ``max_j |dq_j| / vlim_j`` at rest.
 """
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from ruckig import InputParameter, Result, Ruckig, Trajectory
 
-from fabric.motion.lookahead import EPS_MM, PathSteps, linear_profiles
+from fabric.motion.lookahead import EPS_MM, LinearProfiles, PathSteps, linear_profiles
 from fabric.motion.program import MOVEJ, MOVEL, RETRACT, SET_TEMP, WAIT, WAIT_TEMP, Program
 from fabric.motion.thermal import Thermal
 from fabric.motion.timeline import Timeline
 from fabric.robot.frames import inv_T, quat_from_R
 from fabric.wire.errors import ValidationError
 
-__all__ = ["StartState", "time_program", "stop_timeline", "DEFAULT_ACCEL_MM_S2", "DEFAULT_RETRACT_SPEED_MM_S"]
+__all__ = ["StartState", "time_program", "program_times", "ProgramTimes", "stop_timeline", "DEFAULT_ACCEL_MM_S2",
+           "DEFAULT_RETRACT_SPEED_MM_S"]
 
 DEFAULT_ACCEL_MM_S2 = 2000.0
 DEFAULT_RETRACT_SPEED_MM_S = 35.0
@@ -84,24 +87,10 @@ def time_program(program: Program, robot: Any, speed_r: float = 1.0, start_row: 
         k = max(start_row - 1, 0)
         start_state = StartState(program.q_rad[k].copy(), program.xyz_mm[k].copy(), program.quat_wxyz[k].copy())
     sl = slice(start_row, n_all)
-    path, first_quat = _path_steps(program, start_row, start_state)
-    op, q = path.op, path.q
+    dur, path, prof, trajs, first_quat = _row_durations(program, robot, speed_r, start_row, start_state,
+                                                        accel_mm_s2, retract_speed_mm_s)
+    op, seg = path.op, prof.seg
     n = len(op)
-    vlim = np.asarray(robot.vel_limit_rad_s, dtype=float)
-    dur = np.zeros(n)
-    prof = linear_profiles(path, vlim, speed_r, accel_mm_s2, float(start_state.v_mm_s))
-    seg = prof.seg
-    dur[seg] = prof.t1 + prof.tc + prof.t3
-    # a zero-length linear move that only turns the tool: at rest, as fast as the slowest joint allows
-    turn = np.flatnonzero((op == MOVEL) & (path.D <= EPS_MM) & prof.reorient)
-    q_from = np.where((turn > 0)[:, None], q[np.maximum(turn - 1, 0)], path.q0[None])
-    dur[turn] = np.max(np.abs(q[turn] - q_from) / vlim, axis=1)
-    value = program.value[sl]
-    dur[op == WAIT] = np.maximum(value[op == WAIT], 0.0)
-    dur[op == RETRACT] = np.abs(value[op == RETRACT]) / retract_speed_mm_s
-    trajs = _joint_moves(program, sl, q, path.q0, robot, speed_r, start_row)
-    for i, tr in trajs.items():
-        dur[i] = tr.duration
     _thermal_pass(program, sl, op, dur, start_state)
     t_end = np.cumsum(dur)
     t_start = np.concatenate([[0.0], t_end[:-1]])
@@ -118,6 +107,148 @@ def time_program(program: Program, robot: Any, speed_r: float = 1.0, start_row: 
                     first_from_xyz_mm=path.xyz0.copy(), first_from_quat_wxyz=first_quat.copy(),
                     s0_mm=path.s0_mm, speed_r=float(speed_r), flow_r=float(flow_r), joint_traj=trajs,
                     slowed_rows=start_row + prof.slowed, slowed_joint=prof.slowed_joint)
+
+
+def _row_durations(program: Program, robot: Any, speed_r: float, start_row: int, start_state: StartState,
+                   accel_mm_s2: float, retract_speed_mm_s: float
+                   ) -> tuple[np.ndarray, PathSteps, LinearProfiles, dict[int, Trajectory], np.ndarray]:
+    """Every row's duration from ``start_row`` on but the heater waits' (left 0: :func:`_thermal_pass`), with
+    the path, the linear profiles, the joint moves and the orientation the first row starts from."""
+    sl = slice(start_row, len(program))
+    path, first_quat = _path_steps(program, start_row, start_state)
+    op, q = path.op, path.q
+    vlim = np.asarray(robot.vel_limit_rad_s, dtype=float)
+    dur = np.zeros(len(op))
+    prof = linear_profiles(path, vlim, speed_r, accel_mm_s2, float(start_state.v_mm_s))
+    dur[prof.seg] = prof.t1 + prof.tc + prof.t3
+    # a zero-length linear move that only turns the tool: at rest, as fast as the slowest joint allows
+    turn = np.flatnonzero((op == MOVEL) & (path.D <= EPS_MM) & prof.reorient)
+    q_from = np.where((turn > 0)[:, None], q[np.maximum(turn - 1, 0)], path.q0[None])
+    dur[turn] = np.max(np.abs(q[turn] - q_from) / vlim, axis=1)
+    value = program.value[sl]
+    dur[op == WAIT] = np.maximum(value[op == WAIT], 0.0)
+    dur[op == RETRACT] = np.abs(value[op == RETRACT]) / retract_speed_mm_s
+    trajs = _joint_moves(program, sl, q, path.q0, robot, speed_r, start_row)
+    for i, tr in trajs.items():
+        dur[i] = tr.duration
+    return dur, path, prof, trajs, first_quat
+
+
+@dataclass
+class ProgramTimes:
+    """What a plan keeps of its timing: the cycle time, the time each row ends (from the start state) and
+    the rows a joint velocity limit slowed, with the limiting joint (0-based)."""
+
+    total_s: float
+    t_end_s: np.ndarray
+    slowed_rows: np.ndarray
+    slowed_joint: np.ndarray
+
+
+def program_times(program: Program, robot: Any, speed_r: float = 1.0, start_state: StartState | None = None, *,
+                  block_rows: int = 1 << 18, out: np.ndarray | None = None,
+                  accel_mm_s2: float = DEFAULT_ACCEL_MM_S2, retract_speed_mm_s: float = DEFAULT_RETRACT_SPEED_MM_S,
+                  progress: Callable[[float], None] | None = None) -> ProgramTimes:
+    """The times of :func:`time_program` from row 0, computed ``block_rows`` rows at a time (memory: a few
+    blocks of rows, whatever the program's length; ``out``: where to write the times, e.g. a mapped file).
+
+    A program of at most ``block_rows`` rows is timed by :func:`time_program` itself. A longer one is timed
+    in windows: the rows of a block plus enough rows before and after it that the look-ahead cannot see
+    past them (a junction's speed depends on the rows within ``v^2 / 2a`` of path, ``v`` the fastest
+    programmed speed: further on, the acceleration limit bounds it whatever comes; a window's ends are
+    stops, as far from the block as that). Heater waits and the clock run through the blocks in order.
+    The result equals the whole program's timing up to rounding.
+    """
+    n = len(program)
+    if start_state is None:
+        start_state = StartState(program.q_rad[0].copy(), program.xyz_mm[0].copy(), program.quat_wxyz[0].copy())
+    if n <= block_rows:
+        tl = time_program(program, robot, speed_r, 0, start_state, accel_mm_s2=accel_mm_s2,
+                          retract_speed_mm_s=retract_speed_mm_s)
+        t_end = tl.t_end_s
+        if out is not None:
+            out[:] = t_end
+            t_end = out
+        return ProgramTimes(float(tl.total_s), t_end, tl.slowed_rows, tl.slowed_joint)
+    t_end = np.empty(n) if out is None else out
+    thermal = start_state.thermal.copy() if start_state.thermal is not None else Thermal()
+    clock, clock_moving, waited = 0.0, 0.0, 0.0      # end of the last block; the same without heater waits
+    slowed_rows, slowed_joint = [], []
+    for a in range(0, n, block_rows):
+        b = min(a + block_rows, n)
+        s, e = _window(program, a, b, speed_r, accel_mm_s2)
+        if s == 0:
+            ss = dataclasses.replace(start_state, thermal=None)
+        else:                                        # at rest where the row before the window ends
+            ss = StartState(program.q_rad[s - 1].copy(), program.xyz_mm[s - 1].copy(),
+                            program.quat_wxyz[s - 1].copy())
+        win = program.slice(s, e)
+        dur_w, _path, prof, _trajs, _q = _row_durations(win, robot, speed_r, 0, ss, accel_mm_s2,
+                                                        retract_speed_mm_s)
+        dur = dur_w[a - s:b - s].copy()
+        keep = (prof.slowed >= a - s) & (prof.slowed < b - s)
+        slowed_rows.append(prof.slowed[keep] + s)
+        slowed_joint.append(prof.slowed_joint[keep])
+        del dur_w, _path, prof, _trajs, win
+        op = program.op[a:b]
+        # heater waits, in order through the blocks (as _thermal_pass over the whole program)
+        moving = np.cumsum(dur)
+        idx = np.flatnonzero((op == SET_TEMP) | (op == WAIT_TEMP))
+        if len(idx):
+            before = np.concatenate([[0.0], moving[:-1]]) + clock_moving
+            value, aux = program.value[a:b], program.aux[a:b]
+            for i in idx.tolist():
+                t_abs = start_state.t0_s + before[i] + waited
+                if op[i] == SET_TEMP:
+                    thermal.set_target(int(aux[i]), float(value[i]), t_abs)
+                else:
+                    dur[i] = thermal.wait_s(int(aux[i]), t_abs)
+                    waited += dur[i]
+        clock_moving += float(moving[-1]) if len(moving) else 0.0
+        dur[0] += clock
+        np.cumsum(dur, out=t_end[a:b])
+        clock = float(t_end[b - 1])
+        program.release_pages(0, b)
+        if progress is not None:
+            progress(b / n)
+    return ProgramTimes(clock, t_end, np.concatenate(slowed_rows).astype(np.intp),
+                        np.concatenate(slowed_joint).astype(np.intp))
+
+
+def _window(program: Program, a: int, b: int, speed_r: float, accel_mm_s2: float) -> tuple[int, int]:
+    """The rows ``[s, e)`` to time so that the rows ``[a, b)`` come out as in the whole program: at least
+    ``v^2 / 2a`` (+ 50 %, + 1 mm) of linear path on each side, ``v`` the fastest speed programmed there."""
+
+    def reach(lo: int, hi: int) -> tuple[float, float]:
+        # linear path of rows [lo, hi) (a row's step from the row before; row 0 has none), fastest speed there
+        if hi <= lo:
+            return 0.0, 0.0
+        xyz = program.xyz_mm[max(lo - 1, 0):hi]
+        step = np.sqrt(np.einsum("ij,ij->i", xyz[1:] - xyz[:-1], xyz[1:] - xyz[:-1]))
+        if lo == 0:
+            step = np.concatenate([[0.0], step])
+        lin = program.op[lo:hi] == MOVEL
+        return float(step[lin].sum()), float(np.max(program.speed_mm_s[lo:hi][lin], initial=0.0)) * speed_r
+
+    n = len(program)
+    _dist, v_block = reach(a, b)
+    s, m = a, 256
+    while s > 0:
+        s = max(a - m, 0)
+        dist, v = reach(s, a)
+        need = 1.5 * max(v, v_block) ** 2 / (2.0 * accel_mm_s2) + 1.0
+        if dist >= need:
+            break
+        m *= 2
+    e, m = b, 256
+    while e < n:
+        e = min(b + m, n)
+        dist, v = reach(b, e)
+        need = 1.5 * max(v, v_block) ** 2 / (2.0 * accel_mm_s2) + 1.0
+        if dist >= need:
+            break
+        m *= 2
+    return s, e
 
 
 def _path_steps(program: Program, start_row: int, ss: StartState) -> tuple[PathSteps, np.ndarray]:

@@ -81,6 +81,7 @@ def _events(tp: Toolpath, e: np.ndarray, moving_retract: np.ndarray, opt: PlanOp
     of its own line (``M109 S200`` alone heats to 200 C; after ``M104 S200`` it adds nothing)."""
     kind, aux, val = tp.event_kind, tp.event_aux, tp.event_value
     ev_row, ev_line = tp.event_row, tp.event_line
+    _check_set_points(kind, aux, val, ev_line)
     unset = _unset_waits(kind, aux, val)
     if len(unset):                                # each such wait twice: its SET_TEMP copy first
         copies = np.ones(len(kind), np.intp)
@@ -92,7 +93,6 @@ def _events(tp: Toolpath, e: np.ndarray, moving_retract: np.ndarray, opt: PlanOp
     heater = np.where(kind == EV_BED_TEMP, BED, NOZZLE)
     temp = (kind == EV_NOZZLE_TEMP) | (kind == EV_BED_TEMP)
     op[temp] = np.where(aux[temp] == WAIT_NONE, SET_TEMP, WAIT_TEMP)
-    _check_set_points(kind, aux, val, ev_line, temp)
     op[kind == EV_DWELL] = WAIT
     op[kind == EV_EXTRUDE] = RETRACT
     value = val.astype(np.float64).copy()
@@ -110,13 +110,12 @@ def _events(tp: Toolpath, e: np.ndarray, moving_retract: np.ndarray, opt: PlanOp
             cat(ev_line[keep], tp.line[mr]), int((kind == EV_FAN).sum()))
 
 
-def _check_set_points(kind: np.ndarray, aux: np.ndarray, val: np.ndarray, line: np.ndarray,
-                      temp: np.ndarray) -> None:
+def _check_set_points(kind: np.ndarray, aux: np.ndarray, val: np.ndarray, line: np.ndarray) -> None:
     """A set point above its heater's maximum is a GcodeError naming the line (negative ones the reader
     refuses already)."""
     params = Thermal().params
     limit = np.where(kind == EV_BED_TEMP, params[BED].max_c, params[NOZZLE].max_c)
-    bad = np.flatnonzero(temp & (val > limit))
+    bad = np.flatnonzero(((kind == EV_NOZZLE_TEMP) | (kind == EV_BED_TEMP)) & (val > limit))
     if not len(bad):
         return
     i = int(bad[0])
@@ -143,8 +142,15 @@ def _unset_waits(kind: np.ndarray, aux: np.ndarray, val: np.ndarray) -> np.ndarr
     return np.sort(np.concatenate(out)) if out else np.zeros(0, np.intp)
 
 
-def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0) -> PrintRows:
-    """Map a toolpath (G-code frame) to Print-section rows (plate frame); see the module docstring."""
+def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0, *, first: bool = True,
+                 last: bool = True) -> PrintRows:
+    """Map a toolpath (G-code frame) to Print-section rows (plate frame); see the module docstring.
+
+    A toolpath planned in chunks (:class:`~fabric.gcode.ToolpathChunks`: each cut between two extruding
+    rows with no event between them, so no travel run or stop straddles a cut) maps chunk by chunk:
+    ``first`` says whether this is the first (where the approach may land on row 0's start), ``last``
+    whether it is the last (whose last row is a stop).
+    """
     n = len(tp)
     if n == 0:
         raise ValidationError("the G-code has no moves", field="gcode", n_lines=tp.n_lines)
@@ -156,7 +162,8 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0) -
     seg = np.sqrt(np.einsum("ij,ij->i", d, d))
     e = tp.e_mm
     ext = (e > 0) & (seg > 1e-9)
-    k0 = 0 if ext[0] else 1                       # the approach lands on row 0's end unless it extrudes
+    # the approach lands on row 0's end unless it extrudes (a later chunk starts with an extruding row)
+    k0 = 0 if ext[0] or not first else 1
     first = (tp.start_xyz_mm + off) if k0 == 0 else pts[0]
     ev_row, ev_op, ev_val, ev_aux, ev_line, n_fan = _events(tp, e, (e < 0) & (seg > 1e-9), opt)
     sl = slice(k0, n)
@@ -237,7 +244,8 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0) -
     zone = view["zone_mm"]
     zone[motion] = opt.zone_mm
     zone[ev_pos[ev_pos > 0] - 1] = 0.0
-    zone[-1] = 0.0
+    if last:
+        zone[-1] = 0.0
     return PrintRows(start=head, stop=head + total, **full,
                      first_xyz_mm=np.asarray(first, dtype=float).copy(),
                      first_line=int(tp.line[0]), n_lifts=int(ui.size), n_fan_events=n_fan)

@@ -1,15 +1,19 @@
 """The planner: G-code -> verified joint program (approach, print, return home) with its report.
 
-Pipeline: parse (streamed in blocks) -> map the toolpath to Print rows in the
-plate frame (:mod:`fabric.planning.mapping`) -> frame the print with an
+Pipeline, chunk by chunk of the toolpath (``ik_block_rows`` rows each, cut
+between two extruding moves, :class:`fabric.gcode.ToolpathChunks`, so memory
+holds a chunk, not the file): parse (streamed in blocks) -> map the toolpath to
+Print rows in the plate frame (:mod:`fabric.planning.mapping`) -> frame the print with an
 *Approach* (a joint move from home to ``approach_height_mm`` above the first
 point, then a linear move down, at the cell's approach speed, fine zones) and a
 *Return home* (a linear move up, a joint move to the home joints) -> inverse
 kinematics of every motion row with the free rotation about the nozzle axis
 (``fabric.robot.path_ik.solve_path``), solved in blocks of ``ik_block_rows``
 seeded with the previous block's last joints so memory stays bounded and
-progress can be reported -> the cycle time from the motion model the station
-executes (``fabric.motion.timing.time_program``).
+progress can be reported -> the chunk's rows appended to a sink (in memory, or
+files the program is mapped from: :mod:`fabric.motion.program_file`) -> once the
+whole program is there, the cycle time from the motion model the station
+executes (``fabric.motion.timing.program_times``, in blocks of rows too).
 
 Frames: program targets are the TCP in the plate frame (the work object
 ``cell.wobj_T()``); IK takes them in the robot base frame, ``wobj_T @ p``, with
@@ -23,23 +27,28 @@ from __future__ import annotations
 import dataclasses
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fabric.gcode import Toolpath, parse_gcode, parse_gcode_file
+from fabric.gcode import Toolpath, ToolpathChunks
+from fabric.gcode.interp import ChunkSummary
+from fabric.gcode.material import Material
 from fabric.motion.cold import first_cold_extrusion
 from fabric.motion.program import APPROACH, MOVEJ, MOVEL, PRINT, RETURN_HOME, SET_TEMP, WAIT, WAIT_TEMP, Program
+from fabric.motion.program_file import FileSink, MemorySink, ProgramSink
 from fabric.planning.envelope import envelope_status
 from fabric.planning.mapping import map_toolpath
 from fabric.planning.material import resolve_material
 from fabric.planning.options import PlanOptions
 from fabric.planning.post.names import program_name
-from fabric.planning.report import PlanResult, PlanStats, Reachability
+from fabric.planning.report import UNREACHABLE_CODES, PlanResult, PlanStats, Reachability
 from fabric.robot.frames import inv_T, quat_from_R
 from fabric.robot.kinematics import IK_JUMP, IK_OK
+from fabric.wire.errors import FabricError
 
 __all__ = ["plan_gcode", "plan_gcode_file", "plan_toolpath"]
 
@@ -57,40 +66,41 @@ def _sub(progress: Progress | None, a: float, b: float) -> Progress | None:
 
 def plan_gcode(text: str | bytes | os.PathLike[str], cell: Any, options: PlanOptions | None = None,
                progress: Progress | None = None, filename: str | None = None,
-               on_program: ProgramReady | None = None) -> PlanResult:
+               on_program: ProgramReady | None = None, program_dir: str | os.PathLike[str] | None = None
+               ) -> PlanResult:
     """Plan G-code held in memory, or in a file named by a path, for ``cell`` (a :class:`fabric.robot.cell.Cell`).
 
     ``filename`` (optional) names the job: the program's ``meta`` gets
     ``filename`` and ``name`` (its stem), which exports use. ``on_program`` is
     called with the program as soon as it is final, before the cycle-time
     estimate, with its reachability (e.g. to start encoding or exporting it on another thread); it must
-    not change either.
+    not change either. With ``program_dir`` the program (and its per-row status, rotation and times) is
+    written to files there and mapped back read-only (:class:`~fabric.motion.program_file.FileSink`): the
+    process then holds a chunk of rows at a time, whatever the file's size; without it the program is
+    built in memory.
     """
-    parse = parse_gcode_file if isinstance(text, os.PathLike) else parse_gcode     # a path: read in blocks
-    return _parse_and_plan(parse, text, cell, options, progress, filename, on_program)
-
-
-def _parse_and_plan(parse: Callable[..., Toolpath], source: Any, cell: Any, options: PlanOptions | None,
-                    progress: Progress | None, filename: str | os.PathLike[str] | None,
-                    on_program: ProgramReady | None = None) -> PlanResult:
-    """Parse (first quarter of the progress), plan the rest, name the program after ``filename``."""
     opt = options or PlanOptions()
-    t0 = time.perf_counter()
-    tp = parse(source, chord_tol_mm=opt.chord_tol_mm, progress=_sub(progress, 0.0, 0.25))
+    chunks = ToolpathChunks(text, chunk_rows=opt.ik_block_rows, chord_tol_mm=opt.chord_tol_mm)
     meta = {"filename": Path(filename).name, "name": program_name(Path(filename).stem)} if filename else {}
-    return plan_toolpath(tp, cell, opt, _sub(progress, 0.25, 1.0), parse_s=time.perf_counter() - t0, meta=meta,
-                         on_program=on_program)
+    if program_dir is not None:
+        sink: ProgramSink = FileSink(program_dir, extra=_EXTRA)
+    else:
+        sink = MemorySink(rows_hint=chunks.size // 12 + 64, extra=_EXTRA)
+    return _plan_chunks(chunks, cell, opt, progress, meta=meta, on_program=on_program, sink=sink)
 
 
 def plan_gcode_file(path: str | os.PathLike[str], cell: Any, options: PlanOptions | None = None,
                     progress: Progress | None = None) -> PlanResult:
     """Plan a G-code file, streaming it in blocks."""
-    return _parse_and_plan(parse_gcode_file, path, cell, options, progress, path)
+    return plan_gcode(Path(path), cell, options, progress, filename=str(path))
 
 
-def _assemble(tp: Toolpath, cell: Any, opt: PlanOptions) -> tuple[Program, int]:
-    """Program rows (plate frame, no joints yet); returns the program and its print-row count."""
-    pr = map_toolpath(tp, opt, head=2, tail=2)
+def _assemble(tp: Toolpath, cell: Any, opt: PlanOptions, first: bool = True, last: bool = True
+              ) -> tuple[Program, _Assembled]:
+    """Program rows of a toolpath chunk (plate frame, no joints yet): the approach before the first chunk's
+    print rows, the return home after the last's."""
+    head, tail = (2 if first else 0), (2 if last else 0)
+    pr = map_toolpath(tp, opt, head=head, tail=tail, first=first, last=last)
     h = opt.approach_height_mm or float(cell.approach_height_mm)
     v_app = min(opt.approach_speed_mm_s or float(cell.approach_speed_mm_s), opt.max_tcp_speed_mm_s)
     up = np.array([0.0, 0.0, h])
@@ -98,32 +108,50 @@ def _assemble(tp: Toolpath, cell: Any, opt: PlanOptions) -> tuple[Program, int]:
     cols = {name: getattr(pr, name) for name in ("op", "xyz_mm", "speed_mm_s", "zone_mm", "flow_mm3_mm",
                                                  "value", "aux", "gcode_line", "layer")}
     section = np.full(n, PRINT, np.uint8)
-    section[:2] = APPROACH
-    section[-2:] = RETURN_HOME
+    if first:
+        section[:2] = APPROACH
+    if last:
+        section[-2:] = RETURN_HOME
     quat = np.zeros((n, 4))
     quat[:, 0] = 1.0
     prog = Program(**cols, section=section, q_rad=np.zeros((n, int(cell.robot.nq))), quat_wxyz=quat,
                    vel_r=np.zeros(n),
-                   wobj=np.asarray(cell.wobj_T() if opt.wobj_T is None else opt.wobj_T, dtype=float),
-                   meta={"source_lines": tp.n_lines, "slicer": tp.slicer})
-    last = prog.xyz_mm[pr.stop - 1] if len(pr) else pr.first_xyz_mm
-    prog.op[:2] = (MOVEJ, MOVEL)
-    prog.op[-2:] = (MOVEL, MOVEJ)
-    prog.xyz_mm[0], prog.xyz_mm[1] = pr.first_xyz_mm + up, pr.first_xyz_mm
-    prog.xyz_mm[-2] = last + up
-    prog.speed_mm_s[[0, 1, -2, -1]] = v_app
-    prog.zone_mm[[0, 1, -2, -1]] = 0.0
-    prog.gcode_line[1] = pr.first_line
-    prog, dropped, dropped_lifts = _start_at_first_bead(prog, pr.stop)
+                   wobj=np.asarray(cell.wobj_T() if opt.wobj_T is None else opt.wobj_T, dtype=float))
+    if first:
+        prog.op[:2] = (MOVEJ, MOVEL)
+        prog.xyz_mm[0], prog.xyz_mm[1] = pr.first_xyz_mm + up, pr.first_xyz_mm
+        prog.speed_mm_s[[0, 1]] = v_app
+        prog.zone_mm[[0, 1]] = 0.0
+        prog.gcode_line[1] = pr.first_line
+    if last:
+        end = prog.xyz_mm[pr.stop - 1] if len(pr) else pr.first_xyz_mm
+        prog.op[-2:] = (MOVEL, MOVEJ)
+        prog.xyz_mm[-2] = end + up
+        prog.speed_mm_s[[-2, -1]] = v_app
+        prog.zone_mm[[-2, -1]] = 0.0
+    dropped = dropped_lifts = 0
+    if first:
+        prog, dropped, dropped_lifts = _start_at_first_bead(prog, pr.stop)
     n = len(prog)
-    # non-motion rows (temperatures, waits, retractions) hold the TCP where the last motion row left it
+    # non-motion rows (temperatures, waits, retractions) hold the TCP where the last motion row left it (a
+    # chunk after the first starts with a move: the cut is between two extruding moves)
     motion = prog.op <= MOVEL
     last_motion = np.maximum.accumulate(np.where(motion, np.arange(n), 0))
     rest = np.flatnonzero(~motion)
     prog.xyz_mm[rest] = prog.xyz_mm[last_motion[rest]]
-    prog.meta.update(travel_lifts=pr.n_lifts - dropped_lifts, fan_events_dropped=pr.n_fan_events,
-                     approach_speed_mm_s=v_app, leading_travels_dropped=dropped)
-    return prog, len(pr) - dropped
+    return prog, _Assembled(print_rows=len(pr) - dropped, lifts=pr.n_lifts - dropped_lifts,
+                            fan_events=pr.n_fan_events, approach_speed_mm_s=v_app, leading_dropped=dropped)
+
+
+@dataclass
+class _Assembled:
+    """What assembling a chunk found besides its rows."""
+
+    print_rows: int
+    lifts: int
+    fan_events: int
+    approach_speed_mm_s: float
+    leading_dropped: int
 
 
 def _start_at_first_bead(prog: Program, stop: int) -> tuple[Program, int, int]:
@@ -163,19 +191,31 @@ def _start_at_first_bead(prog: Program, stop: int) -> tuple[Program, int, int]:
     return Program(**cols, wobj=prog.wobj, meta=prog.meta), k, lifts
 
 
-def _solve(prog: Program, cell: Any, opt: PlanOptions, progress: Progress | None) -> tuple[np.ndarray, np.ndarray]:
-    """IK of every motion row but the final home move, in blocks; fills q and quat. Returns (status, rot_deg)."""
+@dataclass
+class _Seed:
+    """Where the IK of the next block starts: the last reachable joints so far (home before any), and whether a
+    block was solved before (then its first row is tested for a jump from them)."""
+
+    q_rad: np.ndarray
+    solved: bool = False
+
+
+def _solve(prog: Program, cell: Any, opt: PlanOptions, progress: Progress | None, seed: _Seed | None = None,
+           last: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """IK of every motion row (but the final home move of the ``last`` chunk), in blocks, from ``seed`` (carried
+    to the next chunk); fills q and quat. Returns (status, rot_deg)."""
     from fabric.robot.path_ik import solve_path
 
     robot = cell.robot
     wobj = prog.wobj
     home = np.asarray(cell.home_q_rad, dtype=float)
+    if seed is None:
+        seed = _Seed(home)
     n = len(prog)
-    motion = np.flatnonzero(prog.op[:-1] <= MOVEL)
+    motion = np.flatnonzero(prog.op[:-1] <= MOVEL) if last else np.flatnonzero(prog.op <= MOVEL)
     axis_b = wobj[:3, :3] @ opt.nozzle_axis()
     status = np.zeros(n, np.uint8)
     rot = np.zeros(n)
-    seed = home
     q_wobj_inv = quat_from_R(wobj[:3, :3].T)
     plate_is_base = bool(np.array_equal(wobj[:3, :3], np.eye(3)))     # a shifted plate: no rotation to apply
     block = opt.ik_block_rows
@@ -187,25 +227,27 @@ def _solve(prog: Program, cell: Any, opt: PlanOptions, progress: Progress | None
             xyz_b = p + wobj[:3, 3]
         else:
             xyz_b = np.einsum("ij,kj->ik", p, wobj[:3, :3]) + wobj[:3, 3]     # no BLAS: (N,3)x(3,3)
-        res = solve_path(robot, xyz_b, np.broadcast_to(axis_b, xyz_b.shape), seed,
+        res = solve_path(robot, xyz_b, np.broadcast_to(axis_b, xyz_b.shape), seed.q_rad,
                          rot_range_deg=opt.rot_range_deg, rot_step_deg=opt.rot_step_deg, jump_deg=JUMP_DEG)
         put(prog.q_rad, res.q_rad)
         st = res.status.copy()
-        if a > 0 and len(st) and st[0] == IK_OK and np.max(np.abs(res.q_rad[0] - seed)) > np.radians(JUMP_DEG):
+        if seed.solved and len(st) and st[0] == IK_OK and \
+                np.max(np.abs(res.q_rad[0] - seed.q_rad)) > np.radians(JUMP_DEG):
             st[0] = IK_JUMP                      # across the block boundary, as solve_path does inside
+        seed.solved = seed.solved or len(idx) > 0
         put(prog.quat_wxyz, res.quat_wxyz if plate_is_base else _quat_in_plate(q_wobj_inv, res.quat_wxyz))
         put(status, st)
         put(rot, res.rot_deg)
         good = np.flatnonzero(st == IK_OK)
         if len(good):
-            seed = res.q_rad[good[-1]]
+            seed.q_rad = res.q_rad[good[-1]].copy()
         if progress is not None:
             progress(min(a + block, len(motion)) / max(len(motion), 1))
-    # the final joint move goes to the home joints
-    prog.q_rad[-1] = home
-    T_home = inv_T(wobj) @ robot.fk(home[None])[0]
-    prog.xyz_mm[-1] = T_home[:3, 3]
-    prog.quat_wxyz[-1] = quat_from_R(T_home[:3, :3])
+    if last:                                 # the final joint move goes to the home joints
+        prog.q_rad[-1] = home
+        T_home = inv_T(wobj) @ robot.fk(home[None])[0]
+        prog.xyz_mm[-1] = T_home[:3, 3]
+        prog.quat_wxyz[-1] = quat_from_R(T_home[:3, :3])
     # non-motion rows repeat the previous row's pose and status
     is_m = prog.op <= MOVEL
     fill = np.where(is_m, np.arange(n), -1)
@@ -268,55 +310,198 @@ def _joint_speeds(prog: Program, cell: Any, v_mm_s: float) -> None:
 def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
                   progress: Progress | None = None, *, parse_s: float = 0.0, meta: dict[str, Any] | None = None,
                   on_program: ProgramReady | None = None) -> PlanResult:
-    """Plan an interpreted toolpath for ``cell`` (see the module docstring).
+    """Plan an interpreted toolpath, whole in memory, for ``cell`` (see the module docstring).
 
     ``meta`` is added to the program's; ``on_program`` gets the program once it is final (see :func:`plan_gcode`).
     """
     opt = options or PlanOptions()
-    t0 = time.perf_counter()
-    material = resolve_material(tp.material, opt.filament_diameter_mm)    # the E -> volume factor, said aloud
+    return _plan_chunks(_Whole(tp), cell, opt, progress, meta=meta or {}, on_program=on_program,
+                        sink=MemorySink(rows_hint=2 * len(tp) + 64, extra=_EXTRA), parse_s=parse_s)
+
+
+_EXTRA = {"status": ("u1", ()), "rot_deg": ("f8", ())}     # per-row columns kept beside the program: its reach
+TIMING_BLOCK_ROWS = 1 << 18     # rows timed at once by the cycle-time estimate (program_times)
+
+
+class _Whole:
+    """A whole toolpath as the one chunk of :func:`_plan_chunks`."""
+
+    def __init__(self, tp: Toolpath) -> None:
+        self.tp, self.slicer, self.fraction, self.toolpath = tp, tp.slicer, 1.0, tp
+        self.summary = ChunkSummary(n_lines=tp.n_lines, n_rows=len(tp), layer_z_mm=tp.layer_z_mm,
+                                    unknown_commands=dict(tp.unknown_commands), feature_names=list(tp.feature_names))
+
+    def material(self, n_lines: int = 0) -> Material:
+        return self.tp.material
+
+    def __iter__(self) -> Iterator[tuple[Toolpath, bool]]:
+        yield self.tp, True
+
+
+class _Progress:
+    """A progress callback that never goes back (the parser reads a little ahead of the chunks planned)."""
+
+    def __init__(self, fn: Progress | None) -> None:
+        self.fn, self.last = fn, 0.0
+
+    def __call__(self, fraction: float) -> None:
+        if self.fn is None:
+            return
+        self.last = max(self.last, min(max(float(fraction), 0.0), 1.0))
+        self.fn(self.last)
+
+    def sub(self, a: float, b: float) -> Progress:
+        return lambda f: self(a + (b - a) * f)
+
+
+class _Reach:
+    """The reachability of the chunks so far (counts by reason, the first unreachable target)."""
+
+    def __init__(self) -> None:
+        self.counts: dict[str, int] = {}
+        self.ok = self.n = 0
+        self.first: tuple[int, str] | None = None
+        self.first_row = -1
+
+    def add(self, rep: Reachability, motion: np.ndarray, base: int) -> None:
+        for reason, k in rep.counts.items():
+            self.counts[reason] = self.counts.get(reason, 0) + k
+        st = rep.status[motion]
+        self.n += len(st)
+        self.ok += int(len(st) - np.count_nonzero(np.isin(st, UNREACHABLE_CODES)))
+        if self.first is None and rep.first_unreachable is not None:
+            self.first, self.first_row = rep.first_unreachable, base + rep.first_unreachable_row
+
+    def report(self, status: np.ndarray, rot_deg: np.ndarray) -> Reachability:
+        return Reachability(status=status, rot_deg=rot_deg, feasible_r=self.ok / self.n if self.n else 1.0,
+                            counts=self.counts, first_unreachable=self.first, first_unreachable_row=self.first_row)
+
+
+@dataclass
+class _Totals:
+    """The figures of the chunks so far (see :class:`PlanStats`)."""
+
+    moves: int = 0
+    targets: int = 0
+    print_rows: int = 0
+    lifts: int = 0
+    fan_events: int = 0
+    leading_dropped: int = 0
+    approach_speed_mm_s: float = 0.0
+    volume_mm3: float = 0.0
+    path_mm: float = 0.0
+    print_mm: float = 0.0
+    last_xyz: np.ndarray | None = None
+
+    def add(self, prog: Program, tp: Toolpath, asm: _Assembled, first: bool) -> None:
+        xyz = prog.xyz_mm
+        step = np.zeros_like(xyz)
+        np.subtract(xyz[1:], xyz[:-1], out=step[1:])
+        if self.last_xyz is not None and len(xyz):
+            step[0] = xyz[0] - self.last_xyz         # the chunk's first move starts where the last chunk ended
+        d = np.sqrt(np.einsum("ij,ij->i", step, step))
+        del step
+        lin = prog.op == MOVEL
+        pm = (prog.section == PRINT) & lin
+        self.volume_mm3 += float(np.dot(prog.flow_mm3_mm[lin], d[lin]))
+        self.path_mm += float(d[pm].sum())
+        self.print_mm += float(d[pm & (prog.flow_mm3_mm > 0)].sum())
+        self.targets += int(np.count_nonzero(prog.op <= MOVEL))
+        self.moves += len(tp)
+        self.print_rows += asm.print_rows
+        self.lifts += asm.lifts
+        self.fan_events += asm.fan_events
+        if first:
+            self.leading_dropped, self.approach_speed_mm_s = asm.leading_dropped, asm.approach_speed_mm_s
+        if len(xyz):
+            self.last_xyz = xyz[-1].copy()
+
+
+def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, progress: Progress | None, *,
+                 meta: dict[str, Any], on_program: ProgramReady | None, sink: ProgramSink,
+                 parse_s: float = 0.0) -> PlanResult:
+    """Plan chunk by chunk into ``sink``, then finish the whole program: reach, cold extrusion, cycle time."""
+    t0, parse_before = time.perf_counter(), parse_s     # parse_before: a whole toolpath's, parsed before
+    deferred: FabricError | None = None
+    try:
+        stated = chunks.material()
+    except FabricError as err:          # raised once the whole file is read: the parser's own errors come first
+        stated, deferred = Material(), err
+    material = resolve_material(stated, opt.filament_diameter_mm)    # the E -> volume factor, said aloud
     opt = dataclasses.replace(opt, filament_diameter_mm=material.filament_diameter_mm)
-    prog, n_print = _assemble(tp, cell, opt)
-    if progress is not None:
-        progress(0.05)
-    t1 = time.perf_counter()
-    status, rot = _solve(prog, cell, opt, _sub(progress, 0.05, 0.85))
-    ik_s = time.perf_counter() - t1
-    _joint_speeds(prog, cell, float(prog.meta["approach_speed_mm_s"]))
-    motion = prog.op <= MOVEL
-    motion[-1] = False                       # the home move is not an IK target
-    envelope = envelope_status(prog.xyz_mm, motion, cell.plate_size_mm)     # over the plate, not below it
-    report = Reachability.from_status(status, rot, motion, prog.gcode_line, envelope, opt.allow_off_plate)
-    prog.meta.update(print_rows=n_print, options=opt.to_dict(), **material.meta(), **(meta or {}))
+    mono = _Progress(progress)
+    if isinstance(chunks, ToolpathChunks):
+        chunks.progress = mono.sub(0.0, 0.85)
+    seed = _Seed(np.asarray(cell.home_q_rad, dtype=float))
+    reach, tot = _Reach(), _Totals()
+    ik_s = 0.0
+    wobj = np.asarray(cell.wobj_T() if opt.wobj_T is None else opt.wobj_T, dtype=float)
+    try:
+        it = iter(chunks)
+        first = True
+        while True:
+            t = time.perf_counter()
+            item = next(it, None)
+            parse_s += time.perf_counter() - t
+            if item is None:
+                break
+            tp, last = item
+            prog, asm = _assemble(tp, cell, opt, first, last)
+            t1 = time.perf_counter()
+            status, rot = _solve(prog, cell, opt, None, seed, last)
+            ik_s += time.perf_counter() - t1
+            _joint_speeds(prog, cell, asm.approach_speed_mm_s)
+            motion = prog.op <= MOVEL
+            if last:
+                motion[-1] = False               # the home move is not an IK target
+            envelope = envelope_status(prog.xyz_mm, motion, cell.plate_size_mm)     # over the plate, not below it
+            rep = Reachability.from_status(status, rot, motion, prog.gcode_line, envelope, opt.allow_off_plate)
+            reach.add(rep, motion, sink.n)
+            tot.add(prog, tp, asm, first)
+            sink.append({**prog.columns(), "status": rep.status, "rot_deg": rep.rot_deg})
+            del prog, tp, status, rot, rep, envelope, motion
+            first = False
+            mono(0.85 * chunks.fraction)
+        summary = chunks.summary
+        assert summary is not None                  # the chunks are through
+        if deferred is not None:
+            chunks.material(summary.n_lines)        # the error again, naming its line now that the lines are known
+            raise deferred
+        prog_meta: dict[str, Any] = {"source_lines": summary.n_lines, "slicer": chunks.slicer}
+        prog_meta.update(travel_lifts=tot.lifts, fan_events_dropped=tot.fan_events,
+                         approach_speed_mm_s=tot.approach_speed_mm_s, leading_travels_dropped=tot.leading_dropped)
+        prog_meta.update(print_rows=tot.print_rows, options=opt.to_dict(), **material.meta(), **meta)
+        prog, extra = sink.finish(wobj, prog_meta)
+    except BaseException:
+        if isinstance(sink, FileSink):
+            sink.discard()
+        raise
+    report = reach.report(extra["status"], extra["rot_deg"])
     report.cold = first_cold_extrusion(prog)     # the nozzle's set points against the material's minimum
+    prog.release_pages()
+    mono(0.85)
     if on_program is not None:               # the program is final: the estimate below only reads it
         on_program(prog, report)
     t2 = time.perf_counter()
     estimate = float("nan")
     slowed_rows = slowed_joint = t_end = None
     if report.reachable:
-        from fabric.motion.timing import StartState, time_program
+        from fabric.motion.timing import StartState, program_times
         start = StartState.at_joints(cell.robot, prog.wobj, np.asarray(cell.home_q_rad, dtype=float))
-        timeline = time_program(prog, cell.robot, 1.0, start_state=start)
-        estimate = float(timeline.total_s)
-        slowed_rows, slowed_joint = timeline.slowed_rows, timeline.slowed_joint
-        t_end = timeline.t_end_s
+        out = sink.column("t_end_s", "f8", len(prog)) if isinstance(sink, FileSink) else None
+        times = program_times(prog, cell.robot, 1.0, start, block_rows=TIMING_BLOCK_ROWS, out=out,
+                              progress=mono.sub(0.85, 1.0))
+        estimate, t_end = times.total_s, times.t_end_s
+        slowed_rows, slowed_joint = times.slowed_rows, times.slowed_joint
+        prog.release_pages()
     timing_s = time.perf_counter() - t2
-    if progress is not None:
-        progress(1.0)
-    step = np.zeros_like(prog.xyz_mm)
-    np.subtract(prog.xyz_mm[1:], prog.xyz_mm[:-1], out=step[1:])
-    d = np.sqrt(np.einsum("ij,ij->i", step, step))
-    del step
-    pm = (prog.section == PRINT) & (prog.op == MOVEL)
-    lin = prog.op == MOVEL
+    mono(1.0)
     stats = PlanStats(
-        moves=len(tp), rows=len(prog), targets=int((prog.op <= MOVEL).sum()), layers=tp.n_layers,
-        extruded_volume_mm3=float(np.dot(prog.flow_mm3_mm[lin], d[lin])), path_length_mm=float(d[pm].sum()),
-        print_length_mm=float(d[pm & (prog.flow_mm3_mm > 0)].sum()),
-        travel_lifts=int(prog.meta["travel_lifts"]), fan_events_dropped=int(prog.meta["fan_events_dropped"]),
-        gcode_lines=tp.n_lines, unknown_commands=dict(tp.unknown_commands), slicer=tp.slicer, material=material,
-        warnings=list(material.warnings),
-        parse_s=parse_s, ik_s=ik_s, timing_s=timing_s, total_s=parse_s + time.perf_counter() - t0)
-    return PlanResult(program=prog, report=report, estimate_s=estimate, stats=stats, toolpath=tp,
-                      slowed_rows=slowed_rows, slowed_joint=slowed_joint, t_end_s=t_end)
+        moves=tot.moves, rows=len(prog), targets=tot.targets, layers=summary.n_layers,
+        extruded_volume_mm3=tot.volume_mm3, path_length_mm=tot.path_mm, print_length_mm=tot.print_mm,
+        travel_lifts=tot.lifts, fan_events_dropped=tot.fan_events, gcode_lines=summary.n_lines,
+        unknown_commands=dict(summary.unknown_commands), slicer=chunks.slicer, material=material,
+        warnings=list(material.warnings), parse_s=parse_s, ik_s=ik_s, timing_s=timing_s,
+        total_s=parse_before + time.perf_counter() - t0)
+    return PlanResult(program=prog, report=report, estimate_s=estimate, stats=stats,
+                      toolpath=chunks.toolpath, slowed_rows=slowed_rows, slowed_joint=slowed_joint, t_end_s=t_end)

@@ -17,21 +17,22 @@ class ExportChunkRequest:
     empty): that export starts as soon as the job's program is final, before its cycle time and its id
     are known (the CSV's ``t_s`` column waits for the times). Until then a chunk may come back empty and
     not ``done``: ask again at the same offset."""
-    fmt: str = f(choices=EXPORT_FORMATS)
-    program_id: str = f(default="", max_len=128)
-    job_id: str = f(default="", max_len=64)
-    offset: int = f(default=0, ge=0)
-    limit_bytes: int = f(default=4 << 20, ge=4096, le=MAX_CHUNK_BYTES)
-    module_targets: int = f(default=5000, ge=10, le=1_000_000)
+    fmt: str = f(choices=EXPORT_FORMATS)        # rapid (ABB), krl (KUKA), urscript (Universal Robots) or csv
+    program_id: str = f(default="", max_len=128)    # the planned program (an artifact id of the planner)
+    job_id: str = f(default="", max_len=64)     # or the plan job whose program to export (``program_id`` empty)
+    offset: int = f(default=0, ge=0)            # byte offset of this chunk in the export
+    limit_bytes: int = f(default=4 << 20, ge=4096, le=MAX_CHUNK_BYTES)  # the most bytes this chunk carries
+    module_targets: int = f(default=5000, ge=10, le=1_000_000)  # targets per module (robot languages split a
+                                                                # long program into modules of this size)
 
 
 @schema("planner.ExportChunk")
 class ExportChunk:
     """Bytes ``[offset, offset + len(data))`` of the export; ``done`` with the last of them."""
-    program_id: str
-    fmt: str
-    offset: int
-    data: bytes
-    done: bool
+    program_id: str                 # the program exported
+    fmt: str                        # the format, as asked
+    offset: int                     # where ``data`` starts in the export
+    data: bytes                     # the next bytes (may be empty and not ``done``: ask again at the same offset)
+    done: bool                      # true with the last bytes of the export
     name: str = ""            # a file name for the export (``<program>.<suffix>``)
-    media_type: str = ""
+    media_type: str = ""      # the export's media type (e.g. ``text/csv``)

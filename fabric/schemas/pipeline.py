@@ -7,11 +7,13 @@ import numpy as np
 
 from fabric.schemas.base import f, schema
 from fabric.schemas.common import ErrorReply
-from fabric.wire.errors import COLD_EXTRUSION_REASONS, UNREACHABLE_REASONS
+from fabric.wire.errors import COLD_EXTRUSION_REASONS, UNREACHABLE_REASONS, ValidationError
 
 BACKENDS = ("builtin", "prusaslicer", "slic3r")
 EXPORT_FORMATS = ("rapid", "krl", "urscript", "csv")
 JOB_SOURCES = ("model", "gcode")
+GCODE_SUFFIXES = (".gcode", ".gco", ".g", ".nc")   # a file named so is G-code (JobSubmit source "" infers it)
+MODEL_SUFFIXES = (".stl", ".obj", ".3mf")          # a file named so is a model to slice
 PRINT_JOB_STATES = ("queued", "slicing", "planning", "checking", "loaded", "printing", "paused",
                     "finished", "stopped", "failed", "interrupted")
 FINAL_JOB_STATES = ("finished", "stopped", "failed")
@@ -25,32 +27,35 @@ MATERIAL_SOURCES = ("option", "gcode", "assumed")  # where a plan's filament dia
 @schema("slicer.SliceRequest", version=2)
 class SliceRequest:
     """Slice a model sent as bytes (so the slicer may run on another host), inline or uploaded in chunks."""
-    model: bytes
-    filename: str = f(max_len=255)
-    profile: str = "taz-pla-medium"
-    backend: str = f(default="builtin", choices=BACKENDS)
-    overrides: dict[str, str] = f(factory=dict)
-    center_xy_mm: list[float] | None = f(default=None, shape=(2,))
+    model: bytes                    # the model file's bytes (STL, OBJ or 3MF); empty when ``upload_id`` is given
+    filename: str = f(max_len=255)  # its file name: the suffix (.stl, .obj, .3mf) says the format
+    profile: str = "taz-pla-medium"     # the slicing profile (``slicer/backends`` lists them)
+    backend: str = f(default="builtin", choices=BACKENDS)   # the slicer that slices it
+    overrides: dict[str, str] = f(factory=dict)     # profile keys set for this slice, values as text
+    center_xy_mm: list[float] | None = f(default=None, shape=(2,))  # where the part's center goes, plate frame
+                                                                    # (nil: the plate's center)
     upload_id: str = f(default="", max_len=64)      # a model sent in chunks to slicer/upload (``model`` is empty)
 
 
 @schema("slicer.SliceResult")
 class SliceResult:
-    gcode_id: str
-    backend: str
-    layers: int
-    extruded_mm3: float
-    filament_mm: float
-    model_volume_mm3: float
-    faces: int
-    elapsed_s: float
-    warnings: list[str] = f(factory=list)
+    """What slicing produced: the G-code (an artifact at the slicer) and its numbers."""
+    gcode_id: str                   # the G-code's artifact id (``am/<cell>/slicer/artifact/<gcode_id>``)
+    backend: str                    # the slicer that sliced it
+    layers: int                     # layers in the G-code
+    extruded_mm3: float             # volume the G-code extrudes
+    filament_mm: float              # filament the G-code pushes
+    model_volume_mm3: float         # the model's own volume
+    faces: int                      # triangles of the model
+    elapsed_s: float                # wall-clock time slicing took
+    warnings: list[str] = f(factory=list)   # what the slicer warned about (may be empty)
 
 
 @schema("slicer.Backends")
 class Backends:
+    """The slicing back-ends and profiles this slicer service offers."""
     backends: dict[str, str]      # name -> version ("" when not installed)
-    profiles: list[str]
+    profiles: list[str]           # profile names to give as ``profile``
 
 
 # --- planner -----------------------------------------------------------------
@@ -61,26 +66,31 @@ class PlanRequest:
     slicer's artifact id (``gcode_id``).
 
     ``filament_diameter_mm`` overrides what the G-code states (None: as stated, else assumed and said so)."""
-    gcode: bytes = b""
-    gcode_id: str = ""
-    filename: str = "part.gcode"
-    offset_mm: list[float] = f(factory=lambda: [0.0, 0.0, 0.0], shape=(3,))
-    tilt_deg: list[float] = f(factory=lambda: [0.0, 0.0], shape=(2,))
-    speed_r: float = f(default=1.0, ge=0.05, le=4.0)
-    rot_step_deg: float = f(default=15.0, ge=0.5, le=90.0)
-    wobj_xyz_mm: list[float] | None = f(default=None, shape=(3,))     # work object override (e.g. after calibration)
-    wobj_rpy_deg: list[float] | None = f(default=None, shape=(3,))
-    filament_diameter_mm: float | None = f(default=None, ge=0.5, le=5.0)
+    gcode: bytes = b""              # the G-code itself (inline: up to 4 MB is usual; larger goes by upload)
+    gcode_id: str = ""              # or the slicer's G-code artifact id
+    filename: str = "part.gcode"    # a name for it (messages and the program's name)
+    offset_mm: list[float] = f(factory=lambda: [0.0, 0.0, 0.0], shape=(3,))   # where the G-code origin goes,
+                                    # plate frame: G-code point p becomes plate point p + offset_mm
+    tilt_deg: list[float] = f(factory=lambda: [0.0, 0.0], shape=(2,))  # nozzle axis tilt about the plate's x,
+                                    # then y axis (0, 0: vertical, pointing down)
+    speed_r: float = f(default=1.0, ge=0.05, le=4.0)    # factor on every G-code feed rate
+    rot_step_deg: float = f(default=15.0, ge=0.5, le=90.0)  # step of the search over the free rotation about
+                                    # the nozzle axis (kept clear of joint limits and singularities)
+    wobj_xyz_mm: list[float] | None = f(default=None, shape=(3,))     # work object override (e.g. after calibration):
+                                    # the plate frame's origin in the robot base frame (nil: the cell's)
+    wobj_rpy_deg: list[float] | None = f(default=None, shape=(3,))    # its roll, pitch, yaw (nil: the cell's)
+    filament_diameter_mm: float | None = f(default=None, ge=0.5, le=5.0)   # nil: as the G-code states, else
+                                    # 1.75 assumed (and said so in the summary's warnings)
     allow_off_plate: bool = False               # targets off the plate or below it: counted, not fatal
-    upload_id: str = f(default="", max_len=64)
+    upload_id: str = f(default="", max_len=64)  # or G-code sent in chunks to planner/upload
 
 
 @schema("planner.UnreachableTarget")
 class UnreachableTarget:
     """The first target the robot cannot reach: where (G-code line, program row) and why."""
-    gcode_line: int
-    reason: str = f(choices=UNREACHABLE_REASONS)
-    row: int = -1
+    gcode_line: int                 # the G-code line (1-based; -1: not from G-code)
+    reason: str = f(choices=UNREACHABLE_REASONS)    # why
+    row: int = -1                   # the program row
 
 
 @schema("planner.ColdExtrusion")
@@ -89,22 +99,22 @@ class ColdExtrusion:
     where (G-code line, program row), why, the nozzle's set point then (``nozzle_c``, set at
     ``set_line``, -1: never) and the temperature last waited for (``waited_c``, at ``wait_line``; None:
     nothing waited); ``message`` says it in a sentence (``fabric.motion.cold``)."""
-    gcode_line: int
-    reason: str = f(choices=COLD_EXTRUSION_REASONS)
-    row: int = -1
-    nozzle_c: float = 0.0
-    min_c: float = 0.0
-    set_line: int = -1
-    waited_c: float | None = None
-    wait_line: int = -1
-    message: str = ""
+    gcode_line: int                 # the G-code line of the move (1-based)
+    reason: str = f(choices=COLD_EXTRUSION_REASONS)     # why it would be cold
+    row: int = -1                   # the program row of the move
+    nozzle_c: float = 0.0           # the nozzle's set point then
+    min_c: float = 0.0              # the material's minimum extrusion temperature
+    set_line: int = -1              # the G-code line that set ``nozzle_c`` (-1: never set)
+    waited_c: float | None = None   # the temperature last waited for (nil: nothing waited)
+    wait_line: int = -1             # the G-code line of that wait (-1: none)
+    message: str = ""               # the finding in a sentence
 
 
 @schema("planner.SlowedMove")
 class SlowedMove:
     """The first linear move slowed down to keep a joint within its velocity limit."""
-    gcode_line: int
-    row: int
+    gcode_line: int             # the G-code line of the move (1-based)
+    row: int                    # its program row
     joint: int = f(ge=1)        # the limiting axis, 1-based (A1 = 1)
 
 
@@ -116,46 +126,58 @@ class PlanSummary:
     ``unreachable_by_reason`` counts targets by reason, "off the plate" and "below the plate" included.
     Not ``runnable``: a target is unreachable (``first_unreachable``) or a move would extrude below the
     material's minimum temperature (``cold_extrusion``)."""
-    program_id: str
-    targets: int
-    moves: int
-    layers: int
-    feasible_r: float
-    runnable: bool
-    estimate_s: float
-    extruded_mm3: float
-    path_mm: float
-    first_unreachable: UnreachableTarget | None = None
-    unreachable_by_reason: dict[str, int] = f(factory=dict)
-    elapsed_s: float = 0.0
+    program_id: str                            # the program's artifact id (``am/<cell>/planner/artifact/<id>``)
+    targets: int                               # motion rows of the program (joint and linear moves)
+    moves: int                                 # moves read from the G-code
+    layers: int                                # layers of the G-code
+    feasible_r: float                          # share of motion rows the robot can reach
+    runnable: bool                             # the station may run it (see above)
+    estimate_s: float                          # the program's duration at real time (simulated seconds)
+    extruded_mm3: float                        # volume the program deposits
+    path_mm: float                             # TCP path length of the print section's linear moves
+    first_unreachable: UnreachableTarget | None = None     # the first unreachable target (nil: none)
+    unreachable_by_reason: dict[str, int] = f(factory=dict)    # unreachable targets counted by reason
+    elapsed_s: float = 0.0                     # wall-clock time planning took
     slowed_targets: int = 0                    # linear moves slowed to respect a joint velocity limit
-    first_slowed: SlowedMove | None = None
-    filament_diameter_mm: float = f(default=1.75, ge=0.5, le=5.0)
-    material_source: str = f(default="assumed", choices=MATERIAL_SOURCES)
-    material: str = ""
-    density_g_cm3: float | None = None
-    min_extrude_temp_c: float | None = None
+    first_slowed: SlowedMove | None = None     # the first of them (nil: none)
+    filament_diameter_mm: float = f(default=1.75, ge=0.5, le=5.0)  # the diameter that turned E into volume
+    material_source: str = f(default="assumed", choices=MATERIAL_SOURCES)  # where that diameter came from
+    material: str = ""                         # the material's name as the G-code states it ("" when it does not)
+    density_g_cm3: float | None = None         # as the G-code states it (nil: not stated)
+    min_extrude_temp_c: float | None = None    # as the G-code states it (nil: not stated)
     mass_g: float | None = None                # extruded_mm3 times the density, when the density is known
-    warnings: list[str] = f(factory=list)
+    warnings: list[str] = f(factory=list)      # what the planner warns about (an assumed diameter, ...)
     allow_off_plate: bool = False              # targets off the plate or below it were allowed (still counted)
-    cold_extrusion: ColdExtrusion | None = None
+    cold_extrusion: ColdExtrusion | None = None    # the first move that would extrude cold (nil: none)
 
 
 @schema("planner.ProgramMsg")
 class ProgramMsg:
-    """A whole robot program: its columns as packed arrays (see fabric.motion.program).
+    """A whole robot program: its columns as packed arrays, one row per instruction (``fabric.motion.program``).
 
-    Stored as a planner artifact whose id is the sha256 of this message's bytes."""
-    columns: dict[str, np.ndarray]
-    wobj: np.ndarray = f(dtype="<f8", shape=(4, 4), factory=lambda: np.eye(4))
-    meta: dict[str, Any] = f(factory=dict)
+    Stored as a planner artifact (media type ``application/x-am-fabric-program+msgpack``) whose id is the
+    sha256 of this message's bytes. Every column has one row per instruction (n rows): ``op`` (u1:
+    0 MoveJ, 1 MoveL, 2 Wait, 3 SetTemp, 4 WaitTemp, 5 Retract), ``section`` (u1: 0 approach, 1 print,
+    2 return home), ``q_rad`` (f8, n x 6: joint targets), ``xyz_mm`` (f8, n x 3) and ``quat_wxyz`` (f8,
+    n x 4): the TCP target in the plate frame, ``speed_mm_s`` (f8: MoveL TCP speed), ``vel_r`` (f8: MoveJ
+    share of the joints' velocity limits), ``zone_mm`` (f8: blending zone, 0 = stop point),
+    ``flow_mm3_mm`` (f8: volume deposited per mm of path, 0 = extruder off), ``value`` (f8: Wait seconds,
+    SetTemp/WaitTemp Celsius, Retract filament mm, negative = retract), ``aux`` (i2: heater of
+    SetTemp/WaitTemp, 0 nozzle, 1 bed), ``gcode_line`` (i8: source line, -1 none) and ``layer`` (i4:
+    0-based, -1 outside the print). Non-motion rows repeat the previous row's joints and TCP."""
+    columns: dict[str, np.ndarray]     # column name -> packed array (see above)
+    wobj: np.ndarray = f(dtype="<f8", shape=(4, 4), factory=lambda: np.eye(4))    # the work object the joints
+                                       # were solved for: the plate frame in the robot base frame, 4x4, mm
+    meta: dict[str, Any] = f(factory=dict)     # free-form facts of the plan (options, material, source lines):
+                                               # informative, not part of the contract
 
 
 @schema("planner.ExportRequest")
 class ExportRequest:
-    program_id: str
-    fmt: str = f(choices=EXPORT_FORMATS)
-    module_targets: int = f(default=5000, ge=10, le=1_000_000)
+    """A planned program in a robot language or as CSV, whole in one reply (``export_chunk`` streams it)."""
+    program_id: str                 # the planned program (an artifact id of the planner)
+    fmt: str = f(choices=EXPORT_FORMATS)    # rapid (ABB), krl (KUKA), urscript (Universal Robots) or csv
+    module_targets: int = f(default=5000, ge=10, le=1_000_000)  # targets per module of the robot language
 
 
 # --- collision ---------------------------------------------------------------
@@ -163,32 +185,33 @@ class ExportRequest:
 @schema("collision.CheckRequest")
 class CollisionRequest:
     """Sweep a program (by id) or a single joint move (``q_from_deg`` -> ``q_to_deg``)."""
-    program_id: str = ""
-    q_from_deg: list[float] | None = None
-    q_to_deg: list[float] | None = None
-    step_deg: float = f(default=2.0, ge=0.1, le=30.0)
-    include_part: bool = True
+    program_id: str = ""                # the planner's program to sweep ("" for a single move)
+    q_from_deg: list[float] | None = None   # a single move's start joints
+    q_to_deg: list[float] | None = None     # and its end joints
+    step_deg: float = f(default=2.0, ge=0.1, le=30.0)   # the largest joint step between checked configurations
+    include_part: bool = True           # the part printed so far is an obstacle too
 
 
 @schema("collision.Hit")
 class CollisionHit:
     """The first colliding configuration of a sweep: when, where, and which two bodies touch."""
-    body_a: str
-    body_b: str
-    t_s: float = -1.0                          # from the program start (-1: not timed, e.g. a single move)
+    body_a: str                                # one body (a robot link, the tool, the table, the plate, the part)
+    body_b: str                                # the other
+    t_s: float = -1.0                          # program time from its start, simulated (-1: not timed, e.g. a move)
     row: int = -1                              # program row (-1 for a single joint move)
-    gcode_line: int = -1
-    layer: int = -1
+    gcode_line: int = -1                       # the G-code line of that row (-1: none)
+    layer: int = -1                            # the layer of that row (0-based; -1: none)
     move_r: float = f(default=0.0, ge=0.0, le=1.0)     # where along a single joint move (0 = start, 1 = end)
 
 
 @schema("collision.Report", version=2)
 class CollisionReport:
-    collision_free: bool
-    checked_configs: int
-    min_distance_mm: float
-    first_hit: CollisionHit | None = None
-    elapsed_s: float = 0.0
+    """The verdict of a sweep: collision free or the first hit, and the smallest clearance seen."""
+    collision_free: bool               # no configuration collides
+    checked_configs: int               # configurations checked
+    min_distance_mm: float             # the smallest clearance seen between bodies that may not touch
+    first_hit: CollisionHit | None = None  # the first colliding configuration (nil: none)
+    elapsed_s: float = 0.0             # wall-clock time the sweep took
 
 
 # --- supervisor ---------------------------------------------------------------
@@ -196,78 +219,142 @@ class CollisionReport:
 @schema("supervisor.ServiceInfo", version=2)
 class ServiceInfo:
     """One service of the cell: alive (its liveliness token), since when, and its own health."""
-    name: str
-    alive: bool
-    since_s: float = 0.0
+    name: str                                             # the service
+    alive: bool                                           # it holds its liveliness token
+    since_s: float = 0.0                                  # alive since (wall clock, epoch seconds; 0: not alive)
     health: str = f(default="", choices=("", "ok", "degraded"))   # "": not known (not alive, or did not answer)
     reasons: list[str] = f(factory=list)                  # why it is degraded (see common.Health)
 
 
-@schema("supervisor.JobRecord", version=3)
+SEGMENT_BEGINNINGS = ("start", "restart", "recover")    # from the beginning, at a layer, after an interruption
+SEGMENT_ENDS = ("", "finished", "stopped", "failed", "interrupted")   # "": it is running
+
+
+@schema("supervisor.JobSegment")
+class JobSegment:
+    """One run of a job's program on the station, from how it began (``start`` from the beginning,
+    ``restart`` at a layer after a stop or a finished print, ``recover`` after an interruption) to how it
+    ended ("" while it runs). Wall-clock times; ``sim_s`` on the station's clock (pauses included);
+    ``deposited_mm3`` what this run deposited."""
+    began: str = f(default="start", choices=SEGMENT_BEGINNINGS)
+    from_layer: int = 0                         # the layer it began at (0-based)
+    started_s: float = 0.0                      # it began (wall clock)
+    ended_s: float = 0.0                        # it ended (wall clock; 0 while it runs)
+    ended: str = f(default="", choices=SEGMENT_ENDS)
+    reason: str = ""                            # why it ended so (a stop, a fault, an interruption)
+    t_sim_start_s: float = 0.0                  # the station's clock when it began
+    sim_s: float = 0.0                          # simulated time it has run
+    deposited_mm3: float = 0.0                  # volume it deposited
+    pauses: int = 0                             # times it was paused
+    last_layer: int = -1                        # the last layer it began (0-based)
+
+
+@schema("supervisor.JobOverride")
+class JobOverride:
+    """A live override the operator set while the job was on the station: when, at which layer, what."""
+    wall_s: float                               # when (wall clock)
+    t_sim_s: float = 0.0                        # when (the station's clock)
+    layer: int = -1                             # the layer being printed then (0-based)
+    speed_r: float | None = None                # the values it set (nil: not changed)
+    flow_r: float | None = None
+    nozzle_c: float | None = None
+    bed_c: float | None = None
+
+
+@schema("supervisor.JobRecord", version=4)
 class JobRecord:
     """One print job: what was submitted, where it is, what each stage produced, and how it ended.
 
     ``state`` goes queued -> slicing -> planning -> checking -> (queued, prepared) -> loaded ->
     printing <-> paused -> finished | stopped | failed | interrupted (see PRINT_JOB_STATES).
-    Times ending in ``_s`` without "elapsed" are wall-clock epoch seconds (0 = not yet)."""
-    job_id: str
-    filename: str
+    Times ending in ``_s`` without "elapsed" are wall-clock epoch seconds (0 = not yet).
+    ``segments`` are the runs of its print (a stop and a restart at a layer, an interruption and its
+    recovery: each a segment); ``started_s`` is the first one's start, the durations and the material are
+    their totals. ``live_overrides`` are the speed, flow and temperature overrides set while it printed
+    (they end with the job). Version 4: ``segments`` and ``live_overrides``."""
+    job_id: str                                 # the job's id (12 hex digits)
+    filename: str                               # the submitted file's name
     source: str = f(default="model", choices=JOB_SOURCES)      # a model to slice, or G-code to plan as it is
-    profile: str = ""
-    backend: str = ""
+    profile: str = ""                           # the slicing profile (a model)
+    backend: str = ""                           # the slicer (a model)
     model_id: str = ""                          # the submitted file (an artifact at the supervisor)
     overrides: dict[str, str] = f(factory=dict)  # slicing profile overrides
-    start: bool = False                         # start printing once loaded
-    rtf: float = f(default=1.0, ge=0.0, le=1e6)
-    state: str = f(default="queued", choices=PRINT_JOB_STATES)
+    start: bool = False                         # start printing once loaded (as submitted; job next keeps it)
+    rtf: float = f(default=1.0, ge=0.0, le=1e6)     # the real-time factor it is started with
+    state: str = f(default="queued", choices=PRINT_JOB_STATES)     # see "Print jobs" in docs/protocol.md
     prepared: bool = False                      # sliced, planned and checked: can be loaded
     waiting_for: str = f(default="", choices=WAITING_FOR)   # why a prepared job is not loaded yet ("": it will be)
     reason: str = ""                            # why it is in its state (a failure, an interruption, a stop)
     stage: str = ""                             # what it is doing now, in words
-    progress_r: float = f(default=0.0, ge=0.0, le=1.0)
+    progress_r: float = f(default=0.0, ge=0.0, le=1.0)     # share of the stage (preparing) or of the print done
     layer: int = -1                             # the last layer begun (0-based), while printing
-    created_s: float = 0.0
-    updated_s: float = 0.0
-    started_s: float = 0.0                      # the print began
-    ended_s: float = 0.0                        # the print ended (finished, stopped, failed)
+    created_s: float = 0.0                      # submitted (wall clock, epoch seconds)
+    updated_s: float = 0.0                      # the record last changed (wall clock, epoch seconds)
+    started_s: float = 0.0                      # the print began (wall clock, epoch seconds; 0: not yet)
+    ended_s: float = 0.0                        # the print ended: finished, stopped, failed (wall clock, epoch
+                                                # seconds; 0: not yet)
     sim_elapsed_s: float = 0.0                  # simulated duration of the print so far
     wall_elapsed_s: float = 0.0                 # wall-clock duration of the print so far
     filament_mm: float = 0.0                    # filament pushed by the print
     deposited_mm3: float = 0.0                  # volume deposited by the print
     gcode_id: str = ""                          # the slicer's G-code artifact, once sliced
     program_id: str = ""                        # the planner's program artifact, once planned
-    plan: PlanSummary | None = None
-    collisions: CollisionReport | None = None
+    plan: PlanSummary | None = None             # the plan's summary, once planned
+    collisions: CollisionReport | None = None   # the collision check's report, once checked
     error: ErrorReply | None = None             # the typed error of a failed job
+    segments: list[JobSegment] = f(factory=list)        # every run of the print, in order
+    live_overrides: list[JobOverride] = f(factory=list)  # overrides set while it was on the station
 
 
 @schema("supervisor.JobMove")
 class JobMove:
     """Put a waiting job at ``position`` of the queue (0 = next)."""
-    job_id: str = f(max_len=128)
-    position: int = f(default=0, ge=0, le=100000)
+    job_id: str = f(max_len=128)                # the job to move (one still waiting: queued or preparing)
+    position: int = f(default=0, ge=0, le=100000)   # its place among the waiting jobs (0 = next)
 
 
 @schema("supervisor.Status", version=2)
 class FabricStatus:
-    cell: str
-    services: list[ServiceInfo]
-    job: JobRecord | None = None                # the latest job
+    """The cell at a glance: every service (alive, healthy) and the current job."""
+    cell: str                                   # the cell's name
+    services: list[ServiceInfo]                 # every service of the cell, alive or not
+    job: JobRecord | None = None                # the job on the station, else the latest job (nil: none)
     job_error: str = ""                         # why the latest job could not be read (then ``job`` is nil)
 
 
-@schema("supervisor.JobSubmit", version=2)
+@schema("supervisor.JobSubmit", version=3)
 class JobSubmit:
     """STL/OBJ/3MF bytes -> slice -> plan -> collision check -> load (-> start); or G-code bytes
-    (``source`` "gcode") -> plan -> check -> load (-> start)."""
-    model: bytes
-    filename: str = f(max_len=255)
-    source: str = f(default="model", choices=JOB_SOURCES)
-    profile: str = "taz-pla-medium"
-    backend: str = f(default="builtin", choices=BACKENDS)
-    overrides: dict[str, str] = f(factory=dict)
-    start: bool = False
-    rtf: float = f(default=0.0, ge=0.0, le=1e6)
+    (``source`` "gcode") -> plan -> check -> load (-> start).
+
+    ``source`` empty (the default) is taken from ``filename``: .gcode, .gco, .g and .nc are G-code; .stl,
+    .obj and .3mf a model; any other name is a ``validation`` error naming ``source``. The print runs at
+    real time (``rtf`` 1) unless asked otherwise, as ``fabric-cli job submit`` does. Version 3: ``source``
+    defaults to "" (inferred) and ``rtf`` to 1 (it was "model" and 0, as fast as possible)."""
+    model: bytes                                # the file's bytes (a model, or G-code)
+    filename: str = f(max_len=255)              # its name (its suffix gives ``source`` when that is empty)
+    source: str = f(default="", choices=("", *JOB_SOURCES))    # model, gcode, or "": from the file name
+    profile: str = "taz-pla-medium"             # the slicing profile (a model)
+    backend: str = f(default="builtin", choices=BACKENDS)      # the slicer (a model)
+    overrides: dict[str, str] = f(factory=dict)     # slicing profile keys set for this job, values as text
+    start: bool = False                         # start printing as soon as it is loaded (else: fabric-cli start)
+    rtf: float = f(default=1.0, ge=0.0, le=1e6)     # real-time factor of the print: 1 = real time, 0 = as fast
+                                                # as possible
+
+
+def source_of(filename: str, source: str = "") -> str:
+    """A submitted file's source: ``source`` when given, else what the file name says (``GCODE_SUFFIXES``:
+    gcode, ``MODEL_SUFFIXES``: model); a name that says neither is a ValidationError naming ``source``."""
+    if source:
+        return source
+    suffix = "." + filename.rsplit(".", 1)[-1].lower() if "." in filename else ""
+    if suffix in GCODE_SUFFIXES:
+        return "gcode"
+    if suffix in MODEL_SUFFIXES:
+        return "model"
+    raise ValidationError(f"cannot tell from the file name {filename!r} whether it is a model or G-code: name it "
+                          f"{', '.join(MODEL_SUFFIXES)} or {', '.join(GCODE_SUFFIXES)}, or give source "
+                          f"({' or '.join(JOB_SOURCES)})", field="source", filename=filename)
 
 
 MAX_JOBS_PAGE = 10_000              # the most records one supervisor/jobs reply carries
@@ -278,14 +365,14 @@ class JobsQuery:
     """A page of the print jobs in queue order (``common.Empty``, what older clients send, is the first page).
 
     ``limit`` jobs from the ``offset``-th (0-based), of ``states`` only when given."""
-    offset: int = f(default=0, ge=0, le=1_000_000_000)
-    limit: int = f(default=100, ge=0, le=MAX_JOBS_PAGE)
-    states: list[str] = f(factory=list, choices=PRINT_JOB_STATES)
+    offset: int = f(default=0, ge=0, le=1_000_000_000)      # skip this many matching jobs
+    limit: int = f(default=100, ge=0, le=MAX_JOBS_PAGE)     # the most jobs in the reply
+    states: list[str] = f(factory=list, choices=PRINT_JOB_STATES)  # only jobs in these states (empty: all)
 
 
 @schema("supervisor.JobList", version=4)
 class JobList:
     """Print job records in queue order: a page of them (``supervisor/jobs``), or all (``job_move``)."""
-    jobs: list[JobRecord]
+    jobs: list[JobRecord]                      # the records in queue order: as submitted, as reordered by job_move
     total: int = f(default=-1, ge=-1)          # jobs matching the query in all; -1: ``jobs`` holds every one
     offset: int = f(default=0, ge=0)           # the place of ``jobs[0]`` among them

@@ -25,15 +25,16 @@ class UploadChunk:
     """Bytes ``[offset, offset + len(data))`` of an input of ``total_bytes``; offset 0 starts (or restarts)
     the upload, every next offset is where the last piece ended. The last piece carries ``sha256`` of the
     whole input, which the service checks before the upload can be used."""
-    upload_id: str = f(max_len=64)
-    offset: int = f(ge=0)
-    total_bytes: int = f(ge=0)
-    data: bytes = b""
-    sha256: str = f(default="", max_len=64)
+    upload_id: str = f(max_len=64)  # the sender's name for the upload, 8 to 64 of ``A-Za-z0-9_-``
+    offset: int = f(ge=0)           # where ``data`` goes in the input (0 starts the upload)
+    total_bytes: int = f(ge=0)      # the whole input's size, the same in every piece
+    data: bytes = b""               # at most 8 MB (``UPLOAD_CHUNK_MAX_BYTES``); the client sends 4 MB pieces
+    sha256: str = f(default="", max_len=64)     # on the last piece only: sha256 of the whole input (hex)
 
 
 @schema("upload.Status")
 class UploadStatus:
-    upload_id: str
-    received_bytes: int
-    done: bool = False
+    """How far an upload has got; name ``upload_id`` in the request (``upload_id`` field) once ``done``."""
+    upload_id: str                  # the upload's id, as sent
+    received_bytes: int             # bytes received so far (the next piece's ``offset``)
+    done: bool = False              # the whole input arrived and its sha256 matched: it can be used

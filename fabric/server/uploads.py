@@ -16,9 +16,9 @@ import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from fabric.schemas.upload import UPLOAD_CHUNK_MAX_BYTES, UPLOAD_ID_PATTERN, UploadChunk, UploadStatus
 from fabric.server.disk import require_room
 from fabric.wire.errors import BadRequest, NotFound, ValidationError
-from fabric.schemas.upload import UPLOAD_CHUNK_MAX_BYTES, UPLOAD_ID_PATTERN, UploadChunk, UploadStatus
 
 __all__ = ["UploadStore"]
 
@@ -29,7 +29,7 @@ _ID = re.compile(UPLOAD_ID_PATTERN)
 class _Partial:
     total_bytes: int
     received_bytes: int = 0
-    digest: "hashlib._Hash" = field(default_factory=hashlib.sha256)
+    digest: hashlib._Hash = field(default_factory=hashlib.sha256)
 
 
 class UploadStore:

@@ -110,7 +110,7 @@ def serve(name: str, settings: SessionSettings, options: argparse.Namespace,
             guard.code = code
             if code != 0:
                 guard.arm()                          # closing after a failed start is bounded too
-        _close(name, svc, session, log)
+        _close(name, svc, session, log, guard)
     if code == 0:
         log.info("%s stopped", name)
     return code
@@ -155,11 +155,13 @@ def _write_note(note: dict) -> None:
         pass                        # the launcher then says what the exit code means, without the file
 
 
-def _close(name: str, svc, session: zenoh.Session, log: logging.Logger) -> None:
+def _close(name: str, svc, session: zenoh.Session, log: logging.Logger, guard: _StopGuard | None) -> None:
     """Close the service and the session; an error while closing is one line, not a traceback."""
     for what, fn in (("the service", getattr(svc, "close", None)), ("the session", session.close)):
         if fn is None:
             continue
+        if guard is not None:
+            guard.step = f"closing {what}"
         try:
             fn()
         except Exception as exc:  # noqa: BLE001  (stopping goes on: logged in one line)
@@ -192,6 +194,7 @@ class _StopGuard:
                  deadline_s: float = STOP_DEADLINE_S) -> None:
         self.name, self.stop, self.log, self.deadline_s = name, stop, log, deadline_s
         self.code = 0                 # what the process exits with if the deadline ends it
+        self.step = "stopping"        # what it is doing (said if the deadline ends it)
         self._signals = 0
         self._armed = False
         self._lock = threading.Lock()
@@ -249,8 +252,8 @@ class _StopGuard:
 
         def at_deadline() -> None:
             time.sleep(max(0.0, end - time.monotonic()))
-            self.log.warning("%s did not finish closing within %g s (the fabric does not answer): exiting now",
-                             self.name, self.deadline_s)
+            self.log.warning("%s: still %s after %g s (the fabric does not answer): exiting now", self.name,
+                             self.step, self.deadline_s)
             self._exit()
 
         threading.Thread(target=at_deadline, name=f"{self.name}:deadline", daemon=True).start()

@@ -5,8 +5,13 @@ is the sha256 of its encoded bytes, served at ``planner/artifact/<id>`` so
 that the station and the collision checker fetch it over the fabric (no
 shared filesystem between hosts).
 
-The last plan stays in memory (program and CSV times), so its export starts
-formatting at once, without reading the artifact back and decoding it. The
+The last plan stays at hand (program and CSV times), so its export starts
+formatting at once, without reading the artifact back and decoding it. A plan is
+written chunk by chunk to files under ``<data dir>/plans/<job id>/`` and mapped
+back (:mod:`fabric.motion.program_file`): the process holds a chunk of rows at a
+time, so a 500 MB G-code file plans in the memory of a small one, and walking
+the program (cycle time, artifact, exports) gives its pages back as it goes. A
+plan's files are removed when the next plan starts (or the service stops). The
 artifact is written to the durable store by a background thread once its id
 is known (the job ends with that id); until it is on disk it is served from
 memory, and closing the service waits for the writes still under way. That thread runs at a
@@ -16,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import shutil
 import threading
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -60,7 +66,7 @@ __all__ = ["PlannerService", "build", "add_arguments"]
 
 MEDIA = {"rapid": "text/x-rapid", "krl": "text/x-krl", "urscript": "text/x-urscript", "csv": "text/csv"}
 SUFFIX = {"rapid": "mod", "krl": "src", "urscript": "script", "csv": "csv"}
-KEEP_PLANS = 1              # plans kept in memory for their exports (a million-row program is ~160 MB)
+KEEP_PLANS = 1              # plans kept at hand for their exports (mapped from files: see the module doc)
 MAX_EXPORT_STREAMS = 4      # streamed exports open at once (a reader that went away is dropped by the next)
 KEEP_HANDOFFS = 8           # plan jobs whose exports can still be asked for by job id
 JOB_EXPORT_POLL_S = 30.0    # an export by job id answers an empty chunk after this long without bytes
@@ -97,11 +103,27 @@ class PlannerService(Service):
         self.handoffs: dict[str, PlanHandoff] = {}                    # job id -> what the plan job has so far
         self._handoffs_lock = threading.Lock()
         self._storer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner-store")
+        self.plans_dir = self.data_dir / "plans"            # each plan's program files (see the module doc)
+        shutil.rmtree(self.plans_dir, ignore_errors=True)   # a planner that died left its last plan's
 
     def close(self) -> None:
         self.jobs.close()
         self._storer.shutdown(wait=True)
         super().close()
+        shutil.rmtree(self.plans_dir, ignore_errors=True)
+
+    def _forget_plans(self, keep: str) -> None:
+        """A new plan starts: the plans before it are forgotten (exports under way keep what they hold; an
+        export asked for later reads the artifact back) and their files removed."""
+        self.recent.clear()
+        with self._handoffs_lock:
+            for k, h in self.handoffs.items():
+                if k != keep and h.ended:
+                    h.release()
+        if self.plans_dir.exists():
+            for d in self.plans_dir.iterdir():
+                if d.name != keep:
+                    shutil.rmtree(d, ignore_errors=True)
 
     def _store_program(self, program: Program, name: str) -> str:
         """Write the program to the durable store as an artifact (its id is the hash of its encoding,
@@ -162,8 +184,9 @@ class PlannerService(Service):
             handoff.program_ready(program, _first_unreachable(report), _cold_extrusion(report))
             storing.append(self._storer.submit(self._store_program, program, name))
 
+        self._forget_plans(keep=job.job_id)
         result = plan_gcode(data, self.cell, options, progress=lambda fr: job.progress(fr, "planning"),
-                            filename=req.filename, on_program=program_ready)
+                            filename=req.filename, on_program=program_ready, program_dir=self.plans_dir / job.job_id)
         program = result.program
         handoff.times_ready(result.t_end_s)
         # the job ends (its result is acknowledged) only once the program is on disk: a planner killed

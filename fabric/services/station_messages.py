@@ -13,6 +13,7 @@ import time
 import numpy as np
 
 from fabric import schemas as s
+from fabric.motion.program import MOVEL
 from fabric.robot.frames import T_to_xyzrpy
 from fabric.services.telemetry_gate import EXTRUSION_PERIOD_S, TEMPS_PERIOD_S, ChangeOrPeriod
 from fabric.sim.twin import Twin
@@ -21,7 +22,8 @@ from fabric.store.journal import StationMeta
 
 __all__ = ["StationMessages", "JOB_EVENTS"]
 
-JOB_EVENTS = ("started", "layer", "paused", "resumed", "recovered", "finished", "stopped", "fault", "interrupted")
+JOB_EVENTS = ("started", "layer", "paused", "resumed", "recovered", "finished", "stopped", "fault", "interrupted",
+              "override")
 
 
 class StationMessages:
@@ -33,6 +35,7 @@ class StationMessages:
         self.seq_extrusion = 0
         self._extrusion_gate = ChangeOrPeriod(EXTRUSION_PERIOD_S)
         self._temps_gate = ChangeOrPeriod(TEMPS_PERIOD_S)
+        self._planned: tuple[int, np.ndarray] | None = None     # (program, its planned volume up to each row)
 
     def event(self, ev) -> s.Event:
         """The wire event; a job's events name the job and its simulated time so far."""
@@ -73,11 +76,21 @@ class StationMessages:
                        bed_target_c=float(t.bed_target_c), t_sim_s=self.twin.t_sim_s)
 
     def progress_r(self, ext: ExtrusionState) -> float:
-        """Share of the planned volume deposited (1 once the print has finished)."""
+        """Where the print is in its program: the share of the planned volume in the rows before the one
+        running (1 once the print has finished). Not the volume deposited, which a flow override above 1
+        brings to the planned total layers before the end."""
         if self.twin.state == "idle" and self.twin.reason == "finished":
             return 1.0
-        planned = self.meta.planned_mm3
-        return min(ext.extruded_mm3 / planned, 1.0) if planned > 0 else 0.0
+        program = self.twin.program
+        if program is None or len(program) == 0:
+            return 0.0
+        if self._planned is None or self._planned[0] != id(program):
+            self._planned = (id(program), np.cumsum(program.flow_mm3_mm * program.path_length_mm()
+                                                    * (program.op == MOVEL)))
+        cum = self._planned[1]
+        row = min(max(int(ext.row), 0), len(cum) - 1)
+        done = float(cum[row - 1]) if row > 0 else 0.0
+        return min(done / float(cum[-1]), 1.0) if cum[-1] > 0 else 0.0
 
     def state_key(self, ext: ExtrusionState) -> tuple:
         """What a published state says that matters to a watcher (a change is published at once);

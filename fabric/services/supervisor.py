@@ -41,6 +41,7 @@ from fabric.printjobs.follower import EventFollower
 from fabric.printjobs.prepare import PrepareCancelled, Preparer
 from fabric.printjobs.queue import PREPARER_FIELDS, STATION_FREE, WAITING_STATES, WAITING_TEXT, next_to_load
 from fabric.programs import content_id
+from fabric.schemas.pipeline import source_of
 from fabric.server.disk import require_room
 from fabric.server.service import Service
 from fabric.server.writer import Writer
@@ -168,16 +169,19 @@ class SupervisorService(Service):
         return s.FabricStatus(cell=self.keys.cell, services=infos, job=current)
 
     def on_submit(self, req: s.JobSubmit) -> s.JobAccepted:
+        """Queue a print job. ``source`` not given is taken from the file name (``s.pipeline.source_of``), here
+        at the boundary, so a client that sends a ``.gcode`` without it is understood (or refused at once)."""
         if not req.model:
             raise ValidationError("the submitted file is empty", field="model")
+        source = source_of(req.filename, req.source)
         require_room(self.data_dir, len(req.model), self.name, "the submitted file")
-        art = s.Artifact(artifact_id=content_id(req.model), name=req.filename, media_type=MODEL_MEDIA[req.source],
+        art = s.Artifact(artifact_id=content_id(req.model), name=req.filename, media_type=MODEL_MEDIA[source],
                          data=req.model)
         job_id = uuid.uuid4().hex[:12]
         self.artifacts.put(art)                       # the file on disk (content-addressed) before the record
         self.artifacts.pin(art.artifact_id, job_id)
         now = time.time()
-        rec = s.JobRecord(job_id=job_id, filename=req.filename, source=req.source, profile=req.profile,
+        rec = s.JobRecord(job_id=job_id, filename=req.filename, source=source, profile=req.profile,
                           backend=req.backend, model_id=art.artifact_id, overrides=dict(req.overrides),
                           start=req.start, rtf=req.rtf, state="queued", stage="queued", created_s=now,
                           updated_s=now)
@@ -186,7 +190,7 @@ class SupervisorService(Service):
             self.store.add(rec)
             self.pub_jobs.send(rec)
         self._step(step)
-        self.log.info("job %s queued: %s (%s)", job_id, req.filename, req.source)
+        self.log.info("job %s queued: %s (%s)", job_id, req.filename, source)
         self.wake.set()
         return s.JobAccepted(job_id=job_id, kind="print")
 
@@ -218,8 +222,9 @@ class SupervisorService(Service):
 
     def on_job_next(self, _: s.Empty) -> s.Ack:
         """The operator confirms the plate is clear: the station is told (it owns the part on the plate and
-        refuses while a print is on), then the next prepared job is loaded and started (or the next one
-        submitted, if none waits)."""
+        refuses while a print is on), then the next prepared job is loaded, and started only if it was
+        submitted with ``start`` (its record is not changed: a job loaded without it waits for the operator's
+        ``start``, as the submitter asked)."""
         self.client.clear_plate()
 
         def step() -> s.JobRecord | None:
@@ -229,19 +234,15 @@ class SupervisorService(Service):
                                  command="job next")
             self.store.set_plate_clear(True)
             waiting = self._waiting()
-            if not waiting:
-                return None
-            head = waiting[0]
-            head.start = True
-            self._save(head)
-            return head
+            return waiting[0] if waiting else None
         head = self._step(step)
         if head is None:
             return s.Ack(ok=True, message="plate marked clear; no job is waiting: the next one submitted "
-                                          "with --start starts at once", state="")
+                                          "is loaded once prepared", state="")
+        then = "started" if head.start else "loaded (start it with fabric-cli start)"
         if not head.prepared:
             self.wake.set()
-            return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} starts once prepared "
+            return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} is {then} once prepared "
                                           f"({head.state})", state=head.state)
         self._load_next()
         try:
@@ -249,7 +250,8 @@ class SupervisorService(Service):
         except NotFound:                                  # removed meanwhile by another operator
             return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} was removed meanwhile",
                          state="")
-        return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} ({head.filename}) {head.state}",
+        hint = "" if head.start or head.state != "loaded" else ": start it with fabric-cli start"
+        return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} ({head.filename}) {head.state}{hint}",
                      state=head.state)
 
     # --- preparing and loading ------------------------------------------------------

@@ -144,13 +144,16 @@ def spec_from_dict(d: dict[str, Any]) -> LegSpec:
 
 def thermal_to_dict(th: Thermal) -> dict[str, Any]:
     """Heater parameters and anchored states as plain values."""
-    return {"params": [[p.tau_s, p.tol_c, p.ambient_c, p.max_c] for p in th.params],
+    return {"params": [[p.power_w, p.capacity_j_k, p.resistance_k_w, p.tol_c, p.ambient_c, p.max_c]
+                       for p in th.params],
             "states": [[st.t_s, st.temp_c, st.target_c] for st in th.states]}
 
 
 def thermal_from_dict(d: dict[str, Any]) -> Thermal:
-    """The inverse of :func:`thermal_to_dict` (exact: the closed forms re-anchor nowhere)."""
-    params = tuple(HeaterParams(*(float(v) for v in p)) for p in d["params"])
+    """The inverse of :func:`thermal_to_dict` (exact: the closed forms re-anchor nowhere). Parameters saved
+    by the first-order model before (four values: tau, tol, ambient, max) become today's heaters."""
+    params = tuple(HeaterParams(*(float(v) for v in p)) if len(p) == 6 else default
+                   for p, default in zip(d["params"], Thermal().params, strict=True))
     states = [HeaterState(*(float(v) for v in st)) for st in d["states"]]
     return Thermal(params, states)     # type: ignore[arg-type]
 

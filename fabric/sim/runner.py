@@ -57,6 +57,7 @@ class LegRunner:
         self.builder = builder
         self.tripped: Interlock | None = None
         self._min_c: tuple[int, float | None] | None = None
+        self._layer_z: tuple[int, dict[int, float]] | None = None
 
     # Queue ---------------------------------------------------------------------------
 
@@ -106,6 +107,18 @@ class LegRunner:
             self._min_c = (id(p), min_extrude_c(p))      # the planner's check uses the same rule
         return self._min_c[1]
 
+    def layer_z_mm(self, layer: int, fallback_mm: float) -> float:
+        """The Z a layer is printed at: that of its first extruding move (its first row is often the travel
+        from the layer below, or the approach from above); ``fallback_mm`` for a layer that extrudes nothing."""
+        p = self.state.program
+        if p is None:
+            return fallback_mm
+        if self._layer_z is None or self._layer_z[0] != id(p):
+            rows = np.flatnonzero((p.op == MOVEL) & (p.flow_mm3_mm > 0) & (p.layer >= 0))
+            layers, first = np.unique(p.layer[rows], return_index=True)
+            self._layer_z = (id(p), dict(zip(layers.tolist(), p.xyz_mm[rows[first], 2].tolist(), strict=True)))
+        return float(self._layer_z[1].get(layer, fallback_mm))
+
     def _too_cold(self, leg: Leg, j: int) -> bool:
         min_c = self.min_extrude_c()
         if min_c is None:
@@ -124,7 +137,7 @@ class LegRunner:
             job.row = r
         if leg.main and p.layer[r] >= 0 and p.layer[r] != job.layer:
             job.layer = int(p.layer[r])
-            self.emit(events, t, "layer", {"z_mm": float(p.xyz_mm[r, 2])})
+            self.emit(events, t, "layer", {"z_mm": self.layer_z_mm(job.layer, float(p.xyz_mm[r, 2]))})
         if leg.ext[j] >= 0:             # the extruder's state travels on the extrusion stream, not as events
             job.extruder_on = bool(leg.ext[j])
         if p.op[r] == SET_TEMP:
@@ -200,6 +213,12 @@ class LegRunner:
             self.emit(events, t, kind, self._totals(t))
         elif kind in ("resumed", "recovered", "at_layer"):
             job.resume_at = None
+            if st.state == "printing" and kind != "at_layer":     # the move back is over: say so, not "-ing"
+                st.reason = kind
+            self.emit(events, t, kind)
+        elif kind == "home":
+            if st.state not in ("printing", "paused"):
+                st.reason = "at home"
             self.emit(events, t, kind)
         elif kind == "paused":          # why: the operator, or the cold-extrusion interlock (its reason)
             at = job.resume_at

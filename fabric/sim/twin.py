@@ -203,6 +203,7 @@ class Twin:
             raise
         st.estimate_s = estimate
         self._new_job(program)
+        st.speed_r = st.flow_r = 1.0       # speed and flow overrides belong to a job: the next one starts at 1
         st.t_started_s = st.t_ended_s = None
         st.state, st.reason = "ready", f"loaded {len(program)} rows"
         return TimeInfo(0.0, estimate, estimate, estimate)
@@ -235,7 +236,8 @@ class Twin:
             reason = f"restarted at layer {from_layer + 1}" if from_layer is not None else "restarted"
         st.t_started_s, st.t_ended_s = st.t_sim_s, None
         st.state, st.reason = "printing", reason
-        data = {"rows": len(st.program), "estimate_s": st.estimate_s, "from_row": row}
+        data = {"rows": len(st.program), "estimate_s": st.estimate_s, "from_row": row,
+                "from_layer": from_layer if from_layer is not None else 0}
         self.runner.emit(st.pending, st.t_sim_s, "started", data)
 
     def layer_move(self, from_layer: int) -> tuple[np.ndarray, np.ndarray]:
@@ -256,7 +258,7 @@ class Twin:
         nozzle is below the material's minimum extrusion temperature)."""
         self._refuse("resume", ("paused",))
         self._check_hot("resume")
-        self.s.state, self.s.reason = "printing", "resumed"
+        self.s.state, self.s.reason = "printing", "resuming"
         self._command(self.moves.resume)
 
     def stop(self) -> None:

@@ -79,7 +79,8 @@ _TABLE = [
     _ep("station", "events", s.EventsQuery, s.EventList, doc="event history since a sequence number"),
     _ep("station", "overrides", s.Overrides, s.StationState, doc="speed/flow/temperature overrides"),
     _ep("station", "rtf", s.StartRequest, s.StationState, doc="change the simulation's real-time factor live"),
-    _ep("station", "mesh", s.MeshRequest, s.Artifact, 60.0, "as-printed part as STL or GLB", bulk=True),
+    _ep("station", "mesh", s.MeshRequest, s.Artifact, 60.0, "as-printed part as STL or GLB, or its beads as CSV",
+        bulk=True),
     # slicer
     _ep("slicer", "slice", s.SliceRequest, s.JobAccepted, 10.0, "start slicing a model (a job)", bulk=True),
     _ep("slicer", "job", s.JobQuery, s.JobStatus, doc="a slicing job's status"),
@@ -110,7 +111,7 @@ _TABLE = [
     _ep("supervisor", "job_remove", s.JobQuery, s.Ack, doc="remove a job that is not on the station"),
     _ep("supervisor", "job_move", s.JobMove, s.JobList, doc="reorder the waiting queue"),
     _ep("supervisor", "job_next", s.Empty, s.Ack, 60.0,
-        "the plate is clear: load the next prepared job and start it"),
+        "the plate is clear: load the next prepared job, started if it was submitted with start"),
 ]
 # every service answers for its own health (served by the runtime, fabric.server.service)
 _TABLE += [_ep(svc, "health", s.Empty, s.Health, 2.0, "ok, or degraded with the reasons") for svc in SERVICES]

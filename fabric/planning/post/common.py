@@ -10,10 +10,11 @@ from fabric.motion.program import MOVEL, Program
 from fabric.robot.frames import R_from_quat
 from fabric.wire.errors import ValidationError
 
-__all__ = ["check_program", "row_blocks", "extrusion_rate", "quat_to_rotvec", "R_to_zyx_deg",
+__all__ = ["check_program", "row_blocks", "extrusion_rate", "max_extrusion_rate", "quat_to_rotvec", "R_to_zyx_deg",
            "quat_to_zyx_deg", "write_lines", "write_ascii"]
 
 BLOCK_ROWS = 20_000     # rows formatted per write: output streams, memory stays flat
+CHECK_ROWS = 1 << 18    # rows checked at once
 
 
 def check_program(program: Program) -> None:
@@ -22,18 +23,20 @@ def check_program(program: Program) -> None:
         raise ValidationError(f"expected a Program, got {type(program).__name__}", field="program")
     if len(program) == 0:
         raise ValidationError("the program has no rows", field="program")
-    motion = program.op <= MOVEL
-    for name in ("q_rad", "xyz_mm", "quat_wxyz"):
-        arr = getattr(program, name)
-        # a row's sum is finite when all its values are (a huge finite sum may overflow: checked exactly below)
-        suspect = ~np.isfinite(arr @ np.ones(arr.shape[1])) & motion
-        if not suspect.any():
-            continue
-        bad = np.flatnonzero(suspect & ~np.isfinite(arr).all(axis=1))
-        if len(bad):
-            row = int(bad[0])
-            raise ValidationError(f"row {row}: {name} is not finite", field=name, row=row,
-                                  gcode_line=int(program.gcode_line[row]))
+    for a, b in row_blocks(0, len(program), CHECK_ROWS):     # in blocks: a mapped program stays on disk
+        motion = program.op[a:b] <= MOVEL
+        for name in ("q_rad", "xyz_mm", "quat_wxyz"):
+            arr = getattr(program, name)[a:b]
+            # a row's sum is finite when all its values are (a huge finite sum may overflow: checked exactly below)
+            suspect = ~np.isfinite(arr @ np.ones(arr.shape[1])) & motion
+            if not suspect.any():
+                continue
+            bad = np.flatnonzero(suspect & ~np.isfinite(arr).all(axis=1))
+            if len(bad):
+                row = a + int(bad[0])
+                raise ValidationError(f"row {row}: {name} is not finite", field=name, row=row,
+                                      gcode_line=int(program.gcode_line[row]))
+        program.release_pages(a, b)
 
 
 def row_blocks(start: int, stop: int, size: int = BLOCK_ROWS) -> Iterator[tuple[int, int]]:
@@ -42,10 +45,21 @@ def row_blocks(start: int, stop: int, size: int = BLOCK_ROWS) -> Iterator[tuple[
         yield a, min(a + size, stop)
 
 
-def extrusion_rate(program: Program) -> np.ndarray:
-    """(N,) programmed volumetric rate in mm^3/s of every row (flow per mm x speed; 0 off)."""
-    rate = program.flow_mm3_mm * program.speed_mm_s
-    return np.where(program.op == MOVEL, rate, 0.0)
+def max_extrusion_rate(program: Program) -> float:
+    """The highest programmed volumetric rate (mm^3/s) of the program, at least 1e-9 (in blocks of rows)."""
+    top = 0.0
+    for a, b in row_blocks(0, len(program), CHECK_ROWS):
+        top = max(top, float(extrusion_rate(program, a, b).max(initial=0.0)))
+        program.release_pages(a, b)
+    return max(top, 1e-9)
+
+
+def extrusion_rate(program: Program, start: int = 0, stop: int | None = None) -> np.ndarray:
+    """Programmed volumetric rate in mm^3/s of rows ``[start, stop)`` (all by default; flow per mm x speed;
+    0 off)."""
+    sl = slice(start, stop)
+    rate = program.flow_mm3_mm[sl] * program.speed_mm_s[sl]
+    return np.where(program.op[sl] == MOVEL, rate, 0.0)
 
 
 def quat_to_rotvec(q_wxyz: np.ndarray) -> np.ndarray:

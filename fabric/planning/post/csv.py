@@ -32,6 +32,7 @@ def write_csv(program: Program, out: TextIO, t_end_s: np.ndarray | None = None) 
     for idx, text in ordered_map(lambda idx: (idx, csv_rows(program, idx, t_end_s)), (b for b in blocks if len(b))):
         write_ascii(out, text)        # blocks formatted ahead on a second core, written in order
         n += len(idx)
+        program.release_pages(0, int(idx[0]))      # a program mapped from files: the rows written go
     return n
 
 

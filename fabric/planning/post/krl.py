@@ -25,7 +25,7 @@ from fabric.motion.program import MOVEL, Program
 from fabric.planning.post.common import (
     R_to_zyx_deg,
     check_program,
-    extrusion_rate,
+    max_extrusion_rate,
     quat_to_zyx_deg,
     write_ascii,
     write_lines,
@@ -71,8 +71,7 @@ def write_krl(program: Program, src: TextIO, dat: TextIO | None, *, name: str = 
     if not name.isidentifier() or len(name) > 24:
         raise ValidationError("KRL program name must be an identifier of <= 24 chars", field="name", value=name)
     tool = np.eye(4) if tool_T is None else np.asarray(tool_T, dtype=float)
-    rate = extrusion_rate(program)
-    flow_max = float(max(rate.max(initial=0.0), 1e-9))
+    flow_max = max_extrusion_rate(program)
     if dat is not None:
         write_lines(dat, ["&ACCESS RVP", "&REL 1", f"DEFDAT {name}",
                           f"  DECL FRAME AM_BASE={_frame(program.wobj)}",

@@ -38,7 +38,7 @@ import numpy as np
 
 from fabric.ahead import AHEAD, WORKERS
 from fabric.motion.program import MOVEJ, MOVEL, Program
-from fabric.planning.post.common import check_program, write_ascii, write_lines
+from fabric.planning.post.common import CHECK_ROWS, check_program, row_blocks, write_ascii, write_lines
 from fabric.planning.post.numtext import ChoiceColumn, Column, FixedColumn, format_rows, trimmed_text
 from fabric.planning.post.walk import (
     Block,
@@ -114,10 +114,12 @@ class _Names:
 
     def __init__(self, prefix: str, speeds: np.ndarray, zones: np.ndarray) -> None:
         self.prefix = prefix
+        # keyed by Python's round(), as looked up (np.round differs from it next to a half: 66.65 -> 66.6, 66.7)
         speeds, zones = _run_values(speeds), _run_values(zones)
-        self.speeds = {float(v): f"v{prefix}{_num(v, 1).replace('.', '_')}" for v in np.unique(np.round(speeds, 1))}
-        self.zones = {float(z): f"z{prefix}{_num(z, 2).replace('.', '_')}"
-                      for z in np.unique(np.round(zones, 2)) if z > 0}
+        speed_keys = sorted({round(float(v), 1) for v in np.unique(speeds)})
+        zone_keys = sorted({round(float(z), 2) for z in np.unique(zones)})
+        self.speeds = {v: f"v{prefix}{_num(v, 1).replace('.', '_')}" for v in speed_keys}
+        self.zones = {z: f"z{prefix}{_num(z, 2).replace('.', '_')}" for z in zone_keys if z > 0}
 
     def speed(self, v: float) -> str:
         return self.speeds[round(float(v), 1)]
@@ -140,18 +142,28 @@ def write_rapid(program: Program, sink: TextIO | Callable[[str], TextIO], *,
     opt = options or RapidOptions()
     tool = np.eye(4) if tool_T is None else np.asarray(tool_T, dtype=float)
     moving = program.op <= MOVEL
-    speeds = np.where(program.op == MOVEJ, opt.joint_move_speed_mm_s, program.speed_mm_s)
-    speeds = np.where(speeds > 0, speeds, opt.joint_move_speed_mm_s)
-    names = _Names(opt.prefix, speeds[moving], program.zone_mm[moving])
+    # the distinct speeds and zones, and where the print modules start: in blocks of rows (a program mapped
+    # from files is read through once, holding a block at a time)
+    speed_runs, zone_runs = [], []
+    for a, b in row_blocks(0, len(program), CHECK_ROWS):
+        m = moving[a:b]
+        speed_runs.append(_run_values(_speeds(program, opt, slice(a, b))[m]))
+        zone_runs.append(_run_values(program.zone_mm[a:b][m]))
+        program.release_pages(a, b)
+    names = _Names(opt.prefix, np.concatenate(speed_runs), np.concatenate(zone_runs))
     bounds = program.section_bounds()
     p0, p1 = bounds.get("Print", (0, 0))
-    motion_idx = np.flatnonzero(moving[p0:p1]) + p0
     per = opt.targets_per_module
-    cuts = [p0] + [int(motion_idx[k]) for k in range(per, len(motion_idx), per)] + [p1]
-    cuts = sorted(set(cuts)) if p1 > p0 else []
+    cuts, seen = [p0], 0
+    for a, b in row_blocks(p0, p1, CHECK_ROWS):
+        idx = np.flatnonzero(moving[a:b]) + a           # the motion rows of the print, numbered from seen
+        k = np.arange(max(per, -(-seen // per) * per), seen + len(idx), per)
+        cuts += idx[k - seen].tolist()
+        seen += len(idx)
+    cuts = sorted(set(cuts + [p1])) if p1 > p0 else []
     n_mod = max(len(cuts) - 1, 0)
     export = RapidExport()
-    ctx = _Emitter(program, opt, names, speeds)
+    ctx = _Emitter(program, opt, names)
     main_name = f"{opt.prefix}Main"
     out = _open(sink, main_name)
     _write_main(out, main_name, program, opt, names, tool, n_mod, bounds, ctx)
@@ -170,6 +182,12 @@ def write_rapid(program: Program, sink: TextIO | Callable[[str], TextIO], *,
     finally:
         ctx.movel.close()
     return export
+
+
+def _speeds(program: Program, opt: RapidOptions, rows: slice | np.ndarray | int) -> np.ndarray:
+    """The speed (mm/s) written for rows: a joint move's, or the row's programmed speed (joint moves' if none)."""
+    v = np.where(program.op[rows] == MOVEJ, opt.joint_move_speed_mm_s, program.speed_mm_s[rows])
+    return np.where(v > 0, v, opt.joint_move_speed_mm_s)
 
 
 def _open(sink: TextIO | Callable[[str], TextIO], name: str) -> TextIO:
@@ -221,8 +239,8 @@ def _write_main(out: TextIO, name: str, program: Program, opt: RapidOptions, nam
 class _Emitter:
     """Formats the walker's events as RAPID instructions; the walker keeps the extruder state across modules."""
 
-    def __init__(self, program: Program, opt: RapidOptions, names: _Names, speeds: np.ndarray) -> None:
-        self.p, self.opt, self.names, self.speeds = program, opt, names, speeds
+    def __init__(self, program: Program, opt: RapidOptions, names: _Names) -> None:
+        self.p, self.opt, self.names = program, opt, names
         self.walker = RowWalker(program, runs=True)
         self.tw = f"{opt.tool_name}\\WObj:={opt.wobj_name};"
         self.movel = _MoveLWindows(self)
@@ -252,7 +270,7 @@ class _Emitter:
         columns += _joined([FixedColumn(quat[:, j], 6, trim=True) for j in range(4)])
         columns.append(b"],[")
         columns += _joined([FixedColumn(cf[:, j], 0) for j in range(3)] + [FixedColumn(cfx, 0)])
-        columns += [f"],{_E9}], ".encode(), _choices(self.speeds[rows], self.names.speed), b", ",
+        columns += [f"],{_E9}], ".encode(), _choices(_speeds(p, self.opt, rows), self.names.speed), b", ",
                     _choices(p.zone_mm[rows], self.names.zone), f", {self.tw}  ! ".encode(),
                     FixedColumn(p.gcode_line[rows], 0)]
         return columns
@@ -269,7 +287,7 @@ class _Emitter:
             i, k = ev.row, ev.row - self.base
             target = (f"[{_pose(p.xyz_mm[i], p.quat_wxyz[i])[1:-1]},[{self.cf[k, 0]},{self.cf[k, 1]},"
                       f"{self.cf[k, 2]},{self.cfx[k]}],{_E9}]")
-            speed, zone = self.names.speed(self.speeds[i]), self.names.zone(p.zone_mm[i])
+            speed, zone = self.names.speed(_speeds(p, opt, i)), self.names.zone(p.zone_mm[i])
             sw = ev.extruder
             if isinstance(sw, (ExtruderOn, ExtruderRate)):
                 lines.append(f"    TriggIO trFlow, 0\\Start\\AOp:={opt.ao_flow}, {_num(sw.rate_mm3_s)};")
@@ -282,7 +300,7 @@ class _Emitter:
                 lines.append(f"    MoveL {target}, {speed}, {zone}, {self.tw}  ! {p.gcode_line[i]}")
         elif isinstance(ev, JointMove):
             joints = ",".join(_num(v, 4) for v in self.q_deg[ev.row - self.base])
-            lines.append(f"    MoveAbsJ [[{joints}],{_E9}]\\NoEOffs, {self.names.speed(self.speeds[ev.row])}, "
+            lines.append(f"    MoveAbsJ [[{joints}],{_E9}]\\NoEOffs, {self.names.speed(_speeds(p, opt, ev.row))}, "
                          f"{self.names.zone(p.zone_mm[ev.row])}, {self.tw}")
         elif isinstance(ev, LayerStart):
             lines.append(f"    ! layer {ev.layer}")

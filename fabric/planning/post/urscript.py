@@ -20,7 +20,7 @@ from typing import TextIO
 import numpy as np
 
 from fabric.motion.program import MOVEL, Program
-from fabric.planning.post.common import check_program, extrusion_rate, quat_to_rotvec, write_ascii, write_lines
+from fabric.planning.post.common import check_program, max_extrusion_rate, quat_to_rotvec, write_ascii, write_lines
 from fabric.planning.post.numtext import Column, FixedColumn, format_rows
 from fabric.planning.post.walk import (
     Block,
@@ -61,8 +61,7 @@ def write_urscript(program: Program, out: TextIO, *, name: str = "am_print", too
     if not (joint_speed_rad_s > 0 and accel_m_s2 > 0):
         raise ValidationError("speeds and accelerations must be positive", field="joint_speed_rad_s")
     tool = np.eye(4) if tool_T is None else np.asarray(tool_T, dtype=float)
-    rate = extrusion_rate(program)
-    flow_max = float(max(rate.max(initial=0.0), 1e-9))
+    flow_max = max_extrusion_rate(program)
     write_lines(out, [f"def {name}():", f"  # am-fabric URScript export: {int((program.op <= MOVEL).sum())} targets",
                       f"  set_tcp({_pose_m(tool)})", f"  plate = {_pose_m(program.wobj)}",
                       "  set_digital_out(0, False)", "  set_analog_out(0, 0.0)"])

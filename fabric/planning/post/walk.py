@@ -160,8 +160,11 @@ class RowWalker:
         self.program = program
         self.block_rows = block_rows
         self.runs = runs
-        self.rate_mm3_s = extrusion_rate(program)
-        self.rounded_rate_mm3_s = rounded_rates(self.rate_mm3_s) if runs else None
+        # the rates of the rows of the block being walked (and the row before it), from row rate_base on:
+        # computed block by block, so the walker holds a block's worth whatever the program's length
+        self.rate_base = 0
+        self.rate_mm3_s = np.zeros(0)
+        self.rounded_rate_mm3_s: np.ndarray | None = None
         self.extruding = False
         self.current_rate_mm3_s = -1.0
         self.layer = -2
@@ -175,6 +178,10 @@ class RowWalker:
         p = self.program
         stop = len(p) if stop is None else stop
         for a, b in row_blocks(start, stop, self.block_rows):
+            p.release_pages(0, a)       # a program mapped from files: the rows walked past go (read again if need be)
+            self.rate_base = max(a - 1, 0)
+            self.rate_mm3_s = extrusion_rate(p, self.rate_base, b)
+            self.rounded_rate_mm3_s = rounded_rates(self.rate_mm3_s) if self.runs else None
             yield Block(a, b)
             if not self.runs:
                 yield from self._rows(a, b)
@@ -213,9 +220,10 @@ class RowWalker:
         if b - lo < MIN_RUN_ROWS:
             return []
         prev, cur = slice(lo - 1, b - 1), slice(lo, b)
+        r0 = self.rate_base
         in_print = p.section[lo - 1:b] == PRINT
         plain = ((p.op[cur] == MOVEL) & (p.op[prev] == MOVEL)
-                 & (rate[cur] == rate[prev])
+                 & (rate[lo - r0:b - r0] == rate[lo - 1 - r0:b - 1 - r0])
                  & (~in_print[1:] | (in_print[:-1] & (p.layer[cur] == p.layer[prev]))))
         edges = np.diff(plain.astype(np.int8), prepend=np.int8(0), append=np.int8(0))
         starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
@@ -224,7 +232,7 @@ class RowWalker:
 
     def _switch(self, i: int) -> ExtruderOn | ExtruderRate | ExtruderOff | None:
         # the rate a linear move programs, against what the extruder does now
-        rate = round(float(self.rate_mm3_s[i]), 3)
+        rate = round(float(self.rate_mm3_s[i - self.rate_base]), 3)
         if rate > 0:
             if not self.extruding:
                 self.extruding, self.current_rate_mm3_s = True, rate
