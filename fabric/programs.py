@@ -9,7 +9,7 @@ import numpy as np
 
 from fabric import schemas as s
 from fabric.motion.program import COLUMNS, Program
-from fabric.motion.program_file import PIECE_BYTES, column_pieces
+from fabric.motion.program_file import column_pieces
 from fabric.wire import codec
 from fabric.wire.errors import DecodeError, ValidationError
 
@@ -67,6 +67,9 @@ def program_artifact_pieces(program: Program, name: str = "program") -> tuple[st
     return artifact_id, _PagedPieces(codec.encode_pieces(art))
 
 
+_PAGED_BYTES = 1 << 16       # arrays from this size on go through column_pieces
+
+
 class _PagedPieces(list):
     """Pieces of an encoded message that, iterated, give a large column in parts (the same bytes): a column
     mapped from a file (:mod:`fabric.motion.program_file`) is then read through, hashed or written, with
@@ -77,10 +80,11 @@ class _PagedPieces(list):
 
 
 def _paged(pieces: Iterable[codec.Buffer]) -> Iterator[codec.Buffer]:
-    """The pieces, each large view of an array's data as parts of it (:func:`column_pieces`)."""
+    """The pieces, each view of an array's data as parts of it (:func:`column_pieces`: a mapped one's pages
+    given back as it is read)."""
     for piece in pieces:
         arr = piece.obj if isinstance(piece, memoryview) else None
-        if isinstance(arr, np.ndarray) and piece.nbytes > PIECE_BYTES and arr.nbytes == piece.nbytes:
+        if isinstance(arr, np.ndarray) and arr.nbytes == piece.nbytes and piece.nbytes >= _PAGED_BYTES:
             yield from column_pieces(arr)
         else:
             yield piece

@@ -10,7 +10,7 @@ import numpy as np
 
 from fabric.motion.program import MOVEL, PRINT, Program
 
-__all__ = ["toolpath_png", "gcode_png", "segments_png", "telemetry_png"]
+__all__ = ["toolpath_png", "gcode_png", "segments_png", "telemetry_png", "flow_profile"]
 
 
 def _pyplot():
@@ -84,8 +84,8 @@ def segments_png(seg: np.ndarray, extruding: np.ndarray, layer: np.ndarray, titl
 
 def telemetry_png(columns: Mapping[str, np.ndarray], title: str = "telemetry") -> bytes:
     """Four panels against simulated time from a recording's columns (see ``fabric-cli record``):
-    temperatures and set points, TCP speed and the speed override, extruder flow and the flow
-    override, extruded volume (with the extruder's on/off)."""
+    temperatures and set points, TCP speed and the speed override, extruder flow (its mean and its highest
+    over time: :func:`flow_profile`) and the flow override, extruded volume."""
     _, plt = _pyplot()
     topic = np.asarray(columns["topic"]).astype(str)
     t = np.asarray(columns["t_sim_s"], dtype=float)
@@ -121,8 +121,11 @@ def telemetry_png(columns: Mapping[str, np.ndarray], title: str = "telemetry") -
     twin.step(ts, v, where="post", color="tab:gray", label="speed override")
     twin.set_ylabel("override x"), twin.legend(loc="upper right", fontsize=8)
     ax = axes[2]
-    ts, v = col("flow_mm3_s", "extrusion")
-    ax.step(ts, v, where="post", color="tab:purple", label="flow mm3/s")
+    ts, v = col("extruded_mm3", "extrusion")       # the flow switches on and off every bead: drawn as its mean
+    mid, mean, peak = flow_profile(ts, v, *col("flow_mm3_s", "extrusion"))
+    ax.plot(mid, mean, color="tab:purple", label="mean flow mm3/s")
+    ax.plot(mid, peak, color="tab:purple", linewidth=0.6, alpha=0.5, label="highest flow mm3/s")
+    ax.set_ylim(bottom=0.0)
     ax.set_ylabel("mm3/s"), ax.legend(loc="upper left", fontsize=8)
     twin = ax.twinx()
     ts, v = col("flow_r", "extrusion")
@@ -130,14 +133,27 @@ def telemetry_png(columns: Mapping[str, np.ndarray], title: str = "telemetry") -
     twin.set_ylabel("override x"), twin.legend(loc="upper right", fontsize=8)
     ax = axes[3]
     ts, v = col("extruded_mm3", "extrusion")
-    ax.plot(ts, v, color="tab:orange", label="extruded mm3")
-    ts, on = col("on", "extrusion")
-    if len(ts):
-        ax.fill_between(ts, 0, np.nanmax(v) if len(v) else 1, where=on > 0, step="post", color="tab:orange",
-                        alpha=0.15, label="extruder on")
+    ax.plot(ts, v, color="tab:orange", label="extruded mm3")      # (the extruder's on/off: the mean flow above)
     ax.set_ylabel("mm3"), ax.set_xlabel("simulated time s"), ax.legend(loc="upper left", fontsize=8)
     axes[0].set_title(title)
     return _png(fig, plt)
+
+
+def flow_profile(t_s: np.ndarray, extruded_mm3: np.ndarray, flow_t_s: np.ndarray, flow_mm3_s: np.ndarray,
+                 bins: int = 120) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The extruder's flow over a print as ``bins`` time bins: the mean (the volume deposited in each bin over
+    its length) and the highest sampled flow in each. Sampled flow switches between zero and the bead's flow
+    at every travel, which drawn as it is fills the panel as one block."""
+    if len(t_s) < 2 or t_s[-1] <= t_s[0]:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    edges = np.linspace(t_s[0], t_s[-1], bins + 1)
+    volume = np.interp(edges, t_s, extruded_mm3)
+    mean = np.diff(volume) / np.diff(edges)
+    peak = np.zeros(bins)
+    if len(flow_t_s):
+        which = np.clip(np.searchsorted(edges, flow_t_s, side="right") - 1, 0, bins - 1)
+        np.maximum.at(peak, which, np.nan_to_num(flow_mm3_s))
+    return (edges[:-1] + edges[1:]) / 2, mean, np.maximum(peak, mean)
 
 
 def _png(fig: Any, plt: Any) -> bytes:

@@ -2,6 +2,8 @@
 Z as printed, overrides that end with their job, progress as the place in the program, heaters as a real hotend."""
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -109,6 +111,6 @@ def test_progress_is_the_place_in_the_program_whatever_the_flow(cell: Cell) -> N
     before_last = [(p, d) for layer, p, d in seen if layer < 9]
     assert max(d for _, d in before_last) >= 1.0                   # the planned volume is out before the last layer
     assert max(p for p, _ in before_last) <= 0.9 + 1e-9              # yet the place in the program is 9/10 at most
-    assert all(b >= a for (_, a, _), (_, b, _) in zip(seen, seen[1:], strict=False))
+    assert all(b >= a for (_, a, _), (_, b, _) in itertools.pairwise(seen))
     assert msgs.state().progress_r == 1.0 and twin.reason == "finished"
     assert np.isclose(seen[len(seen) // 2][1], 0.5, atol=0.15)

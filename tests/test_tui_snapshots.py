@@ -8,7 +8,9 @@ import pytest
 
 from fabric import schemas as s
 from fabric.motion.program import MOVEL, PRINT, Program
+from fabric.samples import SAMPLES_DIR
 from fabric.tui.app import FabricConsole
+from fabric.tui.screens.submit import SubmitDialog
 from fabric.tui.toolpath import Toolpath
 
 pytestmark = pytest.mark.timeout(120)
@@ -49,11 +51,20 @@ def job(job_id: str, state: str, filename: str, **kw) -> s.JobRecord:
     return s.JobRecord(job_id=job_id, filename=filename, state=state, created_s=NOW_S - 3600, **kw)
 
 
+PLAN = s.PlanSummary(program_id="p", targets=11898, moves=11890, layers=40, feasible_r=1.0, runnable=True,
+                     estimate_s=1587.2, extruded_mm3=6108.0, path_mm=48000.0, filament_diameter_mm=2.85,
+                     material_source="gcode", material="PLA")
+SEGMENTS = [s.JobSegment(began="start", started_s=NOW_S - 7200, ended_s=NOW_S - 6700, ended="stopped",
+                         reason="stopped by the operator", sim_s=980.0, deposited_mm3=3900.0, pauses=1, last_layer=24),
+            s.JobSegment(began="restart", from_layer=24, started_s=NOW_S - 6000, ended_s=NOW_S - 5600,
+                         ended="finished", sim_s=607.2, deposited_mm3=2629.0, last_layer=39)]
+OVERRIDES = [s.JobOverride(wall_s=NOW_S - 7000, t_sim_s=300.0, layer=8, speed_r=1.5, flow_r=1.1)]
 JOBS = [
     job("a1b2c3d4e5f6", "printing", "bracket.stl", stage="printing layer 3", started_s=NOW_S - 600),
     job("b2c3d4e5f6a1", "queued", "vase.stl", prepared=True, waiting_for="plate", stage="prepared"),
     job("c3d4e5f6a1b2", "finished", "sample_part.stl", started_s=NOW_S - 7200, ended_s=NOW_S - 5600,
-        sim_elapsed_s=1587.2, wall_elapsed_s=1600.0, deposited_mm3=6529.0, filament_mm=2712.0),
+        sim_elapsed_s=1587.2, wall_elapsed_s=900.0, deposited_mm3=6529.0, filament_mm=2712.0, plan=PLAN,
+        segments=SEGMENTS, live_overrides=OVERRIDES, progress_r=1.0),
     job("d4e5f6a1b2c3", "stopped", "gear.3mf", started_s=NOW_S - 9000, ended_s=NOW_S - 8800,
         sim_elapsed_s=200.0, wall_elapsed_s=20.0, deposited_mm3=512.0, filament_mm=213.0,
         reason="stopped by the operator at layer 4 of 40"),
@@ -74,7 +85,18 @@ EVENTS = [
 
 def frozen_console() -> FabricConsole:
     ticks = itertools.count(0.0, 15.0)          # each temperature sample 15 s after the last
-    return FabricConsole(None, wall_clock=lambda: NOW_S, monotonic_clock=lambda: next(ticks))
+    return FabricConsole(None, files_root=SAMPLES_DIR, wall_clock=lambda: NOW_S,
+                         monotonic_clock=lambda: next(ticks))
+
+
+async def first_screen(pilot) -> None:
+    """What a new operator sees first: an idle station, nothing loaded, nothing on the plate."""
+    app: FabricConsole = pilot.app
+    app.cell, app.sub_title = "cell1", "cell cell1"
+    app.alive = {name: True for name in ("station", "slicer", "planner", "collision", "supervisor")}
+    app.station_state = s.StationState(state="idle", rtf=1.0)
+    app.temps = s.Temps(nozzle_c=25.0, nozzle_target_c=0.0, bed_c=25.0, bed_target_c=0.0)
+    await pilot.pause()
 
 
 async def fill(pilot, screen: str) -> None:
@@ -96,7 +118,9 @@ async def fill(pilot, screen: str) -> None:
     app.extrusion = s.Extrusion(seq=50, t_sim_s=530.0, on=True, flow_mm3_s=4.25, extruded_mm3=2024.0,
                                 filament_mm=841.0, layer=2, row=19, gcode_line=900, flow_r=1.0)
     app.jobs = list(JOBS)
-    app.reply = ("overrides", True, "speed x1.50  flow x1.00  rtf 10")
+    for e in EVENTS:
+        app.add_log(f"event #{e.seq} {e.kind}")
+    app.show_reply("overrides", True, "speed x1.50  flow x1.00  rtf 10")
     await app.switch_mode(screen)
     if screen == "events":
         app.screen.show_events(None, EVENTS)
@@ -104,8 +128,55 @@ async def fill(pilot, screen: str) -> None:
 
 
 @pytest.mark.parametrize("size", SIZES)
-@pytest.mark.parametrize("screen", ["cell", "jobs", "events"])
+@pytest.mark.parametrize("screen", ["cell", "jobs", "events", "log"])
 def test_screen_snapshot(snap_compare, screen, size):
     async def run_before(pilot) -> None:
         await fill(pilot, screen)
     assert snap_compare(frozen_console(), terminal_size=SIZES[size], run_before=run_before)
+
+
+@pytest.mark.parametrize("size", SIZES)
+def test_first_screen_snapshot(snap_compare, size):
+    """Issue 24: the first screen said only IDLE / no program loaded."""
+    assert snap_compare(frozen_console(), terminal_size=SIZES[size], run_before=first_screen)
+
+
+async def job_record(pilot) -> None:
+    await fill(pilot, "jobs")
+    history = pilot.app.screen.query_one("#history")
+    history.focus()
+    history.move_cursor(row=0)
+    await pilot.press("enter")
+    await pilot.pause()
+
+
+async def submit_dialog(pilot) -> None:
+    await first_screen(pilot)
+    await pilot.press("a")
+    while not isinstance(pilot.app.screen, SubmitDialog) or not pilot.app.screen.query("#submit-sample"):
+        await pilot.pause(0.05)
+    await pilot.pause(0.3)
+
+
+async def help_dialog(pilot) -> None:
+    await first_screen(pilot)
+    await pilot.press("question_mark")
+    await pilot.pause()
+
+
+async def paused_print(pilot) -> None:
+    """Paused: the ETA line says the wall-clock time left once resumed (not simulated time)."""
+    await fill(pilot, "cell")
+    app = pilot.app
+    app.station_state = s.StationState(state="paused", reason="paused by operator", program_id="p",
+                                       job_id="a1b2c3d4e5f6", t_sim_s=530.0, elapsed_s=527.0, total_s=1587.0,
+                                       remaining_s=1060.0, progress_r=0.31, deposited_mm3=2024.0,
+                                       planned_mm3=6529.0, layer=2, layers_total=4, rtf=10.0, speed_r=1.5)
+    await pilot.pause()
+
+
+@pytest.mark.parametrize("size", SIZES)
+@pytest.mark.parametrize("name", ["job-record", "submit", "help", "paused"])
+def test_dialog_snapshot(snap_compare, name, size):
+    before = {"job-record": job_record, "submit": submit_dialog, "help": help_dialog, "paused": paused_print}[name]
+    assert snap_compare(frozen_console(), terminal_size=SIZES[size], run_before=before)

@@ -50,9 +50,15 @@ def test_a_step_not_begun_in_time_is_dropped_and_never_runs():
     with pytest.raises(ServiceUnavailable, match="nothing was done"):
         w.call(lambda: ran.append(1), timeout_s=0.05)
     assert w.run_pending(0) == 0 and ran == []
+    late = w.submit(lambda: ran.append(2))
+    gave_up = w.submit(lambda: ran.append(3))
+    assert gave_up.cancel()                         # its caller gave up: closing must not trip over it
     w.close()
     with pytest.raises(ServiceUnavailable):
+        late.result(0)
+    with pytest.raises(ServiceUnavailable):
         w.call(lambda: 1, timeout_s=0.05)
+    assert ran == []
 
 
 def test_home_refuses_when_the_station_changed_while_its_move_was_checked(session, settings, monkeypatch):

@@ -2,8 +2,9 @@
 
 For each service folder of the cell (``<data-dir>/<cell>/<service>``) and each database in it (the
 supervisor's ``jobs.sqlite``, the station's ``station.sqlite``, every service's ``records.sqlite`` and
-artifact index ``artifacts/index.sqlite``), the doctor opens the file through its real store class,
-as the service does at start (``PRAGMA quick_check``, versions, migrations). A file found damaged is:
+artifact index ``artifacts/index.sqlite``), the doctor checks the file read-only (``PRAGMA quick_check``,
+the tables' versions), then opens a sound one through its real store class, as the service does at start
+(migrations included). A file found damaged is:
 
 1. moved aside, with its ``-wal`` and ``-shm``, to ``<name>.damaged-YYYYmmdd-HHMMSS`` next to it (kept
    as it was, for a backup or a closer look);
@@ -117,7 +118,8 @@ def _check_station(conn: sqlite3.Connection) -> dict[str, int]:
     conn.executemany("DELETE FROM events WHERE seq = ?", [(q,) for q in bad])
     if bad:
         dropped["events"] = len(bad)
-    expected, gap = 0, []
+    expected = 0
+    gap: list[int] = []
     for first, count in conn.execute("SELECT first, count FROM beads ORDER BY first").fetchall():
         if gap or first != expected:
             gap.append(first)

@@ -1,4 +1,4 @@
-"""CLI commands for print jobs: submit (a model or G-code), list, show, remove, move, next."""
+"""CLI commands for print jobs: submit (a model or G-code), list, show, remove, move, next; the bundled samples."""
 from __future__ import annotations
 
 import argparse
@@ -15,6 +15,9 @@ from fabric.cli.output import emit
 from fabric.cli.pipeline_cmds import parse_sets
 from fabric.client import Client
 from fabric.client.follow import follow_print
+from fabric.printjobs.history import override_lines, segment_lines
+from fabric.samples import SAMPLES_DIR, Sample, samples
+from fabric.wire.errors import NotFound, ValidationError
 
 __all__ = ["register"]
 
@@ -61,6 +64,23 @@ def _list_text(jobs: s.JobList) -> str:
     return "\n".join(lines)
 
 
+def resolve_job_id(c: Client, job_id: str) -> str:
+    """A job's whole id from a unique prefix of it (the console and lists may show fewer than 12 digits)."""
+    job_id = job_id.strip()
+    if len(job_id) >= 12:
+        return job_id
+    if not job_id:
+        raise ValidationError("give a job id (fabric-cli job list shows them)", field="job_id")
+    matches = [r.job_id for r in c.jobs(0, s.MAX_JOBS_PAGE).jobs if r.job_id.startswith(job_id)]
+    if len(matches) == 1:
+        return matches[0]
+    if not matches:
+        raise NotFound(f"no job id starts with {job_id!r} (fabric-cli job list shows them)", job_id=job_id)
+    raise ValidationError(f"job id {job_id!r} is the start of {len(matches)} jobs ({', '.join(matches[:5])}"
+                          f"{', ...' if len(matches) > 5 else ''}): give more of it", field="job_id",
+                          matches=matches[:20])
+
+
 def _record_text(rec: s.JobRecord) -> str:
     lines = [f"job {rec.job_id}: {rec.filename} ({rec.source}) {rec.state}" + (" (prepared)" if rec.prepared else ""),
              f"  stage      {rec.stage}"]
@@ -72,16 +92,39 @@ def _record_text(rec: s.JobRecord) -> str:
         lines.append(f"  material   {rec.deposited_mm3:.0f} mm3 deposited, {rec.filament_mm:.0f} mm of filament")
     if rec.plan is not None:
         lines.append(f"  plan       {rec.plan.moves} moves, {rec.plan.layers} layers, "
-                     f"{rec.plan.extruded_mm3:.0f} mm3, estimate {rec.plan.estimate_s:.1f} s")
+                     f"{rec.plan.extruded_mm3:.0f} mm3 of {rec.plan.filament_diameter_mm:g} mm filament "
+                     f"({rec.plan.material_source}), estimate {rec.plan.estimate_s:.1f} s")
+    if rec.segments:
+        lines.append("  runs")
+        lines += [f"    {line}" for line in segment_lines(rec)]
+    if rec.live_overrides:
+        lines.append("  overrides")
+        lines += [f"    {line}" for line in override_lines(rec)]
     if rec.error is not None:
         lines.append(f"  error      [{rec.error.code}] {rec.error.message}")
     return "\n".join(lines)
 
 
+def _samples_text(found: list[Sample]) -> str:
+    lines = [f"{'part':<18} {'triangles':>9}  {'size x y z mm':<16}  what"]
+    lines += [f"{x.name:<18} {x.triangles:>9}  {'x'.join(f'{v:.0f}' for v in x.size_mm):<16}  {x.description}"
+              for x in found]
+    lines.append(f"in {SAMPLES_DIR} (fabric-cli job submit {found[0].path if found else 'FILE'} --start)")
+    return "\n".join(lines)
+
+
+def _cmd_samples(a: argparse.Namespace) -> int:
+    found = samples()
+    emit([{"name": x.name, "path": str(x.path), "triangles": x.triangles, "size_mm": list(x.size_mm),
+           "description": x.description} for x in found], a.json, lambda _: _samples_text(found))
+    return 0
+
+
 def cmd_submit(c: Client, a: argparse.Namespace) -> int:
     # no --source: the supervisor takes it from the file name (JobSubmit.source "", as any client may send)
     req = s.JobSubmit(model=read_whole(a.file), filename=Path(a.file).name, source=a.source or "", profile=a.profile,
-                      backend=a.backend, overrides=parse_sets(a.set), start=a.start, rtf=a.rtf)
+                      backend=a.backend, overrides=parse_sets(a.set), start=a.start, rtf=a.rtf,
+                      filament_diameter_mm=a.filament_diameter)
     acc = c.submit(req)
     if not (a.wait or a.follow):
         emit(acc, a.json, lambda r: f"job {r.job_id} queued")
@@ -110,7 +153,10 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("file")
     p.add_argument("--profile", default="taz-pla-medium")
     p.add_argument("--backend", default="builtin", choices=s.pipeline.BACKENDS)
-    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a profile key")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a profile key (a model)")
+    p.add_argument("--filament-diameter", type=float, default=None, metavar="MM",
+                   help="the filament's diameter (e.g. 2.85), for G-code that does not state it; a model is sliced "
+                        "for it")
     p.add_argument("--start", action="store_true", help="start printing once loaded (when the plate is clear)")
     p.add_argument("--rtf", type=float, default=1.0,
                    help="real-time factor of the print (default 1: real time, as on the wire; 0 = as fast as possible)")
@@ -127,15 +173,18 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
                    help="only jobs in this state (repeat for several)")
     p.set_defaults(run=lambda c, a: _shown(c.jobs(a.offset, a.limit, a.state), a, _list_text))
     for name in ("show", "status"):
-        p = jsub.add_parser(name, parents=[common], help="one job's whole record")
-        p.add_argument("job_id")
-        p.set_defaults(run=lambda c, a: _shown(c.job(a.job_id), a, _record_text))
+        p = jsub.add_parser(name, parents=[common], help="one job's whole record (its runs, its overrides)")
+        p.add_argument("job_id", help="the job's id, or a unique start of it")
+        p.set_defaults(run=lambda c, a: _shown(c.job(resolve_job_id(c, a.job_id)), a, _record_text))
     p = jsub.add_parser("remove", parents=[common], help="remove a job that is not on the station")
-    p.add_argument("job_id")
-    p.set_defaults(run=lambda c, a: _shown(c.job_remove(a.job_id), a, lambda r: r.message))
+    p.add_argument("job_id", help="the job's id, or a unique start of it")
+    p.set_defaults(run=lambda c, a: _shown(c.job_remove(resolve_job_id(c, a.job_id)), a, lambda r: r.message))
     p = jsub.add_parser("move", parents=[common], help="move a waiting job to a place in the queue (0 = next)")
-    p.add_argument("job_id")
+    p.add_argument("job_id", help="the job's id, or a unique start of it")
     p.add_argument("position", type=int)
-    p.set_defaults(run=lambda c, a: _shown(c.job_move(a.job_id, a.position), a, _list_text))
-    p = jsub.add_parser("next", parents=[common], help="the plate is clear: load the next job (started if submitted with --start)")
+    p.set_defaults(run=lambda c, a: _shown(c.job_move(resolve_job_id(c, a.job_id), a.position), a, _list_text))
+    p = sub.add_parser("samples", parents=[common], help="the parts bundled with am-fabric, to print first")
+    p.set_defaults(local=_cmd_samples)
+    p = jsub.add_parser("next", parents=[common],
+                        help="the plate is clear: load the next job (started if submitted with --start)")
     p.set_defaults(run=lambda c, a: _shown(c.job_next(), a, lambda r: r.message))

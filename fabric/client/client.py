@@ -118,12 +118,13 @@ class Client:
         head = f"no {what} on the fabric (asked for {waited:.2g} s)"
         cell = self.keys.cell
         try:
-            cells = self.cells(timeout=max(0.2, min(1.0, timeout - waited)))
+            cells = self.cells(timeout=max(0.2, min(1.0, timeout - waited)), attempts=ALIVE_ATTEMPTS,
+                               enough=lambda found: service in found.get(cell, ()))
         except zenoh.ZError:                     # the session closed meanwhile: say what is known
             return ServiceUnavailable(f"{head}: is the service running and is the cell name right?", key=key,
                                       timeout_s=waited, reason="no_queryable")
         if cell not in cells:
-            present = ", ".join(f"{c} ({len(svcs)} services)" for c, svcs in cells.items()) or "none"
+            present = "; ".join(f"{c} ({', '.join(svcs)})" for c, svcs in cells.items()) or "none"
             return ServiceUnavailable(f"{head}: no service of cell {cell!r} is on the fabric (cells present: "
                                       f"{present}); is the cell name right (--cell, $FABRIC_CELL)?", key=key,
                                       timeout_s=waited, reason="no_cell", cell=cell, cells=cells)
@@ -170,13 +171,26 @@ class Client:
             time.sleep(ALIVE_BACKOFF_S)
         return {name: name in found for name in SERVICES}
 
-    def cells(self, timeout: float = 2.0) -> dict[str, list[str]]:
-        """Every cell present on the fabric: cell name -> the services that hold a liveliness token."""
+    def cells(self, timeout: float = 2.0, attempts: int = 1,
+              enough: Callable[[dict[str, set[str]]], bool] | None = None) -> dict[str, list[str]]:
+        """Every cell present on the fabric: cell name -> the services that hold a liveliness token.
+
+        ``attempts`` > 1 merges that many queries (10 ms apart, within ``timeout``) unless ``enough(found)``
+        says the answer so far suffices: a peer session's answer can come back incomplete (see :meth:`alive`)."""
         found: dict[str, set[str]] = {}
-        for reply in self.session.liveliness().get(ALIVE_EVERY_CELL, timeout=timeout):
-            if reply.ok is not None:
-                cell, service = parse_alive(str(reply.ok.key_expr))
-                found.setdefault(cell, set()).add(service)
+        end = time.monotonic() + timeout
+        for attempt in range(max(1, attempts)):
+            left = end - time.monotonic()
+            if left <= 0:
+                break
+            for reply in self.session.liveliness().get(ALIVE_EVERY_CELL, timeout=left):
+                if reply.ok is not None:
+                    cell, service = parse_alive(str(reply.ok.key_expr))
+                    found.setdefault(cell, set()).add(service)
+            if enough is not None and enough(found):
+                break
+            if attempt < attempts - 1:
+                time.sleep(ALIVE_BACKOFF_S)
         return {cell: sorted(services) for cell, services in sorted(found.items())}
 
     def health(self, service: str) -> s.Health:

@@ -97,6 +97,8 @@ def _mapping(arr: np.ndarray) -> tuple[mmap.mmap, int] | None:
     prev: np.ndarray | None = None
     while isinstance(base, np.ndarray):
         prev, base = base, base.base
+    if isinstance(base, memoryview):            # np.frombuffer(mapping) keeps a view of the mapping
+        base = base.obj
     if isinstance(base, mmap.mmap) and prev is not None:
         return base, int(arr.__array_interface__["data"][0]) - int(prev.__array_interface__["data"][0])
     return None

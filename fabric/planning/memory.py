@@ -8,7 +8,16 @@ every plan after the first, more for the first). Raising the mmap threshold
 and the trim threshold makes large arrays come from the heap and stay there
 once freed, so a planner that plans again, or streams an export in pieces,
 reuses pages it already touched. The price: the process keeps its peak
-resident size (one plan's worth) instead of shrinking between plans.
+resident size (one plan's worth) instead of shrinking between plans; since a
+plan holds a chunk of rows at a time (``fabric.planning.planner``), that is a
+few hundred MB whatever the G-code's size.
+
+Arenas: glibc gives threads arenas of their own (up to 8 per core), each
+keeping what it freed; the lexer, the export formatters and the artifact writer
+are new threads each plan, and memory freed in one arena is not reused by
+another, so a planner kept ~60 MB more after every plan. Two arenas (the main
+one and one the worker threads share) make every plan reuse the same free
+memory: measured, the idle size after four plans in a row stays flat.
 """
 from __future__ import annotations
 
@@ -20,10 +29,11 @@ __all__ = ["keep_freed_memory"]
 
 log = logging.getLogger("fabric.planning.memory")
 
-_M_TRIM_THRESHOLD, _M_TOP_PAD, _M_MMAP_THRESHOLD = -1, -2, -3    # mallopt parameters (malloc.h)
+_M_TRIM_THRESHOLD, _M_TOP_PAD, _M_MMAP_THRESHOLD, _M_ARENA_MAX = -1, -2, -3, -8    # mallopt parameters (malloc.h)
 MMAP_THRESHOLD_BYTES = 1 << 30      # allocations below this come from the heap
 TRIM_THRESHOLD_BYTES = 2**31 - 1    # free memory at the top of the heap kept up to this
 TOP_PAD_BYTES = 64 << 20            # the heap grows by at least this much at a time
+ARENA_MAX = 2                       # malloc arenas: the main thread's and one for every other thread
 
 _done = False
 
@@ -42,6 +52,7 @@ def keep_freed_memory() -> bool:
         return False
     ok = all(mallopt(param, value) == 1 for param, value in ((_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES),
                                                                (_M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES),
-                                                               (_M_TOP_PAD, TOP_PAD_BYTES)))
+                                                               (_M_TOP_PAD, TOP_PAD_BYTES),
+                                                               (_M_ARENA_MAX, ARENA_MAX)))
     _done = ok
     return ok

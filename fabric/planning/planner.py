@@ -320,7 +320,6 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
 
 
 _EXTRA = {"status": ("u1", ()), "rot_deg": ("f8", ())}     # per-row columns kept beside the program: its reach
-TIMING_BLOCK_ROWS = 1 << 18     # rows timed at once by the cycle-time estimate (program_times)
 
 
 class _Whole:
@@ -489,7 +488,7 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
         from fabric.motion.timing import StartState, program_times
         start = StartState.at_joints(cell.robot, prog.wobj, np.asarray(cell.home_q_rad, dtype=float))
         out = sink.column("t_end_s", "f8", len(prog)) if isinstance(sink, FileSink) else None
-        times = program_times(prog, cell.robot, 1.0, start, block_rows=TIMING_BLOCK_ROWS, out=out,
+        times = program_times(prog, cell.robot, 1.0, start, block_rows=opt.ik_block_rows, out=out,
                               progress=mono.sub(0.85, 1.0))
         estimate, t_end = times.total_s, times.t_end_s
         slowed_rows, slowed_joint = times.slowed_rows, times.slowed_joint

@@ -96,8 +96,11 @@ class Preparer:
 
     def _slice(self, rec: s.JobRecord) -> None:
         model = self.models.get(rec.model_id).data
+        overrides = dict(rec.overrides)
+        if rec.filament_diameter_mm is not None:       # sliced for the filament the job was submitted with
+            overrides["filament_diameter_mm"] = f"{rec.filament_diameter_mm:g}"
         acc = self.client.slice(s.SliceRequest(model=model, filename=rec.filename, profile=rec.profile,
-                                               backend=rec.backend, overrides=dict(rec.overrides)))
+                                               backend=rec.backend, overrides=overrides))
         done = self.client.wait_job("slicer", acc.job_id, timeout=self.budget_s)
         rec.gcode_id = done.result_id
         self.client.pin("slicer", rec.gcode_id, rec.job_id)
@@ -108,7 +111,8 @@ class Preparer:
         gcode = self.models.get(rec.model_id).data if rec.source == "gcode" else b""
         acc = self.client.plan(s.PlanRequest(gcode=gcode, gcode_id=rec.gcode_id if not gcode else "",
                                              filename=name, wobj_xyz_mm=station.wobj_xyz_mm,
-                                             wobj_rpy_deg=station.wobj_rpy_deg))
+                                             wobj_rpy_deg=station.wobj_rpy_deg,
+                                             filament_diameter_mm=rec.filament_diameter_mm))
         done = self.client.wait_job("planner", acc.job_id, timeout=self.budget_s)
         summary = self.client.plan_summary(done.result_id)
         rec.program_id, rec.plan = done.result_id, summary

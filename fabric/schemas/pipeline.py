@@ -236,11 +236,11 @@ class JobSegment:
     ``restart`` at a layer after a stop or a finished print, ``recover`` after an interruption) to how it
     ended ("" while it runs). Wall-clock times; ``sim_s`` on the station's clock (pauses included);
     ``deposited_mm3`` what this run deposited."""
-    began: str = f(default="start", choices=SEGMENT_BEGINNINGS)
+    began: str = f(default="start", choices=SEGMENT_BEGINNINGS)    # how it began (see above)
     from_layer: int = 0                         # the layer it began at (0-based)
     started_s: float = 0.0                      # it began (wall clock)
     ended_s: float = 0.0                        # it ended (wall clock; 0 while it runs)
-    ended: str = f(default="", choices=SEGMENT_ENDS)
+    ended: str = f(default="", choices=SEGMENT_ENDS)   # how it ended ("" while it runs)
     reason: str = ""                            # why it ended so (a stop, a fault, an interruption)
     t_sim_start_s: float = 0.0                  # the station's clock when it began
     sim_s: float = 0.0                          # simulated time it has run
@@ -255,10 +255,10 @@ class JobOverride:
     wall_s: float                               # when (wall clock)
     t_sim_s: float = 0.0                        # when (the station's clock)
     layer: int = -1                             # the layer being printed then (0-based)
-    speed_r: float | None = None                # the values it set (nil: not changed)
-    flow_r: float | None = None
-    nozzle_c: float | None = None
-    bed_c: float | None = None
+    speed_r: float | None = None                # speed factor set (nil: not changed)
+    flow_r: float | None = None                 # flow factor set (nil: not changed)
+    nozzle_c: float | None = None               # nozzle set point set (nil: not changed)
+    bed_c: float | None = None                  # bed set point set (nil: not changed)
 
 
 @schema("supervisor.JobRecord", version=4)
@@ -280,7 +280,7 @@ class JobRecord:
     model_id: str = ""                          # the submitted file (an artifact at the supervisor)
     overrides: dict[str, str] = f(factory=dict)  # slicing profile overrides
     start: bool = False                         # start printing once loaded (as submitted; job next keeps it)
-    rtf: float = f(default=1.0, ge=0.0, le=1e6)     # the real-time factor it is started with
+    rtf: float = f(default=1.0, ge=0.0, le=1e6)     # the real-time factor its print runs at
     state: str = f(default="queued", choices=PRINT_JOB_STATES)     # see "Print jobs" in docs/protocol.md
     prepared: bool = False                      # sliced, planned and checked: can be loaded
     waiting_for: str = f(default="", choices=WAITING_FOR)   # why a prepared job is not loaded yet ("": it will be)
@@ -303,6 +303,7 @@ class JobRecord:
     collisions: CollisionReport | None = None   # the collision check's report, once checked
     error: ErrorReply | None = None             # the typed error of a failed job
     segments: list[JobSegment] = f(factory=list)        # every run of the print, in order
+    filament_diameter_mm: float | None = f(default=None, ge=0.5, le=5.0)  # as submitted (nil: the G-code's)
     live_overrides: list[JobOverride] = f(factory=list)  # overrides set while it was on the station
 
 
@@ -322,7 +323,7 @@ class FabricStatus:
     job_error: str = ""                         # why the latest job could not be read (then ``job`` is nil)
 
 
-@schema("supervisor.JobSubmit", version=3)
+@schema("supervisor.JobSubmit", version=4)
 class JobSubmit:
     """STL/OBJ/3MF bytes -> slice -> plan -> collision check -> load (-> start); or G-code bytes
     (``source`` "gcode") -> plan -> check -> load (-> start).
@@ -340,6 +341,9 @@ class JobSubmit:
     start: bool = False                         # start printing as soon as it is loaded (else: fabric-cli start)
     rtf: float = f(default=1.0, ge=0.0, le=1e6)     # real-time factor of the print: 1 = real time, 0 = as fast
                                                 # as possible
+    filament_diameter_mm: float | None = f(default=None, ge=0.5, le=5.0)   # the filament the print uses, for
+                                                # G-code that does not say it (nil: as stated, else assumed);
+                                                # a model is sliced for it (version 4)
 
 
 def source_of(filename: str, source: str = "") -> str:
@@ -372,7 +376,9 @@ class JobsQuery:
 
 @schema("supervisor.JobList", version=4)
 class JobList:
-    """Print job records in queue order: a page of them (``supervisor/jobs``), or all (``job_move``)."""
+    """Print job records in queue order: the page asked (``supervisor/jobs``), or the first page after a
+    ``job_move`` (up to 100 records, with ``total``)."""
     jobs: list[JobRecord]                      # the records in queue order: as submitted, as reordered by job_move
-    total: int = f(default=-1, ge=-1)          # jobs matching the query in all; -1: ``jobs`` holds every one
+    total: int = f(default=-1, ge=-1)          # jobs matching the query in all (-1, from older services:
+                                               # ``jobs`` holds every one)
     offset: int = f(default=0, ge=0)           # the place of ``jobs[0]`` among them

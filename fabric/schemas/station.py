@@ -21,7 +21,7 @@ class Pose:
     from its surface, as calibrated (``station.State`` ``wobj_xyz_mm``/``wobj_rpy_deg`` place it in the
     robot base frame)."""
     seq: int                     # the pose stream's sample number: from 1 for each run of the station process,
-                                 # +1 per published sample; the ``position`` reply carries the last one's
+                                 # +1 per published sample (a ``position`` reply: that of the last sample)
     t_sim_s: float               # the station's simulated clock when sampled
     q_deg: list[float]           # joint angles A1..An (6 for the bundled robots), degrees
     xyz_mm: list[float]          # TCP in the plate frame (work object), x y z

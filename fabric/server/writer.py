@@ -111,7 +111,7 @@ class Writer:
                 item = self._steps.get_nowait()
             except queue.Empty:
                 return
-            if item is not None:
+            if item is not None and item[1].set_running_or_notify_cancel():    # its caller may have given up
                 item[1].set_exception(ServiceUnavailable(f"{self.name} is closing", service=self.name))
 
     @staticmethod

@@ -49,7 +49,7 @@ __all__ = ["EXIT_CANNOT_JOIN", "EXIT_NO_RESTART", "EXIT_NOTE_ENV", "LAUNCHER_PID
 
 EXIT_CANNOT_JOIN = 2
 EXIT_NO_RESTART = 78              # EX_CONFIG (sysexits.h): the operator must act; a restart cannot fix this
-STOP_DEADLINE_S = 4.0             # from the first SIGTERM/SIGINT to the end of the process, at the latest
+STOP_DEADLINE_S = 3.5             # from the first SIGTERM/SIGINT to the end of the process, at the latest
 EXIT_NOTE_ENV = "FABRIC_EXIT_NOTE"
 LAUNCHER_PID_ENV = "FABRIC_LAUNCHER_PID"
 _PR_SET_PDEATHSIG = 1
@@ -100,11 +100,14 @@ def serve(name: str, settings: SessionSettings, options: argparse.Namespace,
         if getattr(exc, "sqlite_errorname", "") not in ("SQLITE_CORRUPT", "SQLITE_NOTADB"):
             raise
         # a store that does not name its file (all of them do, through fabric.store.sqlite): name the folder
-        err = StoreError(f"a database of the {name} is damaged ({exc})", reason="damaged", problem=str(exc))
-        code = _cannot_start(name, settings.cell, options, err, log)
+        damaged = StoreError(f"a database of the {name} is damaged ({exc})", reason="damaged", problem=str(exc))
+        code = _cannot_start(name, settings.cell, options, damaged, log)
     except FabricError as err:
         log.error("%s cannot start: %s", name, err.message)
         code = EXIT_CANNOT_JOIN
+    except BaseException:
+        code = 1                                     # a bug: its traceback follows; the launcher restarts it
+        raise
     finally:
         if guard is not None:
             guard.code = code

@@ -64,6 +64,10 @@ from fabric.wire.errors import (
 
 __all__ = ["PlannerService", "build", "add_arguments"]
 
+# The allocator is tuned as this module is imported, before the service opens its session: the arena limit
+# only holds for threads started after it (fabric.planning.memory)
+keep_freed_memory()
+
 MEDIA = {"rapid": "text/x-rapid", "krl": "text/x-krl", "urscript": "text/x-urscript", "csv": "text/csv"}
 SUFFIX = {"rapid": "mod", "krl": "src", "urscript": "script", "csv": "csv"}
 KEEP_PLANS = 1              # plans kept at hand for their exports (mapped from files: see the module doc)

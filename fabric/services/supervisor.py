@@ -174,6 +174,10 @@ class SupervisorService(Service):
         if not req.model:
             raise ValidationError("the submitted file is empty", field="model")
         source = source_of(req.filename, req.source)
+        if source == "gcode" and req.overrides:   # G-code is not sliced: a profile key would be kept and ignored
+            raise ValidationError(f"a G-code job is not sliced: the profile keys {sorted(req.overrides)} would change "
+                                  f"nothing; the filament's diameter is filament_diameter_mm (job submit "
+                                  f"--filament-diameter)", field="overrides")
         require_room(self.data_dir, len(req.model), self.name, "the submitted file")
         art = s.Artifact(artifact_id=content_id(req.model), name=req.filename, media_type=MODEL_MEDIA[source],
                          data=req.model)
@@ -184,7 +188,7 @@ class SupervisorService(Service):
         rec = s.JobRecord(job_id=job_id, filename=req.filename, source=source, profile=req.profile,
                           backend=req.backend, model_id=art.artifact_id, overrides=dict(req.overrides),
                           start=req.start, rtf=req.rtf, state="queued", stage="queued", created_s=now,
-                          updated_s=now)
+                          updated_s=now, filament_diameter_mm=req.filament_diameter_mm)
 
         def step() -> None:
             self.store.add(rec)

@@ -19,7 +19,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="the cell model for joint limits (default: the built-in cell, as the services use)")
     a = p.parse_args(argv)
     try:
-        from fabric.tui.app import FabricConsole
+        from fabric.tui.app import FabricConsole, default_state_path
     except ModuleNotFoundError as exc:      # the tui extra is not installed: one line, no traceback
         missing = missing_extra(exc, "the console")
         if missing is None:
@@ -28,7 +28,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         with Client.connect(settings_from_args(a, default_mode="client")) as client:
-            FabricConsole(client, cell_config=a.cell_config).run()
+            FabricConsole(client, cell_config=a.cell_config, state_path=default_state_path()).run()
     except FabricError as err:
         print(f"fabric-tui: error [{err.code}]: {err.message}", file=sys.stderr)
         return 2

@@ -1,7 +1,10 @@
-"""The operator console: the Cell, Jobs and Events screens over one cell link, dialogs for every command."""
+"""The operator console: the Cell, Jobs, Events and Log screens over one cell link, dialogs for every command."""
 from __future__ import annotations
 
+import json
+import os
 import time
+from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
@@ -15,7 +18,7 @@ from textual.reactive import reactive
 from fabric import schemas as s
 from fabric.client import Client
 from fabric.extras import missing_extra
-from fabric.tui.commands import COMMANDS, describe
+from fabric.tui.commands import COMMANDS, PRESETS, Preset, describe, refusal
 from fabric.tui.link import CellLink
 from fabric.tui.messages import (
     CellsListed,
@@ -30,36 +33,51 @@ from fabric.tui.messages import (
 from fabric.tui.screens.cell import CellScreen
 from fabric.tui.screens.cells import CellsDialog
 from fabric.tui.screens.confirm import ConfirmDialog
-from fabric.tui.screens.events import EventsScreen
+from fabric.tui.screens.events import EventsScreen, event_data_text
 from fabric.tui.screens.help import HelpDialog
 from fabric.tui.screens.jobs import JobsScreen
+from fabric.tui.screens.log import LogScreen
+from fabric.tui.screens.preheat import PreheatDialog
 from fabric.tui.screens.report import ReportDialog
 from fabric.tui.screens.submit import SubmitChoice, SubmitDialog
 from fabric.tui.screens.values import ValuesDialog
 from fabric.wire.errors import FabricError
 
-__all__ = ["FabricConsole"]
+__all__ = ["FabricConsole", "default_state_path"]
 
 GCODE_SUFFIXES = (".gcode", ".gco", ".g", ".nc")
+# print events that are also a toast (top right: never over the reply line or a dialog's buttons)
 EVENT_TOASTS: dict[str, SeverityLevel] = {"fault": "error", "interlock": "error", "stall": "error",
                                           "interrupted": "error", "stopped": "warning", "finished": "information",
                                           "paused": "warning"}
+LOG_LINES = 2000               # replies and events kept for the Log screen
+
+
+def default_state_path() -> Path:
+    """Where the console remembers what it should between runs (the last folder a file was picked in)."""
+    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    return Path(base) / "am-fabric" / "console.json"
 
 
 class FabricConsole(App):
     """``fabric-tui``. The console's state lives in the reactive attributes below; the screens watch them
-    and hand them down to their widgets. ``client`` None: no link (the tests set the attributes)."""
+    and hand them down to their widgets. ``client`` None: no link (the tests set the attributes).
+    ``state_path``: a small JSON file of what the console remembers between runs (None: nothing)."""
 
     CSS_PATH = "console.tcss"
     ENABLE_COMMAND_PALETTE = False
     TITLE = "am-fabric"
-    MODES = {"cell": CellScreen, "jobs": JobsScreen, "events": EventsScreen}
+    MODES = {"cell": CellScreen, "jobs": JobsScreen, "events": EventsScreen, "log": LogScreen}
     BINDINGS = [
+        Binding("ctrl+c", "quit", "quit", show=False, priority=True),
         Binding("1", "switch_mode('cell')", "cell"), Binding("2", "switch_mode('jobs')", "jobs"),
-        Binding("3", "switch_mode('events')", "events"),
+        Binding("3", "switch_mode('events')", "events"), Binding("4", "switch_mode('log')", "log"),
+        Binding("a", "submit", "submit"),
         Binding("s", "command('start')", "start"), Binding("p", "command('pause')", "pause"),
         Binding("r", "command('resume')", "resume"), Binding("x", "command('stop')", "stop"),
-        Binding("o", "command('overrides')", "override"), Binding("question_mark", "help", "keys"),
+        Binding("question_mark", "help", "keys"),
+        Binding("o", "command('overrides')", "override", show=False),
+        Binding("e", "preheat", "preheat", show=False),
         Binding("q", "quit", "quit", show=False), Binding("f", "command('rtf')", "sim speed", show=False),
         Binding("v", "command('recover')", "recover", show=False),
         Binding("h", "command('home')", "home", show=False),
@@ -83,16 +101,19 @@ class FabricConsole(App):
     jobs: reactive[list] = reactive(list, always_update=True)
     reply: reactive[Any] = reactive(None, always_update=True)
     last_event: reactive[Any] = reactive(None, always_update=True)
+    log_entry: reactive[str] = reactive("", always_update=True)   # the newest line of the log
 
     def __init__(self, client: Client | None, cell_config: str | None = None, files_root: Path | None = None,
                  wall_clock: Callable[[], float] = time.time,
-                 monotonic_clock: Callable[[], float] = time.monotonic) -> None:
+                 monotonic_clock: Callable[[], float] = time.monotonic, state_path: Path | None = None) -> None:
         super().__init__()
         self.client = client
         self.cell_config = cell_config
-        self.files_root = files_root or Path.cwd()
+        self.state_path = state_path
+        self.files_root = files_root or self._remembered_folder() or Path.cwd()
         self.wall_clock, self.monotonic_clock = wall_clock, monotonic_clock
         self.link: CellLink | None = None
+        self.log_lines: deque[str] = deque(maxlen=LOG_LINES)
         self._toolpath_id = ""
 
     # --- life ---------------------------------------------------------------------------
@@ -115,7 +136,7 @@ class FabricConsole(App):
         self.cell = client.keys.cell
         self.sub_title = f"cell {self.cell}"
         self.station_state = self.pose = self.extrusion = self.temps = self.toolpath = None
-        self.alive, self.jobs, self._toolpath_id = {}, [], ""
+        self.alive, self.degraded, self.jobs, self._toolpath_id = {}, {}, [], ""
         self.link = CellLink(client, self.post_message)
         self.link.open()
 
@@ -138,6 +159,32 @@ class FabricConsole(App):
             return
         self.post_message(LimitsReady(model["joint_names"], model["lower_deg"], model["upper_deg"]))
 
+    # --- what the console remembers between runs --------------------------------------------
+
+    def _remembered(self) -> dict[str, Any]:
+        if self.state_path is None:
+            return {}
+        try:
+            data = json.loads(self.state_path.read_text())
+        except (OSError, ValueError):
+            return {}
+        return data if isinstance(data, dict) else {}
+
+    def _remembered_folder(self) -> Path | None:
+        folder = self._remembered().get("last_folder")
+        return Path(folder) if isinstance(folder, str) and Path(folder).is_dir() else None
+
+    def remember_folder(self, folder: Path) -> None:
+        """The folder a file was last picked in: the file picker opens there next time (and next run)."""
+        self.files_root = folder
+        if self.state_path is None:
+            return
+        try:
+            self.state_path.parent.mkdir(parents=True, exist_ok=True)
+            self.state_path.write_text(json.dumps({**self._remembered(), "last_folder": str(folder)}))
+        except OSError as err:               # not worth more than a line in the log
+            self.add_log(f"could not remember the folder ({err})")
+
     # --- messages up ----------------------------------------------------------------------
 
     def on_telemetry(self, msg: Telemetry) -> None:
@@ -154,6 +201,8 @@ class FabricConsole(App):
             self.temps = p
         elif msg.topic == "events":
             self.last_event = p
+            where = f" layer {p.layer + 1}" if p.layer >= 0 else ""
+            self.add_log(f"event #{p.seq} {p.kind}{where}  {event_data_text(p.data)}".rstrip())
             severity = EVENT_TOASTS.get(p.kind)
             if severity:
                 why = p.data.get("reason", "") if isinstance(p.data, dict) else ""
@@ -169,6 +218,7 @@ class FabricConsole(App):
                 if rec.state == "failed" and old.state != "failed":
                     self.notify(f"{rec.filename}: {rec.reason or rec.stage}", title=f"job {rec.job_id} failed",
                                 severity="error", timeout=10)
+                    self.add_log(f"job {rec.job_id} failed: {rec.reason or rec.stage}")
                 jobs[i] = rec
                 self.jobs = jobs
                 return
@@ -207,15 +257,25 @@ class FabricConsole(App):
         self.push_screen(CellsDialog(msg.cells, self.cell), chosen)
 
     def show_reply(self, command: str, ok: bool, text: str, severity: SeverityLevel | Literal[""] = "") -> None:
-        """The reply stays on the reply line; a refusal or a failure is also a toast."""
+        """The reply stays on the reply line (every screen has one) and goes to the log; no toast, which would
+        cover the reply line or a dialog's buttons."""
         self.reply = (command, ok, text)
-        if not ok or severity in ("error", "warning"):
-            self.notify(text, title=command, severity=severity or "error", timeout=8)
+        self.add_log(f"{command}: {'' if ok else 'REFUSED '}{text}")
+
+    def add_log(self, line: str) -> None:
+        stamped = f"{time.strftime('%H:%M:%S', time.localtime(self.wall_clock()))} {line}"
+        self.log_lines.append(stamped)
+        self.log_entry = stamped
 
     # --- commands ---------------------------------------------------------------------------
 
     def action_command(self, name: str) -> None:
         cmd = COMMANDS[name]
+        st = self.station_state
+        why = refusal(cmd, st.state if st is not None else None)
+        if why:                                  # not asked first only to be refused after
+            self.show_reply(name, False, why)
+            return
 
         def ask_values(_: object = True) -> None:
             if not cmd.asks:
@@ -264,9 +324,16 @@ class FabricConsole(App):
             severity = "warning"
         self.post_message(Reply(name, True, line, report if cmd.report else "", severity))
 
+    def action_preheat(self) -> None:
+        def chosen(preset: Preset | None) -> None:
+            if preset is not None:
+                self.run_command("overrides", {"nozzle_c": preset.nozzle_c, "bed_c": preset.bed_c})
+        self.push_screen(PreheatDialog(PRESETS), chosen)
+
     @work(thread=True, group="commands")
     def run_call(self, label: str, fn: Callable[[Client], Any], refresh_jobs: bool = False) -> None:
-        """A job command (``fn(client)``), answered on the reply line."""
+        """A job command (``fn(client)``), answered on the reply line; ``refresh_jobs``: read the job list after
+        (the ``jobs`` stream carries changed records, not removed ones)."""
         if self.client is None:
             return
         try:
@@ -278,13 +345,26 @@ class FabricConsole(App):
         self.post_message(Reply(label, True, text))
         if isinstance(result, s.JobList):
             self.post_message(JobsListed(self.cell, result.jobs))
-        elif refresh_jobs and self.link is not None:
-            self.link.refresh_jobs()
+        elif refresh_jobs:
+            self._list_jobs()
+
+    def forget_job(self, job_id: str) -> None:
+        """A job removed: off the screens at once (the list read next confirms it)."""
+        self.jobs = [r for r in self.jobs if r.job_id != job_id]
 
     @work(thread=True, group="jobs")
     def refresh_jobs(self) -> None:
-        if self.link is not None:
-            self.link.refresh_jobs()
+        self._list_jobs()
+
+    def _list_jobs(self) -> None:
+        """Ask the supervisor for the job list (blocking: from a thread)."""
+        client = self.client
+        if client is None:
+            return
+        try:
+            self.post_message(JobsListed(client.keys.cell, client.jobs().jobs))
+        except FabricError as err:
+            self.post_message(Reply("jobs", False, f"[{err.code}] {err.message}"))
 
     # --- jobs, cells, help ---------------------------------------------------------------------
 
@@ -303,7 +383,12 @@ class FabricConsole(App):
             except FabricError as err:
                 self.post_message(Reply("submit", False, f"slicer: {err.message} (G-code still works)"))
         self.call_from_thread(self.push_screen, SubmitDialog(self.files_root, backends, profiles),
-                              lambda choice: choice is not None and self.submit(choice))
+                              self._submit_chosen)
+
+    def _submit_chosen(self, choice: SubmitChoice | None) -> None:
+        if choice is not None:
+            self.remember_folder(choice.path.parent)
+            self.submit(choice)
 
     @work(thread=True, group="submit")
     def submit(self, choice: SubmitChoice) -> None:
@@ -318,8 +403,28 @@ class FabricConsole(App):
             self.post_message(Reply("submit", False, getattr(err, "message", str(err))))
             return
         self.post_message(Reply("submit", True, f"job {acc.job_id} queued: {choice.path.name}"))
-        if self.link is not None:
-            self.link.refresh_jobs()
+        self._list_jobs()
+
+    @work(thread=True, group="submit")
+    def reprint(self, rec: s.JobRecord) -> None:
+        """Print a job's file again, as a new job with its settings (the supervisor keeps the file it was
+        submitted with as long as its store has room)."""
+        if self.client is None:
+            return
+        try:
+            art = self.client.artifact("supervisor", rec.model_id, timeout=30.0)
+            acc = self.client.submit(s.JobSubmit(model=art.data, filename=rec.filename, source=rec.source,
+                                                 profile=rec.profile or "taz-pla-medium",
+                                                 backend=rec.backend or "builtin", overrides=dict(rec.overrides),
+                                                 start=rec.start, rtf=rec.rtf,
+                                                 filament_diameter_mm=rec.filament_diameter_mm))
+        except FabricError as err:
+            why = "the file is no longer kept: submit it again (a)" if err.code == "not_found" else err.message
+            self.post_message(Reply("print again", False, f"job {rec.job_id}: {why}"))
+            return
+        self.post_message(Reply("print again", True, f"job {acc.job_id} queued: {rec.filename} again "
+                                                     f"(as job {rec.job_id})"))
+        self._list_jobs()
 
     @work(thread=True, group="cells")
     def action_cells(self) -> None:

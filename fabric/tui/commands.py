@@ -8,7 +8,8 @@ from typing import Any
 from fabric import schemas as s
 from fabric.client import Client
 
-__all__ = ["Command", "COMMANDS", "Bound", "OVERRIDE_BOUNDS", "RTF_BOUND", "LAYER_BOUND", "describe"]
+__all__ = ["Command", "COMMANDS", "Bound", "OVERRIDE_BOUNDS", "RTF_BOUND", "LAYER_BOUND", "PRESETS", "Preset",
+           "describe", "refusal"]
 
 
 @dataclass(frozen=True)
@@ -27,14 +28,17 @@ class Bound:
 # Bounds as the station's schemas declare them (fabric.schemas.station: Overrides, StartRequest).
 OVERRIDE_BOUNDS = (Bound("speed_r", "speed", 0.05, 4.0, "x"), Bound("flow_r", "flow", 0.0, 4.0, "x"),
                    Bound("nozzle_c", "nozzle", 0.0, 500.0, "C"), Bound("bed_c", "bed", 0.0, 200.0, "C"))
-RTF_BOUND = Bound("rtf", "real-time factor (0 = max)", 0.0, 1e6, "x")
-LAYER_BOUND = Bound("layer", "from layer (1 = first)", 1, 1_000_000, "", integer=True)
+RTF_BOUND = Bound("rtf", "sim speed", 0.0, 1e6, "x real time, 0 = max")
+LAYER_BOUND = Bound("layer", "from layer", 1, 1_000_000, "1 = first", integer=True)
+STILL = ("idle", "ready", "stopped", "fault")           # station states in which the robot may be moved
 
 
 @dataclass(frozen=True)
 class Command:
     """``call(client, values)`` runs it; ``confirm`` (a question) guards destructive ones; ``asks``
-    are the values a dialog collects first; ``report``: the answer is shown whole in a dialog."""
+    are the values a dialog collects first; ``report``: the answer is shown whole in a dialog.
+    ``states``: the station states it makes sense in; in another one the console says so at once,
+    rather than asking first and being refused after (the station still decides)."""
 
     name: str
     label: str
@@ -42,6 +46,7 @@ class Command:
     confirm: str = ""
     asks: tuple[Bound, ...] = field(default=())
     report: bool = False
+    states: tuple[str, ...] = ()
 
 
 def _layer(values: dict[str, Any]) -> int:
@@ -60,14 +65,43 @@ COMMANDS: dict[str, Command] = {c.name: c for c in (
     Command("resume", "resume", lambda c, v: c.resume(rtf=v.get("rtf")), asks=(RTF_BOUND,)),
     Command("recover", "recover", lambda c, v: c.recover(rtf=v.get("rtf"), from_layer=_layer(v)),
             asks=(LAYER_BOUND, RTF_BOUND)),
-    Command("stop", "stop", lambda c, v: c.stop(), confirm="Stop the print? It cannot be resumed."),
-    Command("home", "home", lambda c, v: c.home(), confirm="Move the robot home (collision-checked joint move)?"),
-    Command("calibrate", "calibrate", lambda c, v: c.calibrate(),
-            confirm="Probe the plate and replace the work object?", report=True),
+    Command("stop", "stop", lambda c, v: c.stop(), states=("printing", "paused"),
+            confirm="Stop the print? The extruder and the heaters go off and the robot moves clear; the part stays "
+                    "on the plate. A stopped print is not resumed, but it can be restarted at a layer "
+                    "(s, then the layer)."),
+    Command("home", "home", lambda c, v: c.home(), states=STILL,
+            confirm="Move the robot home (a collision-checked joint move)?"),
+    Command("calibrate", "calibrate", lambda c, v: c.calibrate(), states=STILL,
+            confirm="Probe the plate and replace the work object? A loaded program is unloaded (plan it again).",
+            report=True),
     Command("overrides", "overrides", lambda c, v: c.overrides(**v), asks=OVERRIDE_BOUNDS),
     Command("rtf", "sim speed", lambda c, v: c.set_rtf(v["rtf"]),
             asks=(Bound("rtf", RTF_BOUND.label, RTF_BOUND.lo, RTF_BOUND.hi, "x", optional=False),)),
 )}
+
+
+@dataclass(frozen=True)
+class Preset:
+    """Set points of a material, for preheating (0 = heater off)."""
+
+    name: str
+    nozzle_c: float
+    bed_c: float
+
+
+PRESETS = (Preset("PLA", 215.0, 60.0), Preset("PETG", 240.0, 80.0), Preset("ABS", 250.0, 100.0),
+           Preset("TPU", 225.0, 50.0), Preset("cool down", 0.0, 0.0))
+
+
+def refusal(cmd: Command, state: str | None) -> str:
+    """Why ``cmd`` is not asked for in station state ``state`` ("" when it is, or the state is not known)."""
+    if not cmd.states or state is None or state in cmd.states:
+        return ""
+    if cmd.name == "stop":
+        return f"nothing to stop: the station is {state}"
+    why = "stop the print first (x)" if state in ("printing", "paused") else (
+        "recover it first (v)" if state == "interrupted" else "wait until it has stopped moving")
+    return f"cannot {cmd.label} while {state}: {why}"
 
 
 def describe(name: str, result: Any) -> tuple[str, str]:

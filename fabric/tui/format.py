@@ -4,6 +4,7 @@ from __future__ import annotations
 import time
 
 from fabric import schemas as s
+from fabric.printjobs.history import duration_text, override_lines, segment_lines
 
 __all__ = ["duration_text", "eta_text", "layer_text", "job_outcome", "job_report", "STATE_STYLE"]
 
@@ -12,30 +13,22 @@ STATE_STYLE = {"idle": "white on grey23", "ready": "black on green", "printing":
                "fault": "bold white on red", "interrupted": "bold white on red"}
 
 
-def duration_text(seconds: float) -> str:
-    """``42s``, ``3m12s``, ``2h05m``."""
-    seconds = max(0.0, float(seconds))
-    if seconds < 60:
-        return f"{seconds:.0f}s"
-    if seconds < 3600:
-        return f"{int(seconds // 60)}m{int(seconds % 60):02d}s"
-    return f"{int(seconds // 3600)}h{int(seconds % 3600 // 60):02d}m"
-
-
 def layer_text(st: s.StationState) -> str:
     """Layer n/N as people count (the wire's layer is 0-based, -1 before the first)."""
     return f"layer {st.layer + 1 if st.layer >= 0 else 0}/{st.layers_total}"
 
 
 def eta_text(st: s.StationState, now_s: float) -> str:
-    """Wall-clock time the print ends at the current real-time factor (``now_s``: the wall clock)."""
+    """When the print ends, always on the wall clock (``now_s``) at the current real-time factor: the time of day
+    while printing, how long it will take once resumed while paused; at max speed there is no wall-clock time to
+    say (the simulation runs as fast as the host can)."""
     if st.state not in ("printing", "paused", "moving") or st.total_s <= 0:
         return ""
-    if st.state == "paused":
-        return f"{duration_text(st.remaining_s)} left (paused)"
     if st.rtf == 0:
-        return f"{duration_text(st.remaining_s)} sim left, ETA: at max speed"
+        return "at max speed"
     wall_s = st.remaining_s / st.rtf
+    if st.state == "paused":
+        return f"paused: {duration_text(wall_s)} to go once resumed"
     return f"ETA {time.strftime('%H:%M:%S', time.localtime(now_s + wall_s))} (in {duration_text(wall_s)})"
 
 
@@ -61,6 +54,14 @@ def job_report(rec: s.JobRecord) -> str:
         p = rec.plan
         lines.append(f"plan      {p.layers} layers, {p.moves} moves, {p.extruded_mm3:.0f} mm3, "
                      f"estimate {duration_text(p.estimate_s)}")
+        lines.append(f"filament  {p.filament_diameter_mm:g} mm ({p.material_source})"
+                     + (f", {p.material}" if p.material else ""))
+    if rec.segments:
+        lines.append("runs")
+        lines += [f"  {line}" for line in segment_lines(rec)]
+    if rec.live_overrides:
+        lines.append("overrides")
+        lines += [f"  {line}" for line in override_lines(rec)]
     if rec.collisions is not None:
         c, hit = rec.collisions, rec.collisions.first_hit
         if c.collision_free:

@@ -143,6 +143,13 @@ def zenoh_config(st: SessionSettings) -> zenoh.Config:
     """Build the ``zenoh.Config`` (file first, then flags on top)."""
     conf = zenoh.Config.from_file(st.config_file) if st.config_file else zenoh.Config()
     conf.insert_json5("mode", json.dumps(st.mode))
+    if st.mode == "client":
+        # A client (fabric-cli, the console, a monitor) sends without a shared-memory pool of its own. Zenoh's
+        # transport optimisation gives every sending process a 16 MB pool that each receiving process maps and
+        # never unmaps: a planner took 32 MB more with every `fabric-cli plan` that uploaded to it. Clients
+        # come and go, so they send over the socket (a 4 MB upload piece costs ~2 ms); they still read replies
+        # from a service's pool, and services (long-lived, a few) keep theirs.
+        conf.insert_json5("transport/shared_memory/transport_optimization/enabled", "false")
     conf.insert_json5("scouting/multicast/enabled", json.dumps(st.multicast))
     conf.insert_json5("scouting/gossip/enabled", json.dumps(st.gossip))
     if not st.config_file or st.lease_ms != DEFAULT_LEASE_MS:

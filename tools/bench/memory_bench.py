@@ -163,8 +163,7 @@ def _run_plans(path: Path, tmp: Path, repeat: int, tag: str) -> dict:
             out = tmp / f"out-{tag}.csv"
             sampler.mark()
             t0 = time.perf_counter()
-            r = subprocess.run(_plan_cmd(path, out, client_args), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                               timeout=3600)
+            r = subprocess.run(_plan_cmd(path, out, client_args), capture_output=True, timeout=3600)
             wall = time.perf_counter() - t0
             if r.returncode != 0:
                 raise RuntimeError(f"plan failed ({r.returncode}): {r.stderr.decode()[-2000:]}")

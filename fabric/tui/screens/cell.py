@@ -56,7 +56,8 @@ class CellScreen(Screen):
         self.watch(app, "degraded", self._on_degraded)
         self.watch(app, "toolpath", lambda tp: setattr(self.query_one(ToolpathView), "toolpath", tp))
         self.watch(app, "limits", lambda lim: setattr(self.query_one(JointsPanel), "limits", lim))
-        self.watch(app, "reply", self._on_reply)
+        self.watch(app, "reply", self.query_one(ReplyLine).show)
+        self.watch(app, "cell", lambda cell: setattr(self.query_one(TempsPanel), "cell", cell))
 
     def on_resize(self, event: Resize) -> None:
         self.set_class(event.size.width >= WIDE_COLS and event.size.height >= WIDE_ROWS, "wide")
@@ -91,8 +92,3 @@ class CellScreen(Screen):
     def _on_alive(self, alive: dict) -> None:
         self.query_one(StateBanner).alive = dict(alive)
         self.query_one(ExtruderPanel).alive = dict(alive)
-
-    def _on_reply(self, reply: Any) -> None:
-        if reply is not None:
-            line = self.query_one(ReplyLine)
-            line.command, line.ok, line.text = reply

@@ -12,6 +12,7 @@ from textual.widgets import DataTable, Footer, Header, Input, Label, Select
 
 from fabric import schemas as s
 from fabric.sim.types import EVENT_KINDS
+from fabric.tui.widgets.reply_line import ReplyLine
 from fabric.wire.errors import FabricError
 
 if TYPE_CHECKING:
@@ -45,12 +46,14 @@ class EventsScreen(Screen):
             yield Input(placeholder="/ search (kind, reason, any data)", id="events-search")
         yield Label("", id="events-count")
         yield DataTable(id="events-table", cursor_type="row", zebra_stripes=True)
+        yield ReplyLine(id="reply")
         yield Footer(compact=True)
 
     def on_mount(self) -> None:
         self.query_one(DataTable).add_columns("seq", "t_sim s", "kind", "layer", "line", "data")
         self.watch(self.app, "last_event", self._on_event, init=False)
         self.watch(self.app, "cell", self._on_cell)
+        self.watch(self.app, "reply", self.query_one(ReplyLine).show)
 
     def _on_cell(self, _cell: str) -> None:
         self.load(self.kind)            # the console switched cells: that cell's history

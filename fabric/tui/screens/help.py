@@ -1,4 +1,4 @@
-"""Every key of the console, in one dialog."""
+"""Every key of the console, in one dialog (lines short enough for an 80-column terminal)."""
 from __future__ import annotations
 
 from textual.app import ComposeResult
@@ -8,16 +8,19 @@ from textual.screen import ModalScreen
 from textual.widgets import Label, Static
 
 KEYS = """\
-1 cell   2 jobs   3 events   g cells on the fabric   ? this help   q quit
-
-station   s start (layer, rtf)   p pause   r resume   v recover (after a crash)
-          x stop*   h home*   k calibrate*   (* asks first)
-          o overrides (speed, flow, nozzle, bed)   f simulation speed (rtf)
-          y ready?   c collisions   w position   t time
-
-jobs      a submit a file   n next job (plate clear)   del remove*
-          [ / ] move up / down in the queue   enter the whole record
-events    / search   pick a kind in the list   live events are added as they come"""
+screens   1 cell  2 jobs  3 events  4 log   g other cells
+          ? keys  q or ctrl+c quit
+start     a submit a file (the bundled samples are listed there)
+          e preheat (PLA, PETG, ABS, TPU, cool down)
+print     s start (a layer, sim speed)  p pause  r resume
+          x stop*  v recover (after a crash)
+          o overrides (speed, flow, nozzle, bed)  f sim speed
+robot     h home*  k calibrate*
+ask       y ready?  c collisions  w position  t time
+jobs      n next job (plate clear?)*  del remove*  R print again
+          [ ] move in the queue  enter the whole record
+events    / search  pick a kind in the list
+                                             * asks first"""
 
 
 class HelpDialog(ModalScreen[None]):

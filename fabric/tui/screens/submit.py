@@ -1,5 +1,5 @@
-"""Submit a print job: a model (STL, 3MF, OBJ) or G-code from a file picker, with the slicer's back-ends and
-profiles."""
+"""Submit a print job: a model (STL, 3MF, OBJ) or G-code from a file picker or the bundled samples, with the
+slicer's back-ends and profiles."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -12,7 +12,10 @@ from textual.screen import ModalScreen
 from textual.validation import Number
 from textual.widgets import Button, Checkbox, DirectoryTree, Input, Label, Select
 
+from fabric.samples import samples
 from fabric.tui.widgets.model_tree import PRINTABLE_SUFFIXES, ModelTree
+
+DEFAULT_RTF = 1.0          # the real-time factor when the field is left empty (real time)
 
 
 @dataclass(frozen=True)
@@ -34,24 +37,26 @@ class SubmitDialog(ModalScreen[SubmitChoice | None]):
         self.root = root
         self.backends = {name: version for name, version in backends.items() if version} or {"builtin": "?"}
         self.profiles = profiles or ["taz-pla-medium"]
+        self.samples = {str(x.path): x for x in samples()}
 
     def compose(self) -> ComposeResult:
         with Vertical(classes="dialog", id="submit-dialog"):
-            yield Label("Submit a print job (STL, 3MF, OBJ or G-code)", classes="dialog-title")
+            yield Label("Submit a print job: an STL, 3MF, OBJ or G-code file", classes="dialog-title")
             yield ModelTree(self.root, id="submit-tree")
-            yield Input(placeholder="file path (or pick one above)", id="submit-path")
+            yield Input(placeholder="file path (pick one above, or a sample below)", id="submit-path")
             with Horizontal(classes="field"):
+                yield Select([(f"{x.name} ({x.size_mm[2]:.0f} mm)", key) for key, x in self.samples.items()],
+                             prompt="samples", id="submit-sample")
                 yield Select([(f"{n} {v}", n) for n, v in self.backends.items()], value=next(iter(self.backends)),
                              allow_blank=False, id="submit-backend")
                 yield Select([(p, p) for p in self.profiles], value=self.profiles[0], allow_blank=False,
                              id="submit-profile")
             with Horizontal(classes="field"):
-                yield Checkbox("start when loaded", value=True, id="submit-start")
-                yield Label("rtf", classes="field-label")
-                yield Input(placeholder="0..1e6, 0 = max, empty = 1", id="submit-rtf",
+                yield Checkbox("start once loaded", value=True, id="submit-start")
+                yield Input(placeholder=f"sim speed (0 = max, empty = {DEFAULT_RTF:g})", id="submit-rtf",
                             validators=[Number(minimum=0, maximum=1e6)], type="number", valid_empty=True)
-            yield Label("", id="submit-error", classes="error")
             with Horizontal(classes="dialog-buttons"):
+                yield Label("", id="submit-error", classes="error")
                 yield Button("Cancel", id="cancel")
                 yield Button("Submit", id="submit", variant="primary")
 
@@ -60,6 +65,10 @@ class SubmitDialog(ModalScreen[SubmitChoice | None]):
 
     def on_directory_tree_file_selected(self, event: DirectoryTree.FileSelected) -> None:
         self.query_one("#submit-path", Input).value = str(event.path)
+
+    def on_select_changed(self, event: Select.Changed) -> None:
+        if event.select.id == "submit-sample" and isinstance(event.value, str):
+            self.query_one("#submit-path", Input).value = event.value
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         self.submit()
@@ -77,10 +86,12 @@ class SubmitDialog(ModalScreen[SubmitChoice | None]):
             error.update(f"pick a file ({', '.join(PRINTABLE_SUFFIXES)})")
             return
         rtf_in = self.query_one("#submit-rtf", Input)
-        checked = rtf_in.validate(rtf_in.value)
+        raw = rtf_in.value.strip()
+        checked = rtf_in.validate(raw)          # None: empty (allowed), or no validator
         if checked is not None and not checked.is_valid:
-            error.update("the real-time factor is 0..1e6 (0 = as fast as possible)")
+            error.update("the sim speed is 0..1e6 x real time (0 = as fast as possible)")
             return
         self.dismiss(SubmitChoice(path, str(self.query_one("#submit-backend", Select).value),
                                   str(self.query_one("#submit-profile", Select).value),
-                                  self.query_one("#submit-start", Checkbox).value, float(rtf_in.value or 1.0)))
+                                  self.query_one("#submit-start", Checkbox).value,
+                                  float(raw) if raw else DEFAULT_RTF))

@@ -43,6 +43,10 @@ class StateBanner(Static):
                 word, style, why = "HEATING", "black on yellow", f"waiting for {heating} before printing"
             elif st.state == "paused" and ("interlock" in why.lower() or "prevented" in why.lower()):
                 word, style = "INTERLOCK", "bold white on dark_orange3"
+            elif st.state == "idle" and not st.program_id:       # the first thing a new operator reads
+                why = (why + ": " if why else "") + "no program; a submits a file (the samples are listed there)"
+                if not st.plate_clear:
+                    why += f"; the plate holds a part ({st.plate_mm3:.0f} mm3)"
         text = Text(f" {word} ", style=f"{style} bold")
         if why:
             text.append(f" {why}")

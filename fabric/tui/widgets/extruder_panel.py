@@ -32,10 +32,15 @@ class ExtruderPanel(Static):
             out.append(f"speed x{st.speed_r:.2f}  flow x{st.flow_r:.2f}  rtf {rtf}\n")
             out.append(f"deposited {st.deposited_mm3:.0f}/{st.planned_mm3:.0f} mm3\n")
         sick = []
-        for name in SERVICES:
+        width, used = max(self.content_size.width, 20), 0
+        for name in SERVICES:                    # whole names, on as many lines as the width needs
             up, why = self.alive.get(name), self.degraded.get(name)
             style = "red" if not up else ("yellow" if why else "green")
-            out.append("●" if up else "○", style=style).append(f"{name[:5]} ")
+            if used and used + len(name) + 2 > width:
+                out.append("\n")
+                used = 0
+            out.append("●" if up else "○", style=style).append(f"{name} ")
+            used += len(name) + 2
             if up and why:
                 sick.append(f"{name}: {why[0]}")
         for line in sick:

@@ -24,7 +24,7 @@ class JobProgress(Static):
     def render(self) -> Text:
         st = self.state
         if st is None or (st.layers_total == 0 and st.total_s == 0):
-            return Text(" no program loaded", style="dim")
+            return Text(" no program loaded · a submit a file · e preheat · 2 jobs · ? every key", style="dim")
         tail = f" {layer_text(st)}  {100 * st.progress_r:5.1f} %  {eta_text(st, self.clock())}".rstrip()
         bar_w = max(10, self.size.width - len(tail) - 1)
         done = int(round(bar_w * st.progress_r))

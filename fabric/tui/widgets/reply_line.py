@@ -1,5 +1,7 @@
-"""The last command and what it answered: stays on screen until the next one."""
+"""The last command and what it answered: stays on screen until the next one (every screen has it)."""
 from __future__ import annotations
+
+from typing import Any
 
 from rich.text import Text
 from textual.reactive import reactive
@@ -7,15 +9,20 @@ from textual.widgets import Static
 
 
 class ReplyLine(Static):
-    """Attributes: ``command``, ``text`` and ``ok`` of the last reply."""
+    """Attributes: ``command``, ``text`` and ``ok`` of the last reply (``show`` sets them from the console's
+    ``reply``)."""
 
     command: reactive[str] = reactive("")
     text: reactive[str] = reactive("")
     ok: reactive[bool] = reactive(True)
 
+    def show(self, reply: Any) -> None:
+        if reply is not None:
+            self.command, self.ok, self.text = reply
+
     def render(self) -> Text:
         if not self.command:
-            return Text(" ? keys  1 cell  2 jobs  3 events  g cells", style="dim")
+            return Text(" replies to commands show here; 4: the log of every reply and event", style="dim")
         out = Text(f" {self.command} ", style="bold black on green" if self.ok else "bold white on red")
         out.append(f" {self.text}")
         out.no_wrap, out.overflow = True, "ellipsis"

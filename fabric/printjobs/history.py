@@ -1,0 +1,58 @@
+"""A job's print history in words: its segments (each run of the print) with their totals, and the overrides set
+while it printed. Pure functions of the record, shared by ``fabric-cli job show`` and the console."""
+from __future__ import annotations
+
+import time
+
+from fabric import schemas as s
+
+__all__ = ["duration_text", "segment_lines", "override_lines"]
+
+def duration_text(seconds: float) -> str:
+    """``42s``, ``3m12s``, ``2h05m``."""
+    seconds = max(0.0, float(seconds))
+    if seconds < 60:
+        return f"{seconds:.0f}s"
+    if seconds < 3600:
+        return f"{int(seconds // 60)}m{int(seconds % 60):02d}s"
+    return f"{int(seconds // 3600)}h{int(seconds % 3600 // 60):02d}m"
+
+
+def _clock(t_s: float) -> str:
+    return time.strftime("%H:%M:%S", time.localtime(t_s)) if t_s else "-"
+
+
+def segment_lines(rec: s.JobRecord) -> list[str]:
+    """One line per run of the print, then the totals when there is more than one::
+
+        1 22:00:00 start    layers 1-25   16m20s  3900 mm3  stopped (1 pause)
+        2 22:20:00 restart  layers 25-40  10m07s  2629 mm3  finished
+          in all 2 runs                   26m27s  6529 mm3  15m00s wall
+    """
+    lines = []
+    for i, seg in enumerate(rec.segments, 1):
+        first = seg.from_layer + 1 if seg.began != "start" else 1
+        layers = f"layers {first}-{seg.last_layer + 1}" if seg.last_layer >= 0 else "no layer yet"
+        notes = [f"{seg.pauses} pause{'s' if seg.pauses != 1 else ''}"] if seg.pauses else []
+        if seg.reason and seg.ended in ("failed", "interrupted"):
+            notes.append(seg.reason)
+        ended = (seg.ended or "running") + (f" ({', '.join(notes)})" if notes else "")
+        lines.append(f"{i} {_clock(seg.started_s)} {seg.began:<8} {layers:<13} {duration_text(seg.sim_s):>6}  "
+                     f"{seg.deposited_mm3:.0f} mm3  {ended}")
+    if len(rec.segments) > 1:
+        lines.append(f"  {'in all ' + str(len(rec.segments)) + ' runs':<31} {duration_text(rec.sim_elapsed_s):>6}  "
+                     f"{rec.deposited_mm3:.0f} mm3  {duration_text(rec.wall_elapsed_s)} wall")
+    return lines
+
+
+def override_lines(rec: s.JobRecord) -> list[str]:
+    """One line per override set while the job printed (``10:05:40 layer 3: speed x1.50, flow x1.10``)."""
+    lines = []
+    for o in rec.live_overrides:
+        parts = [f"speed x{o.speed_r:.2f}" if o.speed_r is not None else "",
+                 f"flow x{o.flow_r:.2f}" if o.flow_r is not None else "",
+                 f"nozzle {o.nozzle_c:.0f} C" if o.nozzle_c is not None else "",
+                 f"bed {o.bed_c:.0f} C" if o.bed_c is not None else ""]
+        where = f"layer {o.layer + 1}" if o.layer >= 0 else "before the first layer"
+        lines.append(f"{_clock(o.wall_s)} {where}: " + ", ".join(p for p in parts if p))
+    return lines
