@@ -331,11 +331,19 @@ def test_submit_infers_the_source_and_runs_at_real_time_and_job_next_honours_sta
     # the second job waits for the plate; job next loads it and, as it was submitted without start, no more
     second = client.jobs().jobs[-1]
     second = client.wait_print_job(second.job_id, lambda r: r.waiting_for == "plate", timeout=120)
-    ack = client.job_next()
-    assert second.job_id in ack.message and "fabric-cli start" in ack.message, ack.message
-    after = client.job(second.job_id)
-    assert after.state == "loaded" and not after.start
-    assert client.state().state == "ready"
+    events = client.subscribe("station", "events")
+    try:
+        ack = client.job_next()
+        assert second.job_id in ack.message and "fabric-cli start" in ack.message, ack.message
+        after = client.wait_print_job(second.job_id, lambda r: r.state == "loaded", timeout=60)
+        assert not after.start
+        with pytest.raises(queue.Empty):                 # a start would come right after the load: none comes
+            while True:
+                ev = events.get(timeout=1.0)
+                assert not (ev.kind == "started" and ev.data.get("job_id") == second.job_id), ev
+    finally:
+        events.close()
+    assert client.state().state == "ready" and client.job(second.job_id).state == "loaded"
 
 
 def test_unknown_commands_and_cells_get_a_typed_answer_within_the_timeout(cell_in_process, settings):

@@ -155,6 +155,9 @@ async def submit_dialog(pilot) -> None:
     await pilot.press("a")
     while not isinstance(pilot.app.screen, SubmitDialog) or not pilot.app.screen.query("#submit-sample"):
         await pilot.pause(0.05)
+    tree = pilot.app.screen.query_one("#submit-tree")
+    while len(tree.root.children) < 2:                  # the folder is read in a worker
+        await pilot.pause(0.05)
     await pilot.pause(0.3)
 
 

@@ -232,7 +232,7 @@ class Certifier:
         self.clearance, self.clearance_body = float("inf"), ""
         self._placed: object = None
         hit: SweepHit | None = None
-        for a, b in segs.runs(segs.tip_layer):
+        for a, b in segs.runs(self._stretch_keys()):
             last_row = int(segs.row[b - 1])
             count = len(beads) if last_row >= LIVE_ROW else int(np.searchsorted(beads.row, last_row, "left"))
             self.trees.advance(count, int(segs.tip_layer[a]))
@@ -244,6 +244,18 @@ class Certifier:
         return SweepResult(hit is None, self.clearance, self.clearance_body, self.configs, self.pieces, len(segs),
                            len(beads), hit, time.perf_counter() - t0, segs)
 
+    def _stretch_keys(self) -> np.ndarray:
+        """Per segment, what its stretch shares: the tip's layer, and whether that layer's first bead is laid
+        yet (so the nozzle lifting off one layer is not held against the next layer's beads)."""
+        segs, beads = self.segs, self.beads
+        first_row = {}
+        if len(beads):
+            layers, first = np.unique(beads.layer, return_index=True)
+            first_row = dict(zip(layers.tolist(), beads.row[first].tolist(), strict=True))
+        started = np.array([r >= first_row.get(t, LIVE_ROW + 1) for r, t in
+                            zip(segs.row.tolist(), segs.tip_layer.tolist(), strict=True)], dtype=bool)
+        return segs.tip_layer * 2 + started
+
     def _bound(self, lb: float, name: str) -> None:
         if lb < self.clearance:
             self.clearance, self.clearance_body = lb, name
@@ -254,9 +266,8 @@ class Certifier:
         segs = self.segs
         idx = a + np.flatnonzero(~segs.joint[a:b])
         hits: list[SweepHit] = []
-        for tool in self.tools:
-            tip = tool.body.name == TIP
-            res = hull_check(self.bodies, segs, idx, tool, self.trees.tip if tip else self.trees.all)
+        checks = [(tool, self.trees.tip if tool.body.name == TIP else self.trees.all) for tool in self.tools]
+        for (tool, _), res in zip(checks, hull_check(self.bodies, segs, idx, checks), strict=True):
             self.pieces += res.pieces
             self._bound(res.clearance_mm, tool.body.name)
             item = self._body_item(tool.body)

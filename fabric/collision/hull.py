@@ -35,6 +35,7 @@ from fabric.collision.path import Segments
 __all__ = ["ToolCylinder", "HullResult", "hull_check", "CHORD_TARGET_MM", "PIECE_MAX_MM", "GJK_EPS_MM"]
 
 CHORD_TARGET_MM = 0.02       # chord error allowed per piece
+GROUP_RADIUS_MM = 6.0        # consecutive pieces share a cover when they fit this much wider than the tool
 PIECE_MAX_MM = 10.0          # longest piece (the swept cylinder grows by half of it sideways)
 GJK_EPS_MM = 1e-3            # coal's distances are within 1 um (GJK tolerance): bounds give that away
 
@@ -56,20 +57,20 @@ class HullResult:
     pieces: int
 
 
-def hull_check(bodies: RobotBodies, segs: Segments, idx: np.ndarray, tool: ToolCylinder,
-               tree: coal.BroadPhaseCollisionManager) -> HullResult:
-    """Check the swept hulls of ``tool`` along linear segments ``idx`` against ``tree``."""
+def hull_check(bodies: RobotBodies, segs: Segments, idx: np.ndarray,
+               checks: list[tuple[ToolCylinder, coal.BroadPhaseCollisionManager]]) -> list[HullResult]:
+    """Check the swept hulls of each tool along linear segments ``idx`` against its tree."""
     if len(idx) == 0:
-        return HullResult(float("inf"), [], 0)
+        return [HullResult(float("inf"), [], 0) for _ in checks]
     robot = bodies.cell.robot
     dq = segs.dq_abs[idx]
-    chord = bodies.chord_error_mm(dq, tool.body)
+    chord = np.max([bodies.chord_error_mm(dq, tool.body) for tool, _ in checks], axis=0)
     tcp0 = robot.fk(segs.q0[idx])
     tcp1 = robot.fk(segs.q1[idx])
     length = np.linalg.norm(tcp1[:, :3, 3] - tcp0[:, :3, 3], axis=1)
     n = np.maximum(np.ceil(np.sqrt(chord / CHORD_TARGET_MM)), np.ceil(length / PIECE_MAX_MM))
     n = np.maximum(n, 1).astype(np.int64)
-    # the pieces: segment, fractions of it, joints at both ends
+    # the pieces: segment, fractions of it, TCP at both ends
     seg = np.repeat(np.arange(len(idx)), n)
     first = np.repeat(np.cumsum(n) - n, n)
     k = np.arange(len(seg)) - first
@@ -78,12 +79,26 @@ def hull_check(bodies: RobotBodies, segs: Segments, idx: np.ndarray, tool: ToolC
     qb = segs.q0[idx][seg] + (segs.q1[idx] - segs.q0[idx])[seg] * f1[:, None]
     Ta = _fk_reuse(robot, qa, f0 == 0, tcp0[seg])
     Tb = _fk_reuse(robot, qb, f1 == 1, tcp1[seg])
-    error = chord[seg] / n[seg] ** 2                      # chord error scales with the square of the travel
-    centre, axis, radius, half, grow = _cover(Ta, Tb, tool, error)
+    glob = idx[seg]
+    s0 = segs.s0[glob] + (segs.s1[glob] - segs.s0[glob]) * f0
+    s1 = segs.s0[glob] + (segs.s1[glob] - segs.s0[glob]) * f1
+    out = []
+    for tool, tree in checks:
+        error = bodies.chord_error_mm(dq, tool.body)[seg] / n[seg] ** 2    # scales with the travel squared
+        groups, covers = _groups(Ta, Tb, tool, error)
+        clearance, touching = _check_covers(covers, tree)
+        pieces = [i for g in touching for i in range(groups[g], groups[g + 1])]
+        out.append(HullResult(clearance, [(int(glob[i]), float(s0[i]), float(s1[i])) for i in pieces], len(seg)))
+    return out
+
+
+def _check_covers(covers: tuple[np.ndarray, ...], tree: coal.BroadPhaseCollisionManager) -> tuple[float, list[int]]:
+    """(smallest distance of the covers that do not touch ``tree``, indices of those that do)."""
+    centre, axis, radius, half, grow = covers
     objs = []
     mgr = coal.DynamicAABBTreeCollisionManager()
     rot = _rotations_to(axis)
-    for i in range(len(seg)):
+    for i in range(len(centre)):
         geom = coal.Cylinder(float(radius[i] * MM), float(2.0 * half[i] * MM))
         geom.setSweptSphereRadius(float(grow[i] * MM))
         obj = coal.CollisionObject(geom, rot[i], centre[i] * MM)
@@ -106,11 +121,58 @@ def hull_check(bodies: RobotBodies, segs: Segments, idx: np.ndarray, tool: ToolC
         dist = coal.DistanceCallBackDefault()
         tree.distance(mgr, dist)
         clearance = float(dist.data.result.min_distance) / MM - GJK_EPS_MM
-    glob = idx[seg]
-    s0 = segs.s0[glob] + (segs.s1[glob] - segs.s0[glob]) * f0
-    s1 = segs.s0[glob] + (segs.s1[glob] - segs.s0[glob]) * f1
-    out = [(int(glob[i]), float(s0[i]), float(s1[i])) for i in touching]
-    return HullResult(clearance, out, len(seg))
+    return clearance, touching
+
+
+def _groups(Ta: np.ndarray, Tb: np.ndarray, tool: ToolCylinder, error: np.ndarray,
+            ) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
+    """Runs of consecutive pieces under one cover where they fit in a cylinder ``GROUP_RADIUS_MM`` wider
+    than the tool (aligned blocks of 16, else of 4, else one piece): (group edges (G+1,), covers (centre,
+    axis, radius, half, grow))."""
+    ends = np.concatenate([(Ta[:, :3, 3] + Ta[:, :3, 2] * tool.offset_mm)[:, None],
+                           (Tb[:, :3, 3] + Tb[:, :3, 2] * tool.offset_mm)[:, None]], axis=1)   # (n, 2, 3)
+    axes = np.concatenate([Ta[:, None, :3, 2], Tb[:, None, :3, 2]], axis=1)
+    n = len(ends)
+    taken = np.zeros(n, bool)
+    starts, sizes, covers = [], [], []
+    for size in (16, 4, 1):
+        cand = np.arange(0, n - size + 1, size)
+        sel = cand[:, None] + np.arange(size)[None, :]
+        free = ~taken[sel].all(axis=1) if size == 1 else ~taken[sel].any(axis=1)
+        cand, sel = cand[free], sel[free]
+        if len(cand) == 0:
+            continue
+        cover = _cover(ends[sel].reshape(len(cand), 2 * size, 3), axes[sel].reshape(len(cand), 2 * size, 3),
+                       error[sel].max(axis=1), tool)
+        keep = cover[-1] <= GROUP_RADIUS_MM if size > 1 else np.ones(len(cand), bool)
+        starts.append(cand[keep])
+        sizes.append(np.full(int(keep.sum()), size))
+        covers.append(tuple(c[keep] for c in cover[:-1]))
+        taken[sel[keep].ravel()] = True
+    begin, size = np.concatenate(starts), np.concatenate(sizes)
+    order = np.argsort(begin)
+    edges = np.concatenate([begin[order], [n]])
+    assert np.array_equal(edges[1:], (begin + size)[order]), "the groups tile the pieces"
+    return edges, tuple(np.concatenate([c[f] for c in covers])[order] for f in range(5))
+
+
+def _cover(ends: np.ndarray, axes: np.ndarray, error: np.ndarray, tool: ToolCylinder) -> tuple[np.ndarray, ...]:
+    """The cylinder containing the tool's swept volume over a run of pieces (see the module docstring):
+    ``ends`` (G, P, 3) the tool's centre at each piece end, ``axes`` (G, P, 3) its axis there, ``error``
+    (G,) the largest chord error. Returns (centre, axis, radius, half, grow, spread across the axis)."""
+    axis = axes.sum(axis=1)
+    axis /= np.linalg.norm(axis, axis=1)[:, None]
+    turn = np.arccos(np.clip(np.einsum("gpk,gk->gp", axes, axis), -1.0, 1.0)).max(axis=1)
+    along = np.einsum("gpk,gk->gp", ends, axis)
+    lo, hi = along.min(axis=1), along.max(axis=1)
+    across = ends - along[..., None] * axis[:, None, :]
+    mid = (across.min(axis=1) + across.max(axis=1)) / 2.0
+    mid -= np.sum(mid * axis, axis=1)[:, None] * axis                  # onto the plane across the axis
+    spread = np.linalg.norm(across - mid[:, None, :], axis=2).max(axis=1)
+    centre = mid + ((lo + hi) / 2.0)[:, None] * axis
+    rho = float(np.hypot(tool.radius_mm, tool.half_mm))
+    grow = error + rho * turn + GJK_EPS_MM
+    return centre, axis, tool.radius_mm + spread, tool.half_mm + (hi - lo) / 2.0, grow, spread
 
 
 def _fk_reuse(robot, q: np.ndarray, known: np.ndarray, T_known: np.ndarray) -> np.ndarray:
@@ -120,24 +182,6 @@ def _fk_reuse(robot, q: np.ndarray, known: np.ndarray, T_known: np.ndarray) -> n
     if todo.any():
         T[todo] = robot.fk(q[todo])
     return T
-
-
-def _cover(Ta: np.ndarray, Tb: np.ndarray, tool: ToolCylinder, error: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The growing cylinder containing the tool's swept volume between poses Ta and Tb (see module doc)."""
-    aa, ab = Ta[:, :3, 2], Tb[:, :3, 2]
-    ca = Ta[:, :3, 3] + aa * tool.offset_mm
-    cb = Tb[:, :3, 3] + ab * tool.offset_mm
-    mean = aa + ab
-    axis = mean / np.linalg.norm(mean, axis=1)[:, None]
-    v = cb - ca
-    v_par = np.sum(v * axis, axis=1)
-    v_perp = np.linalg.norm(v - v_par[:, None] * axis, axis=1)
-    turn = np.arccos(np.clip(np.sum(aa * ab, axis=1), -1.0, 1.0))
-    rho = float(np.hypot(tool.radius_mm, tool.half_mm))
-    radius = tool.radius_mm + v_perp / 2.0
-    half = tool.half_mm + np.abs(v_par) / 2.0
-    grow = error + rho * turn / 2.0 + GJK_EPS_MM
-    return (ca + cb) / 2.0, axis, radius, half, grow
 
 
 def _rotations_to(axis: np.ndarray) -> np.ndarray:

@@ -24,7 +24,7 @@ from __future__ import annotations
 import mmap
 import os
 import shutil
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -107,7 +107,7 @@ def _mapping(arr: np.ndarray) -> tuple[mmap.mmap, int] | None:
 class MemorySink:
     """Program rows appended in blocks to columns in memory."""
 
-    def __init__(self, rows_hint: int = 0, extra: dict[str, tuple[str, tuple[int, ...]]] | None = None) -> None:
+    def __init__(self, rows_hint: int = 0, extra: Mapping[str, tuple[str, tuple[int, ...]]] | None = None) -> None:
         self.spec = {**COLUMNS, **(extra or {})}
         self._cols = RowColumns(self.spec, rows_hint)
 
@@ -133,7 +133,7 @@ class FileSink:
     """Program rows appended in blocks to one file per column in ``directory`` (created; see the module doc)."""
 
     def __init__(self, directory: str | os.PathLike[str],
-                 extra: dict[str, tuple[str, tuple[int, ...]]] | None = None) -> None:
+                 extra: Mapping[str, tuple[str, tuple[int, ...]]] | None = None) -> None:
         self.dir = Path(directory)
         self.dir.mkdir(parents=True, exist_ok=True)
         self.spec = {**COLUMNS, **(extra or {})}

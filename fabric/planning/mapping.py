@@ -164,7 +164,7 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0, *
     ext = (e > 0) & (seg > 1e-9)
     # the approach lands on row 0's end unless it extrudes (a later chunk starts with an extruding row)
     k0 = 0 if ext[0] or not first else 1
-    first = (tp.start_xyz_mm + off) if k0 == 0 else pts[0]
+    start = (tp.start_xyz_mm + off) if k0 == 0 else pts[0]
     ev_row, ev_op, ev_val, ev_aux, ev_line, n_fan = _events(tp, e, (e < 0) & (seg > 1e-9), opt)
     sl = slice(k0, n)
     m = n - k0
@@ -219,14 +219,14 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0, *
         li = np.flatnonzero(lifted)
         xyz[main[li], 2] += opt.travel_lift_mm
         pi = k0 + ui - 1                          # the point the lift starts from
-        xyz[main[ui] - 1] = np.where((pi >= 0)[:, None], pts[np.maximum(pi, 0)], first[None])
+        xyz[main[ui] - 1] = np.where((pi >= 0)[:, None], pts[np.maximum(pi, 0)], start[None])
         xyz[main[ui] - 1, 2] += opt.travel_lift_mm
         xyz[main[di] + 1] = pts[k0 + di]
     # an event row repeats the pose of the motion row before it (the first point if none)
     prev_pos = np.full(len(slot), -1)
     after = np.flatnonzero(slot > 0)              # events after some toolpath row: that row's move (or down)
     prev_pos[after] = main[slot[after] - 1] + np.isin(slot[after] - 1, di)
-    xyz[ev_pos] = np.where((prev_pos >= 0)[:, None], xyz[np.maximum(prev_pos, 0)], first[None])
+    xyz[ev_pos] = np.where((prev_pos >= 0)[:, None], xyz[np.maximum(prev_pos, 0)], start[None])
     motion = op == MOVEL
     speed_col, line, layer = view["speed_mm_s"], view["gcode_line"], view["layer"]
     t_line, t_layer = tp.line[sl], tp.layer[sl]
@@ -247,5 +247,5 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0, *
     if last:
         zone[-1] = 0.0
     return PrintRows(start=head, stop=head + total, **full,
-                     first_xyz_mm=np.asarray(first, dtype=float).copy(),
+                     first_xyz_mm=np.asarray(start, dtype=float).copy(),
                      first_line=int(tp.line[0]), n_lifts=int(ui.size), n_fan_events=n_fan)

@@ -319,7 +319,8 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
                         sink=MemorySink(rows_hint=2 * len(tp) + 64, extra=_EXTRA), parse_s=parse_s)
 
 
-_EXTRA = {"status": ("u1", ()), "rot_deg": ("f8", ())}     # per-row columns kept beside the program: its reach
+# per-row columns kept beside the program: its reach
+_EXTRA: dict[str, tuple[str, tuple[int, ...]]] = {"status": ("u1", ()), "rot_deg": ("f8", ())}
 
 
 class _Whole:

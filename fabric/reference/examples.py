@@ -137,8 +137,9 @@ COMMAND_EXAMPLES: dict[tuple[str, str], Example] = {
                                    _ack("removed job 71d2e08f5c3a (bracket.gcode)", "queued")),
     ("supervisor", "job_move"): (s.JobMove(job_id="71d2e08f5c3a", position=0),
                                  s.JobList(jobs=[RECORD, QUEUED], total=2, offset=0)),
-    ("supervisor", "job_next"): (s.Empty(), _ack("plate marked clear; job 71d2e08f5c3a (bracket.gcode) loaded: start "
-                                                 "it with fabric-cli start", "loaded")),
+    ("supervisor", "job_next"): (s.Empty(), _ack("plate marked clear; job 71d2e08f5c3a (bracket.gcode) loaded "
+                                                 "(submitted without start: start it with fabric-cli start once "
+                                                 "loaded)", "loaded")),
     **{(svc, "health"): (s.Empty(), s.Health(service=svc, state="ok"))
        for svc in ("station", "slicer", "planner", "collision", "supervisor")},
 }

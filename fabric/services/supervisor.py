@@ -254,7 +254,7 @@ class SupervisorService(Service):
         except NotFound:                                  # removed meanwhile by another operator
             return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} was removed meanwhile",
                          state="")
-        hint = "" if head.start or head.state != "loaded" else ": start it with fabric-cli start"
+        hint = "" if head.start else " (submitted without start: start it with fabric-cli start once loaded)"
         return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} ({head.filename}) {head.state}{hint}",
                      state=head.state)
 

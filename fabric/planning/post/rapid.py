@@ -154,12 +154,13 @@ def write_rapid(program: Program, sink: TextIO | Callable[[str], TextIO], *,
     bounds = program.section_bounds()
     p0, p1 = bounds.get("Print", (0, 0))
     per = opt.targets_per_module
-    cuts, seen = [p0], 0
+    cuts: list[int] = [p0]
+    seen = 0
     for a, b in row_blocks(p0, p1, CHECK_ROWS):
-        idx = np.flatnonzero(moving[a:b]) + a           # the motion rows of the print, numbered from seen
-        k = np.arange(max(per, -(-seen // per) * per), seen + len(idx), per)
-        cuts += idx[k - seen].tolist()
-        seen += len(idx)
+        rows = np.flatnonzero(moving[a:b]) + a          # the motion rows of the print, numbered from seen
+        nth = np.arange(max(per, -(-seen // per) * per), seen + len(rows), per)
+        cuts += rows[nth - seen].tolist()
+        seen += len(rows)
     cuts = sorted(set(cuts + [p1])) if p1 > p0 else []
     n_mod = max(len(cuts) - 1, 0)
     export = RapidExport()
@@ -287,7 +288,7 @@ class _Emitter:
             i, k = ev.row, ev.row - self.base
             target = (f"[{_pose(p.xyz_mm[i], p.quat_wxyz[i])[1:-1]},[{self.cf[k, 0]},{self.cf[k, 1]},"
                       f"{self.cf[k, 2]},{self.cfx[k]}],{_E9}]")
-            speed, zone = self.names.speed(_speeds(p, opt, i)), self.names.zone(p.zone_mm[i])
+            speed, zone = self.names.speed(float(_speeds(p, opt, i))), self.names.zone(p.zone_mm[i])
             sw = ev.extruder
             if isinstance(sw, (ExtruderOn, ExtruderRate)):
                 lines.append(f"    TriggIO trFlow, 0\\Start\\AOp:={opt.ao_flow}, {_num(sw.rate_mm3_s)};")
@@ -300,7 +301,8 @@ class _Emitter:
                 lines.append(f"    MoveL {target}, {speed}, {zone}, {self.tw}  ! {p.gcode_line[i]}")
         elif isinstance(ev, JointMove):
             joints = ",".join(_num(v, 4) for v in self.q_deg[ev.row - self.base])
-            lines.append(f"    MoveAbsJ [[{joints}],{_E9}]\\NoEOffs, {self.names.speed(_speeds(p, opt, ev.row))}, "
+            speed = self.names.speed(float(_speeds(p, opt, ev.row)))
+            lines.append(f"    MoveAbsJ [[{joints}],{_E9}]\\NoEOffs, {speed}, "
                          f"{self.names.zone(p.zone_mm[ev.row])}, {self.tw}")
         elif isinstance(ev, LayerStart):
             lines.append(f"    ! layer {ev.layer}")

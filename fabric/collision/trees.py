@@ -1,0 +1,108 @@
+"""The broad phase of a sweep: what has been laid so far, in coal's dynamic AABB trees, as the path goes on.
+
+Three levels, each containing the next, so each gives a distance lower bound
+of the one below:
+
+* the part's bounding box so far and the fixed bodies' boxes, as arrays: the
+  vectorised first pass of :mod:`fabric.collision.certify` (a body's bounding
+  sphere against them);
+* ``coarse``: one box per layer around all of that layer's beads (a layer is
+  flat, so the box's top is the beads' top), with the table and the plate;
+  ``coarse_tip`` is the same without the tip's two exempt layers;
+* ``fine``: every bead laid so far, one box each, built the first time a
+  query needs it and kept up to date from then on.
+
+A layer's box goes in with the layer's first bead, and holds the beads the
+layer will get later in the stretch too: a superset, which can only make a
+distance smaller (:mod:`fabric.collision.certify` asks again with exactly the
+beads laid before a row when that matters).
+"""
+from __future__ import annotations
+
+import coal
+import numpy as np
+
+from fabric.collision.beads import BeadSolids
+from fabric.collision.bodies import MM
+
+__all__ = ["PartTrees"]
+
+
+class PartTrees:
+    """What the sweep has laid so far (beads ``0 .. count - 1``), at three levels (see the module doc)."""
+
+    def __init__(self, beads: BeadSolids, env: dict[str, coal.CollisionObject]) -> None:
+        self.beads = beads
+        self.env = env
+        self.env_lo = np.array([np.asarray(o.getAABB().min_) / MM for o in env.values()])
+        self.env_hi = np.array([np.asarray(o.getAABB().max_) / MM for o in env.values()])
+        self.coarse = _tree(env.values())
+        self.coarse_tip = _tree(env.values())
+        self.fine: coal.BroadPhaseCollisionManager | None = None
+        self.count = 0
+        self.part_lo = np.full(3, np.inf)
+        self.part_hi = np.full(3, -np.inf)
+        # one box per layer, in order of each layer's first bead
+        layers, first = np.unique(beads.layer, return_index=True)
+        order = np.argsort(first, kind="stable")
+        self._layers = layers[order]
+        self._layer_first = first[order]
+        self._boxes = [_box(beads.lo[beads.layer == layer].min(axis=0), beads.hi[beads.layer == layer].max(axis=0))
+                       for layer in self._layers]
+        self._in = 0                                       # layers whose box is in ``coarse``
+        self._tip_in: set[int] = set()                     # positions in _layers whose box is in ``coarse_tip``
+        self._fine_count = 0
+
+    def advance(self, count: int, tip_layer: int) -> None:
+        """Hold beads ``0 .. count - 1``; ``coarse_tip`` leaves out layers ``tip_layer`` and ``tip_layer - 1``."""
+        beads = self.beads
+        if count > self.count:
+            self.part_lo = np.minimum(self.part_lo, beads.lo[self.count:count].min(axis=0))
+            self.part_hi = np.maximum(self.part_hi, beads.hi[self.count:count].max(axis=0))
+            self.count = count
+        while self._in < len(self._layers) and self._layer_first[self._in] < count:
+            self.coarse.registerObject(self._boxes[self._in])
+            self._in += 1
+        exempt = {tip_layer, tip_layer - 1} if tip_layer >= 0 else set()
+        want = {i for i in range(self._in) if int(self._layers[i]) not in exempt}
+        for i in self._tip_in - want:
+            self.coarse_tip.unregisterObject(self._boxes[i])
+        for i in sorted(want - self._tip_in):
+            self.coarse_tip.registerObject(self._boxes[i])
+        self._tip_in = want
+        if self.fine is not None:
+            self._fill_fine()
+
+    def fine_tree(self) -> coal.BroadPhaseCollisionManager:
+        """Every bead laid so far, one box each, with the table and the plate (built on first use)."""
+        if self.fine is None:
+            self.fine = _tree(self.env.values())
+        self._fill_fine()
+        return self.fine
+
+    def _fill_fine(self) -> None:
+        assert self.fine is not None
+        if self.count > self._fine_count:
+            for obj in self.beads.objects(np.arange(self._fine_count, self.count)):
+                self.fine.registerObject(obj)
+            self._fine_count = self.count
+
+    def obstacle_boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bounding boxes (lo, hi), mm, of the fixed bodies and of the part so far."""
+        if self.count == 0:
+            return self.env_lo, self.env_hi
+        return np.vstack([self.env_lo, self.part_lo]), np.vstack([self.env_hi, self.part_hi])
+
+
+def _tree(objects) -> coal.BroadPhaseCollisionManager:
+    tree = coal.DynamicAABBTreeCollisionManager()
+    for obj in objects:
+        tree.registerObject(obj)
+    tree.setup()
+    return tree
+
+
+def _box(lo: np.ndarray, hi: np.ndarray) -> coal.CollisionObject:
+    obj = coal.CollisionObject(coal.Box(*((hi - lo) * MM)), np.eye(3), (lo + hi) / 2.0 * MM)
+    obj.computeAABB()
+    return obj
