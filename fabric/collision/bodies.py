@@ -103,6 +103,11 @@ class RobotBodies:
         self._axes = [_joint_axis(self.model, j) if j else np.zeros(3) for j in range(self.model.njoints)]
         self._joint_T = [_mm(self.model.jointPlacements[j].homogeneous) for j in range(self.model.njoints)]
         self.by_name = {b.name: b for b in self.bodies}
+        self.sphere_centre = {b.name: (b.corners.min(axis=0) + b.corners.max(axis=0)) / 2.0 for b in self.bodies}
+        self.sphere_radius = {b.name: float(np.linalg.norm(b.corners - self.sphere_centre[b.name], axis=1).max())
+                              for b in self.bodies}
+        self.tcp_joint = int(tcp.parentJoint)
+        self._tcp_placement = _mm(tcp.placement.homogeneous)
         self.moving = [b for b in self.bodies if b.joint > 0]
         # self pairs: the robot's own, plus the tip against whatever the nozzle is paired with
         nozzle = self.by_name[NOZZLE].index
@@ -112,6 +117,26 @@ class RobotBodies:
         self.self_pairs = [(self.bodies[a], self.bodies[b]) for a, b in pairs]
         self.env = _fixed_bodies(cell)
         self.objects = {b.name: coal.CollisionObject(b.geometry, coal.Transform3s()) for b in self.bodies}
+
+    def axial_cylinders(self) -> list[tuple[Body, float, float, float]]:
+        """Bodies that are cylinders on the TCP's z axis, rigid with it (the tip and the nozzle always, the
+        tool body when the TCP lies on the flange's axis): (body, radius, half-length, centre offset along
+        TCP z), mm. Turning about that axis leaves them where they are."""
+        out = []
+        inv = np.linalg.inv(self._tcp_placement)
+        for b in self.bodies:
+            if b.joint != self.tcp_joint or not isinstance(b.geometry, coal.Cylinder):
+                continue
+            rel = inv @ b.placement
+            if abs(abs(rel[2, 2]) - 1.0) < 1e-9 and np.hypot(rel[0, 3], rel[1, 3]) < 1e-6:
+                g = b.geometry
+                out.append((b, float(g.radius) / MM, float(g.halfLength) / MM, float(rel[2, 3])))
+        return out
+
+    def spheres(self, poses: np.ndarray, body: Body) -> tuple[np.ndarray, float]:
+        """Centres (N, 3) and radius (mm) of the body's bounding sphere at ``poses`` (N, 4, 4)."""
+        c = self.sphere_centre[body.name]
+        return poses[:, :3, :3] @ c + poses[:, :3, 3], self.sphere_radius[body.name]
 
     # --- bounds ------------------------------------------------------------------------
 

@@ -49,8 +49,10 @@ class PartTrees:
         self._layer_first = first[order]
         self._boxes = [_box(beads.lo[beads.layer == layer].min(axis=0), beads.hi[beads.layer == layer].max(axis=0))
                        for layer in self._layers]
+        self._pos = {int(layer): i for i, layer in enumerate(self._layers)}
         self._in = 0                                       # layers whose box is in ``coarse``
         self._tip_in: set[int] = set()                     # positions in _layers whose box is in ``coarse_tip``
+        self._exempt: set[int] = set()
         self._fine_count = 0
 
     def advance(self, count: int, tip_layer: int) -> None:
@@ -60,16 +62,21 @@ class PartTrees:
             self.part_lo = np.minimum(self.part_lo, beads.lo[self.count:count].min(axis=0))
             self.part_hi = np.maximum(self.part_hi, beads.hi[self.count:count].max(axis=0))
             self.count = count
+        new = []
         while self._in < len(self._layers) and self._layer_first[self._in] < count:
             self.coarse.registerObject(self._boxes[self._in])
+            new.append(self._in)
             self._in += 1
-        exempt = {tip_layer, tip_layer - 1} if tip_layer >= 0 else set()
-        want = {i for i in range(self._in) if int(self._layers[i]) not in exempt}
-        for i in self._tip_in - want:
+        exempt = {self._pos[x] for x in (tip_layer, tip_layer - 1) if tip_layer >= 0 and x in self._pos}
+        exempt = {i for i in exempt if i < self._in}
+        for i in exempt & self._tip_in:                    # layers that became exempt leave coarse_tip
             self.coarse_tip.unregisterObject(self._boxes[i])
-        for i in sorted(want - self._tip_in):
-            self.coarse_tip.registerObject(self._boxes[i])
-        self._tip_in = want
+            self._tip_in.discard(i)
+        for i in sorted((self._exempt - exempt) | set(new)):   # and the ones no longer exempt come back
+            if i not in exempt and i not in self._tip_in:
+                self.coarse_tip.registerObject(self._boxes[i])
+                self._tip_in.add(i)
+        self._exempt = exempt
         if self.fine is not None:
             self._fill_fine()
 

@@ -328,7 +328,7 @@ class Interpreter:
         if final:
             c = n
         else:
-            c = _safe_cut(cols["xyz"][:n], cols["e"][:n], ev_row)
+            c = _safe_cut(cols["xyz"][:n], cols["e"][:n], ev_row, max(min_rows, 2))
             if c <= 0:
                 return None
         if ch.infer is None:
@@ -458,22 +458,21 @@ class _Chunks:
             self.first_z.setdefault(int(li), float(xyz[ext[k], 2]))
 
 
-def _safe_cut(xyz: np.ndarray, e: np.ndarray, ev_row: np.ndarray) -> int:
-    """The last row ``c`` (``2 <= c < n``) such that rows ``c - 1`` and ``c`` both extrude (filament fed while
-    moving more than 1e-9 mm) with no event at row ``c``; 0 if there is none."""
+def _safe_cut(xyz: np.ndarray, e: np.ndarray, ev_row: np.ndarray, limit: int) -> int:
+    """A row ``c`` (``2 <= c < n``) such that rows ``c - 1`` and ``c`` both extrude (filament fed while moving
+    more than 1e-9 mm) with no event at row ``c``: the last one at most ``limit``, else the first one after it;
+    0 if there is none."""
     n = len(e)
-    lo = 1
-    for lo in (max(1, n - 65536), 1):
-        if n - lo < 2:
-            continue
-        d = xyz[lo:] - xyz[lo - 1:-1]
-        ext = (e[lo:] > 0) & (np.einsum("ij,ij->i", d, d) > 1e-18)     # rows lo..n-1
-        ok = ext[1:] & ext[:-1]                                       # c = lo + 1 .. n - 1
-        if len(ev_row):
-            ok[np.clip(ev_row - lo - 1, 0, len(ok) - 1)[(ev_row >= lo + 1) & (ev_row < n)]] = False
-        hit = np.flatnonzero(ok)
-        if len(hit):
-            return lo + 1 + int(hit[-1])
-        if lo == 1:
-            break
-    return 0
+    if n < 3:
+        return 0
+    d = xyz[1:] - xyz[:-1]
+    ext = (e[1:] > 0) & (np.einsum("ij,ij->i", d, d) > 1e-18)         # rows 1 .. n-1
+    ok = ext[1:] & ext[:-1]                                           # c = 2 .. n-1
+    if len(ev_row):
+        at = ev_row[(ev_row >= 2) & (ev_row < n)]
+        ok[at - 2] = False
+    hit = np.flatnonzero(ok) + 2
+    if len(hit) == 0:
+        return 0
+    k = int(np.searchsorted(hit, limit, side="right"))
+    return int(hit[k - 1]) if k > 0 else int(hit[0])
