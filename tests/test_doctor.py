@@ -4,12 +4,10 @@ from __future__ import annotations
 
 import json
 import os
-import queue
 import re
 import signal
 import subprocess
 import sys
-import threading
 import time
 import uuid
 from dataclasses import replace
@@ -27,6 +25,7 @@ from fabric.wire.config import SessionSettings
 from fabric.wire.keys import SERVICES
 
 from conftest import free_port
+from proc_lines import ProcLines
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -50,41 +49,11 @@ def _jobs(path: Path, n: int) -> list[s.JobRecord]:
     return recs
 
 
-class _Lines:
-    """A process's output lines, read by a thread; wait for one matching a pattern, with a deadline."""
-
-    def __init__(self, proc: subprocess.Popen) -> None:
-        self.lines: list[str] = []
-        self._q: queue.Queue[str] = queue.Queue()
-        threading.Thread(target=self._read, args=(proc,), daemon=True).start()
-
-    def _read(self, proc: subprocess.Popen) -> None:
-        for line in proc.stdout:
-            self.lines.append(line)
-            self._q.put(line)
-
-    def wait(self, pattern: str, timeout: float) -> str | None:
-        """The first line from now on matching ``pattern``; None when none came within ``timeout``."""
-        end = time.monotonic() + timeout
-        while (left := end - time.monotonic()) > 0:
-            try:
-                line = self._q.get(timeout=left)
-            except queue.Empty:
-                return None
-            if re.search(pattern, line):
-                return line
-        return None
-
-    @property
-    def text(self) -> str:
-        return "".join(self.lines)
-
-
-def _up(cell: str, listen: str, data: Path, logs: Path) -> tuple[subprocess.Popen, _Lines]:
+def _up(cell: str, listen: str, data: Path, logs: Path) -> tuple[subprocess.Popen, ProcLines]:
     proc = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "up", "--cell", cell, "--listen", listen,
                              "--data-dir", str(data), "--log-dir", str(logs)],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    return proc, _Lines(proc)
+    return proc, ProcLines(proc)
 
 
 def _end(proc: subprocess.Popen) -> int:

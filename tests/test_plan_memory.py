@@ -136,6 +136,18 @@ def test_planning_in_chunks_gives_the_whole_plan(cell: Cell, tmp_path: Path, mar
         assert texts[0] == texts[1], fmt
 
 
+def test_the_times_come_block_by_block_and_stay(cell: Cell, tmp_path: Path) -> None:
+    """on_times tells how many rows are timed as the cycle time is computed; those rows do not change after
+    (a CSV export streams behind the computation)."""
+    seen: list[tuple[int, np.ndarray]] = []
+    res = plan_gcode(rich_gcode(n_layers=20, seed=5), cell, PlanOptions(ik_block_rows=1000),
+                     program_dir=tmp_path / "plan", on_times=lambda t, rows: seen.append((rows, t[:rows].copy())))
+    rows = [r for r, _ in seen]
+    assert rows[0] == 0 and rows[-1] == len(res.program) and rows == sorted(rows) and len(rows) > 4
+    for r, early in seen:
+        assert np.array_equal(early, res.t_end_s[:r])
+
+
 def test_a_failed_plan_leaves_no_files(cell: Cell, tmp_path: Path) -> None:
     text = rich_gcode(n_layers=6, seed=2) + "G1 X10 Y10 X20\n"          # a letter twice: an error at the end
     with pytest.raises(Exception, match="appears twice"):

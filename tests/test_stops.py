@@ -4,13 +4,11 @@ a taken port is one line. Real processes; every wait is on a condition with a de
 from __future__ import annotations
 
 import os
-import queue
 import re
 import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 import uuid
 from dataclasses import replace
@@ -26,6 +24,7 @@ from fabric.wire.errors import StateError
 from fabric.wire.keys import SERVICES
 
 from conftest import free_port
+from proc_lines import ProcLines, wait_until
 
 pytestmark = pytest.mark.timeout(240)
 CLI = [sys.executable, "-m", "fabric.cli.main"]
@@ -42,54 +41,18 @@ def _running(pid: int) -> bool:
         return False
 
 
-def _wait_until(predicate, timeout: float, what: str) -> None:
-    end = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < end, f"{what}: not within {timeout:g} s"
-        time.sleep(0.05)                          # polling the condition, not a synchronising sleep
-
-
-class _Lines:
-    """A process's output lines, read by a thread; wait for one matching a pattern, with a deadline."""
-
-    def __init__(self, proc: subprocess.Popen) -> None:
-        self.lines: list[str] = []
-        self._q: queue.Queue[str] = queue.Queue()
-        threading.Thread(target=self._read, args=(proc,), daemon=True).start()
-
-    def _read(self, proc: subprocess.Popen) -> None:
-        for line in proc.stdout:
-            self.lines.append(line)
-            self._q.put(line)
-
-    def wait(self, pattern: str, timeout: float) -> str | None:
-        end = time.monotonic() + timeout
-        while (left := end - time.monotonic()) > 0:
-            try:
-                line = self._q.get(timeout=left)
-            except queue.Empty:
-                return None
-            if re.search(pattern, line):
-                return line
-        return None
-
-    @property
-    def text(self) -> str:
-        return "".join(self.lines)
-
-
 def _router(endpoint: str) -> subprocess.Popen:
     proc = subprocess.Popen([*CLI, "router", "--listen", endpoint], stdout=subprocess.PIPE, text=True)
     assert "fabric hub listening" in proc.stdout.readline()
     return proc
 
 
-def _up(*args: str) -> tuple[subprocess.Popen, _Lines]:
+def _up(*args: str) -> tuple[subprocess.Popen, ProcLines]:
     proc = subprocess.Popen([*CLI, "up", *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    return proc, _Lines(proc)
+    return proc, ProcLines(proc)
 
 
-def _pids(lines: _Lines) -> dict[str, int]:
+def _pids(lines: ProcLines) -> dict[str, int]:
     return {m.group(1): int(m.group(2)) for m in (re.match(r"\s+(\w+)\s+pid (\d+)", ln) for ln in lines.lines) if m}
 
 
@@ -164,7 +127,7 @@ def test_no_service_outlives_up_however_it_ends_and_their_locks_are_free(tmp_pat
             assert out.wait(r"stopping services", 30) is not None, out.text
         proc.kill()                                  # the launcher, and the hub in it, are gone at once
         proc.wait()
-        _wait_until(lambda: not any(_running(p) for p in pids.values()), 6.0,
+        wait_until(lambda: not any(_running(p) for p in pids.values()), 6.0,
                     f"every service ending after {how} of up ({ {n: _running(p) for n, p in pids.items()} })")
         for name in SERVICES:                         # and nothing holds their locks: the next up can start them
             _lock_dir(data / cell / name, name, cell).close()

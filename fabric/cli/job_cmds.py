@@ -13,6 +13,7 @@ from fabric import schemas as s
 from fabric.cli.inputs import read_whole
 from fabric.cli.output import emit
 from fabric.cli.pipeline_cmds import parse_sets
+from fabric.cli.progress import print_progress
 from fabric.client import Client
 from fabric.client.follow import follow_print
 from fabric.printjobs.history import override_lines, segment_lines
@@ -38,8 +39,16 @@ def _show_change(quiet: bool):
     if quiet:
         return None
 
+    tty = sys.stderr.isatty()          # a line redrawn in place on a terminal; plain lines when piped
+    shown: list[str] = []
+
     def show(rec: s.JobRecord) -> None:
-        print(f"\r  {rec.state:<10} {rec.stage[:48]:<48}", end="", file=sys.stderr, flush=True)
+        line = f"  {rec.state:<10} {rec.stage[:48]:<48}"
+        if tty:
+            print(f"\r{line}", end="", file=sys.stderr, flush=True)
+        elif shown[-1:] != [line]:
+            shown.append(line)
+            print(line.rstrip(), file=sys.stderr, flush=True)
     return show
 
 
@@ -130,12 +139,13 @@ def cmd_submit(c: Client, a: argparse.Namespace) -> int:
         emit(acc, a.json, lambda r: f"job {r.job_id} queued")
         return 0
     rec = c.wait_print_job(acc.job_id, _settled, timeout=a.timeout or 3600.0, on_change=_show_change(a.json))
-    if not a.json:
+    if not a.json and sys.stderr.isatty():
         print(file=sys.stderr)
     result: dict = {"job": rec}
     if a.follow and rec.state in ("printing", "loaded") and a.start:
         try:
-            result["end"] = follow_print(c, timeout_s=a.timeout)
+            with print_progress(c, acc.job_id, quiet=a.json):    # layer, %, volume, ETA on stderr
+                result["end"] = follow_print(c, timeout_s=a.timeout)
         except queue.Empty:
             result["end"] = None
         # the supervisor applies the same end event to the record: wait for it to say so

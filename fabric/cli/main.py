@@ -8,7 +8,7 @@ import sys
 import threading
 from pathlib import Path
 
-from fabric.cli import auth_cmds, doctor, job_cmds, pipeline_cmds, station_cmds
+from fabric.cli import auth_cmds, check_cmds, doctor, job_cmds, pipeline_cmds, station_cmds
 from fabric.cli.output import emit, fail
 from fabric.client import Client
 from fabric.extras import missing_extra, require
@@ -62,12 +62,15 @@ def build_parser() -> argparse.ArgumentParser:
                        help="a router linked to the hub that dashboards connect to, so that the hub does not "
                             "fan telemetry out to each of them")
     p.add_argument("--secure", type=Path, default=None, metavar="DIR",
-                   help="a relay of a secured fabric (TLS, passwords): it joins the hub as monitor, and whoever "
-                        "connects to it has a monitor's rights")
+                   help="a relay of a secured fabric (TLS, passwords): its own folder ('fabric-cli auth export DIR "
+                        "relay --host HOST -o OUT': it listens and finds the hub where that says), or the whole "
+                        "credentials folder; it joins the hub as monitor, and whoever connects to it has a "
+                        "monitor's rights")
     p.set_defaults(local=_cmd_relay)
 
     station_cmds.register(sub, common)
     pipeline_cmds.register(sub, common)
+    check_cmds.register(sub, common)
     job_cmds.register(sub, common)
     importlib.import_module("fabric.cli.record_cmds").register(sub, common)     # record, plot, preview
     auth_cmds.register(sub, common)
@@ -143,33 +146,36 @@ def _cmd_router(a: argparse.Namespace) -> int:
 
 def _cmd_relay(a: argparse.Namespace) -> int:
     """A router that listens for dashboards and links to the hub: telemetry crosses to it once and is fanned
-    out here, so the hub (and the commands it carries) does not do that work for every dashboard."""
+    out here, so the hub (and the commands it carries) does not do that work for every dashboard. Secured, from
+    its own folder ('fabric-cli auth export DIR relay ...': where it listens and the hub come from there unless
+    --listen/--connect say otherwise) or from the whole credentials folder."""
     from dataclasses import replace
 
+    from fabric.security.relay import serve_info
     from fabric.wire.config import DEFAULT_HUB, zenoh_config
     from fabric.wire.errors import ConfigError
     st = settings_from_args(a)
-    if not st.listen:
-        raise ConfigError("a relay needs --listen ENDPOINT: where dashboards connect to it", field="--listen")
-    creds = None
-    if a.secure is not None:
-        from fabric.security.credentials import Credentials
-        creds = Credentials(a.secure.resolve()).check()
-    hub = list(a.connect or (creds.hub_endpoints() if creds else [DEFAULT_HUB]))
-    if set(hub) & set(st.listen):
-        raise ConfigError(f"a relay listens elsewhere than the hub it links to ({', '.join(hub)})",
-                          field="--listen", value=st.listen)
-    if creds is None:
+    if a.secure is None:
+        if not st.listen:
+            raise ConfigError("a relay needs --listen ENDPOINT: where dashboards connect to it", field="--listen")
+        listen, hub = list(st.listen), list(a.connect or [DEFAULT_HUB])
         conf, secured = zenoh_config(replace(st, mode="router", connect=hub)), ""
     else:
-        from fabric.security.relay import relay_zenoh_config
-        conf, secured = relay_zenoh_config(creds, st.listen, hub), " (TLS, passwords; monitor rights)"
-    return _run_router(conf, f"fabric relay listening on {', '.join(st.listen)}{secured}, linked to the hub at "
-                             f"{', '.join(hub)}")
+        from fabric.security.relay import relay_setup
+        conf, listen, hub = relay_setup(a.secure, a.listen, a.connect)
+        secured = " (TLS, passwords; monitor rights)"
+    if set(hub) & set(listen):
+        raise ConfigError(f"a relay listens elsewhere than the hub it links to ({', '.join(hub)})",
+                          field="--listen", value=listen)
+    info = {"relay": True, "listen": listen, "hub": hub, "secured": a.secure is not None,
+            "rights": "monitor" if a.secure is not None else "all"}
+    return _run_router(conf, f"fabric relay listening on {', '.join(listen)}{secured}, linked to the hub at "
+                             f"{', '.join(hub)}", on_open=lambda session: serve_info(session, info))
 
 
-def _run_router(conf, what: str) -> int:
-    """Open router session ``conf``, say ``what`` it is, and serve until SIGINT or SIGTERM."""
+def _run_router(conf, what: str, on_open=None) -> int:
+    """Open router session ``conf``, say ``what`` it is, and serve until SIGINT or SIGTERM (``on_open(session)``
+    first: what it declares lives as long as the session)."""
     import zenoh
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -181,8 +187,10 @@ def _run_router(conf, what: str) -> int:
         reason = str(exc).split(" at /")[0]
         raise ConfigError(f"cannot start the router: {reason}", field="--listen") from None
     with session:
+        kept = on_open(session) if on_open is not None else None
         print(f"{what} (Ctrl-C stops it)", flush=True)
         stop.wait()
+        del kept
     return 0
 
 

@@ -125,6 +125,7 @@ class CellProcesses:
         self.children: dict[str, _Child] = {}
         self.hub: zenoh.Session | None = None
         self.died = False              # a child exited while supervised
+        self.killed: list[str] = []    # children that had to be killed (SIGKILL) by the last stop
         self._pgid: int | None = None
         self._notes: Path | None = None
 
@@ -342,12 +343,14 @@ class CellProcesses:
                 if not in_group:
                     c.proc.send_signal(signal.SIGTERM)
         end = time.monotonic() + grace_s
+        self.killed = []
         for c in self.children.values():
             try:
                 c.proc.wait(timeout=max(0.1, end - time.monotonic()))
             except subprocess.TimeoutExpired:
                 c.proc.kill()
                 c.proc.wait()
+                self.killed.append(c.name)
         self._close_hub()
         if self._notes is not None:
             shutil.rmtree(self._notes, ignore_errors=True)
@@ -428,7 +431,20 @@ def run_up(settings: SessionSettings, services: tuple[str, ...], host_hub: bool,
             stop_print_first(cell.client_settings, out, hurry=hurry)
         out("stopping services ...")
         cell.stop()
+        out(_stopped_line(cell, host_hub))
     return 1 if cell.died else 0
+
+
+def _stopped_line(cell: CellProcesses, host_hub: bool) -> str:
+    """The launcher's last line: how the cell ended."""
+    ran = [n for n in cell.children if n not in cell.held]
+    ended = [n for n in ran if n not in cell.killed]
+    line = f"cell '{cell.cell}' stopped: {len(ended)} service{'s' if len(ended) != 1 else ''} ended"
+    if cell.killed:
+        line += f", {', '.join(cell.killed)} killed (no exit within {STOP_GRACE_S:g} s)"
+    if cell.held:
+        line += f"; {', '.join(cell.held)} had stopped before (see above)"
+    return line + ("; hub closed" if host_hub and cell.children else "")
 
 
 def _say_up(cell: CellProcesses, settings: SessionSettings, host_hub: bool, secure: Credentials | None,

@@ -23,7 +23,16 @@ import zenoh
 
 from fabric import schemas as s
 from fabric.client.job_waits import wait_job, wait_print_job
-from fabric.client.sessions import CONNECT_WINDOW_S, check_role, error_of, open_session, wait_connected
+from fabric.client.sessions import (
+    CONNECT_WINDOW_S,
+    check_role,
+    error_of,
+    open_session,
+    refused_by_relay,
+    relay_info,
+    relay_named,
+    wait_connected,
+)
 from fabric.client.subscriptions import AliveSubscription, Subscription
 from fabric.client.transfers import EXPORT_CHUNK_BYTES, export_to_file, input_size, upload_file
 from fabric.schemas.upload import UPLOAD_CHUNK_BYTES
@@ -48,6 +57,7 @@ class Client:
         self.session = session
         self.keys = Keys(cell)
         self.role = role
+        self._relay: dict[str, Any] | bool | None = False     # what the relay says of itself (False: not asked)
 
     @classmethod
     @contextmanager
@@ -79,10 +89,10 @@ class Client:
         """Ask ``service/command`` with an already encoded request (e.g. one of an older version)."""
         key = self.keys.cmd(service, command)
         return self._get_one(key, payload, reply_type, timeout, f"{service}/{command}",
-                             command_qos(_endpoint(service, command)), service)
+                             command_qos(_endpoint(service, command)), service, command)
 
     def _get_one(self, key: str, payload: bytes | None, reply_type: type, timeout: float, what: str,
-                 qos: dict[str, Any] = BULK_QOS, service: str = "") -> Any:
+                 qos: dict[str, Any] = BULK_QOS, service: str = "", command: str = "") -> Any:
         # A get with no matching queryable returns at once; right after a service (or this session)
         # starts, its declaration may still be on the way: retry for a short, bounded window. The first
         # reply is taken (no consolidation): a key has one answering queryable (a service's catch-all on
@@ -101,6 +111,9 @@ class Client:
                 raise error_of(reply.err.payload.to_bytes(), what, time.monotonic() - t0)
             waited = time.monotonic() - t0
             timed_out = time.monotonic() - t_get >= 0.9 * timeout
+            if command and self._relay is False:     # no one answered: on a relay that may be why
+                self._relay = relay_info(self.session)
+                refused_by_relay(self._relay, self.role, service, command)
             if timed_out or waited >= min(timeout, DISCOVERY_WINDOW_S):
                 break
             time.sleep(0.05)
@@ -115,7 +128,7 @@ class Client:
         of every cell (one query, answered by the hub; bounded by what is left of ``timeout``, at least 0.2 s).
         ``details['reason']``: ``no_cell`` (``details['cells']``: every cell present and its services),
         ``service_down`` (``details['alive']``: the cell's services alive), or ``no_queryable``."""
-        head = f"no {what} on the fabric (asked for {waited:.2g} s)"
+        head = f"no {what} on the fabric (asked for {waited:.2g} s{relay_named(self._relay)})"
         cell = self.keys.cell
         try:
             cells = self.cells(timeout=max(0.2, min(1.0, timeout - waited)), attempts=ALIVE_ATTEMPTS,

@@ -31,20 +31,21 @@ its own row only, so it certifies its own segment and no further.
 from __future__ import annotations
 
 import heapq
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import coal
 import numpy as np
 
 from fabric.collision.beads import BeadSolids
-from fabric.collision.bodies import MM, Body, RobotBodies
-from fabric.collision.path import LIVE_ROW, Segments
+from fabric.collision.bodies import GJK_EPS_MM, MM, Body, RobotBodies
+from fabric.collision.path import LIVE_ROW, NO_LAYER, Segments
 from fabric.collision.trees import PartTrees
 
 __all__ = ["Advancer", "Item", "Probe", "SweepHit", "GJK_EPS_MM", "EXACT_MARGIN_MM"]
 
-GJK_EPS_MM = 1e-3            # coal's distances are within 1 um (GJK tolerance): bounds give that away
 EXACT_MARGIN_MM = 2.0        # an exact query looks this far around a body for beads
+FINE_BELOW_MM = 5.0          # the beads' tree is asked only when the layer boxes are this close
 _MAX_DEPTH = 60              # bisections of one segment
 
 
@@ -67,7 +68,20 @@ class Probe:
     d: float
     other: str = ""
     bead: int = -1
-    exact: bool = False          # with exactly the beads laid before the row (else the stretch's superset)
+    exact: bool = False          # with exactly what the row may touch (else the stretch's superset)
+    row_only: bool = False       # holds for this row only (exact beads laid before it): certifies no further
+
+
+@dataclass
+class _Walk:
+    """One item's walk: its runs of vertices, which it is on, cumulative motion and first-pass bounds per
+    vertex, and its last query (vertex, distance) while a stretch certified by it is open."""
+
+    runs: list[tuple[int, int]]
+    cum: np.ndarray
+    free: np.ndarray
+    run: int = 0
+    prev: tuple[int, float] | None = None
 
 
 @dataclass
@@ -102,23 +116,42 @@ class Advancer:
         if lb < self.clearance:
             self.clearance, self.clearance_body, self.clearance_segment = lb, name, segment
 
-    # --- motion bounds of a stretch -------------------------------------------------------------
+    # --- a batch of segments: motion bounds and first-pass distances, vectorised ---------------------
 
-    def set_stretch(self, a: int, b: int) -> None:
-        """Motion bounds of every body over segments [a, b): (J, C, E) per body (joint bound, chord part,
-        chord error; :meth:`RobotBodies.chord_parts_mm`), from one vectorised FK of the stretch."""
+    def set_batch(self, a: int, b: int, part_lo: np.ndarray, part_hi: np.ndarray) -> None:
+        """Segments [a, b): every body's motion bounds (J, C, E: joint bound, chord part, chord error;
+        :meth:`RobotBodies.chord_parts_mm`) and the spheres covering it at every vertex, from one vectorised
+        FK; ``part_lo``/``part_hi`` (b - a + 1, 3) bound the part laid by each vertex's stretch."""
         segs, bodies = self.segs, self.bodies
-        self.frames = bodies.joint_frames(np.vstack([segs.q0[a:b], segs.q1[b - 1:b]]))
+        frames = bodies.joint_frames(np.vstack([segs.q0[a:b], segs.q1[b - 1:b]]))
         dq = segs.dq_abs[a:b]
         self._a = a
         self._parts = {}
+        self.spheres: dict[str, tuple[np.ndarray, float]] = {}
         for body in bodies.bodies:
+            poses = bodies.body_poses(frames, body)
+            self.spheres[body.name] = bodies.spheres(poses, body)
             if body.joint == 0:                                # on the base: does not move
                 zero = np.zeros(b - a)
                 self._parts[body.name] = (zero, zero, zero)
                 continue
-            C, E = bodies.chord_parts_mm(bodies.body_poses(self.frames, body), body, dq)
+            C, E = bodies.chord_parts_mm(poses, body, dq)
             self._parts[body.name] = (bodies.motion_mm(dq, body), C, E)
+        env_lo, env_hi = self.trees.env_lo, self.trees.env_hi
+        self._box_lo = np.concatenate([np.broadcast_to(env_lo, (len(part_lo), *env_lo.shape)), part_lo[:, None]], 1)
+        self._box_hi = np.concatenate([np.broadcast_to(env_hi, (len(part_hi), *env_hi.shape)), part_hi[:, None]], 1)
+
+    def free(self, item: Item) -> np.ndarray:
+        """A distance lower bound at every vertex of the batch, from the spheres covering each body: to the
+        bounding boxes of the fixed bodies and of the part laid so far (to the other body's spheres, for a
+        pair). Cheap, vectorised, and enough for bodies far from everything."""
+        c, r = self.spheres[item.body.name]                                           # (N, k, 3)
+        if item.other is None:
+            lo, hi = self._box_lo, self._box_hi                                     # (N, B, 3)
+            gap = np.maximum(np.maximum(lo[:, None] - c[:, :, None], c[:, :, None] - hi[:, None]), 0.0)
+            return np.linalg.norm(gap, axis=3).min(axis=(1, 2)) - r
+        c2, r2 = self.spheres[item.other.name]
+        return np.linalg.norm(c[:, :, None] - c2[:, None], axis=3).min(axis=(1, 2)) - r - r2
 
     def _item_parts(self, item: Item) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         J, C, E = self._parts[item.body.name]
@@ -128,80 +161,105 @@ class Advancer:
         return self.segs.dq_abs[self._a:self._a + len(J)] @ item.rate_mm, C + C2, E + E2
 
     def motion(self, item: Item) -> np.ndarray:
-        """Per segment of the stretch: how far the item's body can move (a pair: relative to the other)."""
+        """Per segment of the batch: how far the item's body can move (a pair: relative to the other)."""
         J, C, E = self._item_parts(item)
         linear = ~self.segs.joint[self._a:self._a + len(J)]
         return np.where(linear, np.minimum(J, C + 2.0 * E), J)
 
     def piece_motion(self, item: Item, k: int, sa: float, sb: float, qa: np.ndarray, qb: np.ndarray) -> float:
-        """The motion bound of the piece [sa, sb] of segment ``k`` (in the current stretch)."""
+        """The motion bound of the piece [sa, sb] of segment ``k`` (in the current batch)."""
         segs = self.segs
         joint = float(np.abs(qb - qa) @ item.rate_mm)
         if segs.joint[k]:
             return joint                                   # the joints move monotonically: travel = difference
-        J, C, E = (float(v[k - self._a]) for v in self._item_parts(item))
+        _, C, E = self._parts[item.body.name]
+        i = k - self._a
+        Ck, Ek = float(C[i]), float(E[i])
+        if item.other is not None:
+            _, C2, E2 = self._parts[item.other.name]
+            Ck, Ek = Ck + float(C2[i]), Ek + float(E2[i])
         span = float(segs.s1[k] - segs.s0[k])
         f = (sb - sa) / span if span > 0 else 1.0
-        return min(joint, f * C + 4.0 * E) if f < 1.0 else min(joint, C + 2.0 * E)
+        return min(joint, f * Ck + 4.0 * Ek) if f < 1.0 else min(joint, Ck + 2.0 * Ek)
 
     # --- the walk ---------------------------------------------------------------------------------
 
-    def walk(self, a: int, b: int, work: list[tuple[Item, np.ndarray]]) -> list[SweepHit]:
-        """Walk every item over the segments of [a, b) its mask selects; the first hit of each item."""
+    def walk(self, a: int, b: int, work: list[tuple[Item, list[tuple[int, int]]]],
+             enter: Callable[[int], list[SweepHit]], stretch_of: np.ndarray) -> list[SweepHit]:
+        """Walk every item over its runs of vertices (batch-local, ``(first, last)``) in [a, b), in path
+        order, calling ``enter(s)`` before the first vertex of each stretch ``s`` (``stretch_of``: per
+        segment of the batch). The walk stops once no item can find a hit before the earliest one found.
+        Returns every hit found (at most one per item, and ``enter``'s)."""
         segs = self.segs
-        state, heap = [], []
-        for j, (item, mask) in enumerate(work):
-            runs = _runs(mask)
-            cum = np.concatenate([[0.0], np.cumsum(self.motion(item))])
-            state.append({"runs": runs, "run": 0, "cum": cum, "prev": None})
+        n = b - a
+        state: list[_Walk] = []
+        heap: list[tuple[int, int]] = []
+        for j, (item, runs) in enumerate(work):
+            state.append(_Walk(runs, np.concatenate([[0.0], np.cumsum(self.motion(item))]), self.free(item)))
             if runs:
                 heap.append((runs[0][0], j))
         heapq.heapify(heap)
         hits: list[SweepHit] = []
-        while heap:
+        best = n + 1                                        # local segment of the earliest hit so far
+        entered = int(stretch_of[0]) - 1
+        while heap and heap[0][0] <= best:
             i, j = heapq.heappop(heap)
+            here = int(stretch_of[min(i, n - 1)])
+            while entered < here:                           # the broad phase follows the path
+                entered += 1
+                found = enter(entered)
+                hits += found
+                best = min([best] + [h.segment - a for h in found])
+            if i > best:
+                continue
             st, item = state[j], work[j][0]
-            r1 = st["runs"][st["run"]][1]
-            cum = st["cum"]
+            r1 = st.runs[st.run][1]
+            cum, free = st.cum, st.free
             if i >= r1:                                     # end of a run: close its last stretch, go on
-                if st["prev"] is not None:
-                    end = segs.q1[a + i - 1]
-                    self._close(item, st, i, self._query(item, end), a + i - 1)
-                st["prev"] = None
-                st["run"] += 1
-                if st["run"] < len(st["runs"]):
-                    heapq.heappush(heap, (st["runs"][st["run"]][0], j))
+                if st.prev is not None:
+                    end = float(free[i]) if free[i] > 0 else self._query(item, segs.q1[a + i - 1]).d
+                    self._close(item, st, i, Probe(end), a + i - 1)
+                st.prev = None
+                st.run += 1
+                if st.run < len(st.runs):
+                    heapq.heappush(heap, (st.runs[st.run][0], j))
                 continue
             k = a + i
             q = segs.q0[k]
             step = float(cum[i + 1] - cum[i])
-            probe = self.probe(item, k, q, step + 2.0 * self.tol)
-            if st["prev"] is not None:
+            if free[i] > step + 2.0 * self.tol:            # the first pass's bound suffices: no query
+                probe = Probe(float(free[i]))
+            else:
+                probe = self.probe(item, k, q, step + 2.0 * self.tol)
+            if st.prev is not None:
                 self._close(item, st, i, probe, k)
             if probe.d <= self.tol:
                 hits.append(self.hit(item, k, float(segs.s0[k]), q, probe))
+                best = min(best, i)
                 continue                                    # this item stops at its first hit
             # an exact distance holds for this segment's row only: it may certify this segment, no further
-            last = i + 1 if probe.exact else r1
+            last = i + 1 if probe.row_only else r1
             u = min(int(np.searchsorted(cum, cum[i] + probe.d - 2.0 * self.tol, "left")) - 1, last)
             if u > i:                                       # certified up to vertex u by this one distance
-                st["prev"] = (i, probe.d)
+                st.prev = (i, probe.d)
                 heapq.heappush(heap, (u, j))
                 continue
-            st["prev"] = None                               # segment i moves further than the clearance: bisect
+            st.prev = None                                  # segment i moves further than the clearance: bisect
             q1 = segs.q1[k]
             h = self.refine(item, k, float(segs.s0[k]), q, probe, float(segs.s1[k]), q1,
                             self.probe(item, k, q1, step + 2.0 * self.tol), 0, step)
             if h is not None:
                 hits.append(h)
+                best = min(best, i)
                 continue
             heapq.heappush(heap, (i + 1, j))
         return hits
 
-    def _close(self, item: Item, st: dict, i: int, probe: Probe, k: int) -> None:
+    def _close(self, item: Item, st: _Walk, i: int, probe: Probe, k: int) -> None:
         """The clearance lower bound of the stretch certified from the item's last query to vertex ``i``."""
-        pi, pd = st["prev"]
-        span = float(st["cum"][i] - st["cum"][pi])
+        assert st.prev is not None, "a stretch is open"
+        pi, pd = st.prev
+        span = float(st.cum[i] - st.cum[pi])
         self.bound(max(pd - span, (pd + probe.d - span) / 2.0), item.name, k)
 
     def refine(self, item: Item, k: int, sa: float, qa: np.ndarray, pa: Probe, sb: float, qb: np.ndarray,
@@ -220,7 +278,7 @@ class Advancer:
             return self.hit(item, k, s, q, p)
         sm = (sa + sb) / 2.0
         qm = self.segs.q_at(k, sm)
-        pm = self.probe(item, k, qm, motion / 2.0 + 2.0 * self.tol)
+        pm = self.probe(item, k, qm, min(motion / 2.0, FINE_BELOW_MM) + 2.0 * self.tol)
         left = self.refine(item, k, sa, qa, pa, sm, qm, pm, depth + 1)
         if left is not None:
             return left
@@ -233,13 +291,19 @@ class Advancer:
         if self._placed != key:
             self.bodies.place(q)
             self._placed = key
+            self._tf: dict[str, coal.Transform3s] = {}
             self.configs += 1
+
+    def _transform(self, body: Body) -> coal.Transform3s:
+        tf = self._tf.get(body.name)
+        if tf is None:
+            tf = self._tf[body.name] = self.bodies.transform(body)
+        return tf
 
     def _pair(self, x: Body, y: Body) -> float:
         res = self._res
         res.clear()
-        bodies = self.bodies
-        return coal.distance(x.geometry, bodies.transform(x), y.geometry, bodies.transform(y), self._req,
+        return coal.distance(x.geometry, self._transform(x), y.geometry, self._transform(y), self._req,
                              res) / MM - GJK_EPS_MM
 
     def _tree_distance(self, tree: coal.BroadPhaseCollisionManager, obj: coal.CollisionObject) -> float:
@@ -255,10 +319,11 @@ class Advancer:
         if item.other is not None:
             return Probe(self._pair(item.body, item.other), item.other.name, exact=True)
         obj = self.bodies.placed_object(item.body)
-        if item.tip:
-            return Probe(self._tree_distance(self.trees.coarse_tip, obj))
+        if item.tip:                                # no bead tree without its layers: the boxes, then exactly
+            d = self._tree_distance(self.trees.coarse_tip, obj)
+            return Probe(d) if d > need_mm or d > FINE_BELOW_MM else Probe(-1.0)
         d = self._tree_distance(self.trees.coarse, obj)
-        if d > need_mm:
+        if d > need_mm or d > FINE_BELOW_MM:       # far from the layer boxes: bisecting is cheaper than beads
             return Probe(d)
         return Probe(self._tree_distance(self.trees.fine_tree(), obj))
 
@@ -268,7 +333,8 @@ class Advancer:
         p = self._query(item, q, need_mm)
         if item.other is not None or p.d > 2.0 * self.tol:
             return p
-        return self.exact(item, k, q, EXACT_MARGIN_MM)
+        margin = EXACT_MARGIN_MM if not np.isfinite(need_mm) else max(EXACT_MARGIN_MM, need_mm)
+        return self.exact(item, k, q, margin)
 
     def exact(self, item: Item, k: int, q: np.ndarray, margin_mm: float) -> Probe:
         """The distance at ``q`` with exactly what the row of segment ``k`` may touch: the table, the plate
@@ -278,14 +344,14 @@ class Advancer:
         if item.other is not None:
             return Probe(self._pair(item.body, item.other), item.other.name, exact=True)
         bodies, body = self.bodies, item.body
-        tf = bodies.transform(body)
-        best = Probe(float("inf"), exact=True)
+        tf = self._transform(body)
+        best = Probe(float("inf"), exact=True, row_only=True)
         req, res = self._req, self._res
         for name, obj in bodies.env.items():
             res.clear()
             d = coal.distance(body.geometry, tf, obj.collisionGeometry(), obj.getTransform(), req, res) / MM
             if d - GJK_EPS_MM < best.d:
-                best = Probe(d - GJK_EPS_MM, name, exact=True)
+                best = Probe(d - GJK_EPS_MM, name, exact=True, row_only=True)
         beads = self.beads
         if len(beads):
             row = int(self.segs.row[k])
@@ -294,16 +360,16 @@ class Advancer:
             lo, hi = np.asarray(aabb.min_) / MM, np.asarray(aabb.max_) / MM
             mask = None
             layer = int(self.segs.tip_layer[k])
-            if item.tip and layer >= 0:
+            if item.tip and layer != NO_LAYER:
                 mask = (beads.layer[:upto] != layer) & (beads.layer[:upto] != layer - 1)
             near = beads.near(lo, hi, margin_mm, mask, upto)
             if best.d > margin_mm:
-                best = Probe(margin_mm, "part", exact=True)
+                best = Probe(margin_mm, "part", exact=True, row_only=True)
             for i, obj in zip(near.tolist(), beads.objects(near), strict=True):
                 res.clear()
                 d = coal.distance(body.geometry, tf, obj.collisionGeometry(), obj.getTransform(), req, res) / MM
                 if d - GJK_EPS_MM < best.d:
-                    best = Probe(d - GJK_EPS_MM, "part", i, exact=True)
+                    best = Probe(d - GJK_EPS_MM, "part", i, exact=True, row_only=True)
         return best
 
     def hit(self, item: Item, k: int, s: float, q: np.ndarray, probe: Probe) -> SweepHit:
@@ -311,13 +377,3 @@ class Advancer:
             probe = self.exact(item, k, q, EXACT_MARGIN_MM)
         return SweepHit(k, int(self.segs.row[k]), float(s), item.body.name, probe.other or "?", float(probe.d),
                         np.asarray(q, dtype=float).copy(), probe.bead)
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """Runs of True segments as (first vertex, last vertex) pairs."""
-    if not mask.any():
-        return []
-    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
-    d = np.diff(m)
-    starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
-    return [(int(s), int(e)) for s, e in zip(starts, ends, strict=True)]

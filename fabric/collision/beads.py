@@ -105,6 +105,13 @@ class BeadSolids:
         return cls(centre, axes, half, np.asarray(layer, dtype=np.int64).reshape(n),
                    np.asarray(row, dtype=np.int64).reshape(n), np.asarray(gcode_line, dtype=np.int64).reshape(n))
 
+    def extend(self, more: BeadSolids) -> BeadSolids:
+        """These beads followed by ``more`` (the coal objects made so far are kept)."""
+        out = BeadSolids(*(np.concatenate([getattr(self, k), getattr(more, k)])
+                           for k in ("centre", "axes", "half", "layer", "row", "gcode_line")))
+        out._objects = self._objects + more._objects
+        return out
+
     # --- coal objects -----------------------------------------------------------------------
 
     def objects(self, idx: np.ndarray) -> list[coal.CollisionObject]:

@@ -21,12 +21,13 @@ whole path it moves at most::
     M_b = sum_j |dq_j| * A_jb
 
 with ``A_jb`` an upper bound of the distance of the body's points from joint
-``j``'s axis: for the body's own joint, the distance of its bounding sphere's
-centre from that axis plus the sphere's radius (exact in the joint's frame);
-for the joints before it, ``D_jb``: the sum of the joint-to-joint offsets
-from ``j`` to the body's joint plus the centre's offset and the radius (the
-triangle inequality, so valid in every configuration). Joints after the body's
-own do not move it. This is computed once per body.
+``j``'s axis, computed once per body from the corners of its bounding box:
+for the body's own joint, their largest distance from that axis (exact in the
+joint's frame; zero for a cylinder or sphere on the axis, which turning about
+it leaves in place); for each joint before it, the part of the next joint's
+offset across ``j``'s axis (fixed in ``j``'s frame) plus the largest distance
+from that next joint's origin (the triangle inequality, valid in every
+configuration). Joints after the body's own do not move it.
 
 For a linear joint interpolation a second bound gives how far any point strays
 from the straight chord between its two end positions (used by the swept hulls
@@ -44,9 +45,10 @@ import pinocchio as pin
 
 from fabric.robot.cell import Cell
 
-__all__ = ["RobotBodies", "TIP", "NOZZLE", "MM", "display_name"]
+__all__ = ["RobotBodies", "Body", "TIP", "NOZZLE", "MM", "GJK_EPS_MM", "display_name"]
 
 MM = 1e-3                 # metres per mm: Pinocchio and coal work in metres, the API in mm
+GJK_EPS_MM = 1e-3         # coal's distances are within 1 um (its GJK tolerance): every bound gives that away
 TIP, NOZZLE = "tool_tip", "tool_nozzle"
 
 
@@ -103,9 +105,7 @@ class RobotBodies:
         self._axes = [_joint_axis(self.model, j) if j else np.zeros(3) for j in range(self.model.njoints)]
         self._joint_T = [_mm(self.model.jointPlacements[j].homogeneous) for j in range(self.model.njoints)]
         self.by_name = {b.name: b for b in self.bodies}
-        self.sphere_centre = {b.name: (b.corners.min(axis=0) + b.corners.max(axis=0)) / 2.0 for b in self.bodies}
-        self.sphere_radius = {b.name: float(np.linalg.norm(b.corners - self.sphere_centre[b.name], axis=1).max())
-                              for b in self.bodies}
+        self._spheres = {b.name: _sphere_cover(b.corners) for b in self.bodies}
         self.tcp_joint = int(tcp.parentJoint)
         self._tcp_placement = _mm(tcp.placement.homogeneous)
         self.moving = [b for b in self.bodies if b.joint > 0]
@@ -134,9 +134,10 @@ class RobotBodies:
         return out
 
     def spheres(self, poses: np.ndarray, body: Body) -> tuple[np.ndarray, float]:
-        """Centres (N, 3) and radius (mm) of the body's bounding sphere at ``poses`` (N, 4, 4)."""
-        c = self.sphere_centre[body.name]
-        return poses[:, :3, :3] @ c + poses[:, :3, 3], self.sphere_radius[body.name]
+        """A few equal spheres covering the body's bounding box, at ``poses`` (N, 4, 4): centres (N, k, 3)
+        and their radius (mm)."""
+        c, r = self._spheres[body.name]
+        return np.swapaxes(poses[:, :3, :3] @ c.T, 1, 2) + poses[:, None, :3, 3], r
 
     # --- bounds ------------------------------------------------------------------------
 
@@ -157,6 +158,8 @@ class RobotBodies:
         m = self.model
         axis = _joint_axis(m, j)
         rate[m.joints[j].idx_q] = float(np.max(np.linalg.norm(pts - np.outer(pts @ axis, axis), axis=1)))
+        if _round_about(geom, g.placement, axis):     # turning about its own axis leaves it where it is
+            rate[m.joints[j].idx_q] = 0.0
         lever = float(np.max(np.linalg.norm(pts, axis=1)))        # from this joint's origin
         reach[m.joints[j].idx_q] = lever
         child = j
@@ -257,6 +260,18 @@ class RobotBodies:
         return obj
 
 
+def _round_about(geom, placement: pin.SE3, axis: np.ndarray) -> bool:
+    """Whether ``geom`` (placed by ``placement`` in its joint's frame) is a solid of revolution about the
+    joint's axis (a cylinder or capsule on it, a sphere centred on it)."""
+    centre = np.asarray(placement.translation, dtype=float)
+    on_axis = np.linalg.norm(centre - axis * float(centre @ axis)) < 1e-9
+    if isinstance(geom, coal.Sphere):
+        return bool(on_axis)
+    if isinstance(geom, (coal.Cylinder, coal.Capsule)):
+        return bool(on_axis and abs(abs(float(placement.rotation[:, 2] @ axis)) - 1.0) < 1e-9)
+    return False
+
+
 def _mm(T: np.ndarray) -> np.ndarray:
     out = np.array(T, dtype=float)
     out[:3, 3] /= MM
@@ -268,6 +283,21 @@ def _rodrigues(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
     s, c = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
     return np.eye(3) + s * K + (1.0 - c) * (K @ K)
+
+
+def _sphere_cover(corners: np.ndarray) -> tuple[np.ndarray, float]:
+    """Centres (k, 3) and radius of k <= 4 spheres covering the box of ``corners``: the box cut into near
+    cubes along its longest side, one sphere around each."""
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    ext = hi - lo
+    axis = int(np.argmax(ext))
+    other = max(float(np.delete(ext, axis).max()), 1e-9)
+    k = int(np.clip(round(float(ext[axis]) / other), 1, 4))
+    sub = ext.copy()
+    sub[axis] /= k
+    centres = np.repeat(((lo + hi) / 2.0)[None], k, axis=0)
+    centres[:, axis] = lo[axis] + sub[axis] * (np.arange(k) + 0.5)
+    return centres, float(np.linalg.norm(sub) / 2.0)
 
 
 def _corners(geom) -> np.ndarray:

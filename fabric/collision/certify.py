@@ -27,13 +27,13 @@ for the stretch:
    axis, along linear moves: swept hulls, all of the stretch in one coal call
    per body (:mod:`fabric.collision.hull`);
 2. every other body, those along joint moves, and every pair of robot bodies:
-   a vectorised first pass certifies each segment whose bounding-sphere
-   distance to the fixed bodies' and the part's bounding boxes (or to the
-   other body's sphere) exceeds twice its motion bound;
-3. what is left: conservative advancement with exact distances
-   (:mod:`fabric.collision.advance`), bisecting where the clearance is small.
+   conservative advancement (:mod:`fabric.collision.advance`), bisecting
+   where the clearance is small. A vectorised first pass gives a distance
+   lower bound at every configuration for free (spheres covering each body
+   against the boxes around the fixed bodies and the part so far, or against
+   the other body's spheres); coal is asked only where that is not enough.
 
-Pieces that the first two cannot certify go to the third. The certified
+Pieces the hulls cannot certify are refined by the second. The certified
 clearance is the smallest lower bound of all; the first hit is the earliest
 along the path, and ends the sweep.
 """
@@ -47,8 +47,8 @@ import numpy as np
 from fabric.collision.advance import Advancer, Item, SweepHit
 from fabric.collision.beads import BeadSolids
 from fabric.collision.bodies import TIP, Body, RobotBodies
-from fabric.collision.hull import ToolCylinder, hull_check
-from fabric.collision.path import LIVE_ROW, Segments, move_segments, program_segments
+from fabric.collision.hull import ToolCylinder, cover_distances, hull_covers
+from fabric.collision.path import LIVE_ROW, NO_LAYER, START_LAYER, Segments, move_segments, program_segments
 from fabric.collision.trees import PartTrees
 from fabric.motion.program import Program
 from fabric.robot.cell import Cell
@@ -56,6 +56,7 @@ from fabric.robot.cell import Cell
 __all__ = ["Certifier", "SweepHit", "SweepResult", "TOLERANCE_MM", "exemption_text"]
 
 TOLERANCE_MM = 0.01          # two bodies this close count as touching
+BATCH_SEGMENTS = 20_000      # stretches are prepared (vectorised bounds, hull covers) this many segments at a time
 
 
 def exemption_text(bodies: RobotBodies) -> str:
@@ -105,32 +106,81 @@ class Certifier:
         return self._sweep(segs, solids, t0)
 
     def sweep_move(self, q_from: np.ndarray, q_to: np.ndarray, beads: BeadSolids | None = None,
-                   tip_layer: int = -1, vel_r: float = 0.5, kind: str = "joint") -> SweepResult:
-        """Certify one joint move (as the twin times it, at ``vel_r``) against ``beads`` (all laid before)."""
+                   tip_layer: int = NO_LAYER, vel_r: float = 0.5, kind: str = "joint") -> SweepResult:
+        """Certify one joint move (as the twin times it, at ``vel_r``) against ``beads`` (all laid before).
+
+        The tip was laying layer ``tip_layer`` where the move starts (an interrupted print): the beads of
+        that layer and the one under it within the exemption zone around the tip there (the tip's radius
+        and one layer height) are what it rests on, and it may leave them. Every other bead counts."""
         t0 = time.perf_counter()
+        solids = beads if beads is not None else BeadSolids.empty()
+        if tip_layer != NO_LAYER and len(solids):
+            solids = self._resting(solids, np.asarray(q_from, dtype=float), tip_layer)
+            tip_layer = START_LAYER
         segs = move_segments(self.cell.robot, q_from, q_to, vel_r, kind, tip_layer)
-        return self._sweep(segs, beads if beads is not None else BeadSolids.empty(), t0)
+        return self._sweep(segs, solids, t0)
+
+    def _resting(self, beads: BeadSolids, q: np.ndarray, tip_layer: int) -> BeadSolids:
+        """``beads`` with those the tip rests on at ``q`` relabelled ``START_LAYER``: of layer ``tip_layer``
+        or the one under, within the tip's radius and one layer height of the tip."""
+        tip = self.cell.robot.fk(q)[:3, 3]
+        height = float(np.max(2.0 * beads.half[:, 2])) if len(beads) else 0.0
+        reach = self.bodies.tip_radius_mm + height
+        gap = np.linalg.norm(np.maximum(np.maximum(beads.lo - tip, tip - beads.hi), 0.0), axis=1)
+        resting = (gap <= reach) & ((beads.layer == tip_layer) | (beads.layer == tip_layer - 1))
+        if not resting.any():
+            return beads
+        layer = np.where(resting, START_LAYER, beads.layer)
+        out = BeadSolids(beads.centre, beads.axes, beads.half, layer, beads.row, beads.gcode_line)
+        out._objects = beads._objects
+        return out
 
     # --- the sweep ------------------------------------------------------------------------------
 
     def _sweep(self, segs: Segments, beads: BeadSolids, t0: float) -> SweepResult:
         self.segs, self.beads = segs, beads
         self.trees = PartTrees(beads, self.bodies.env)
-        self.adv = Advancer(self.bodies, segs, beads, self.trees, self.tol)
+        adv = self.adv = Advancer(self.bodies, segs, beads, self.trees, self.tol)
         self.pieces = 0
         hit: SweepHit | None = None
-        for a, b in segs.runs(self._stretch_keys()):
-            last_row = int(segs.row[b - 1])
-            count = len(beads) if last_row >= LIVE_ROW else int(np.searchsorted(beads.row, last_row, "left"))
-            self.trees.advance(count, int(segs.tip_layer[a]))
-            self.adv.set_stretch(a, b)
-            hits = self._hulls(a, b) + self.adv.walk(a, b, self._work(a, b))
+        runs = segs.runs(self._stretch_keys())
+        self._starts = np.array([a for a, _ in runs], dtype=np.int64)
+        self._stretch = np.repeat(np.arange(len(runs)), [b - a for a, b in runs])
+        self._counts = np.array([self._count(b) for _, b in runs], dtype=np.int64)
+        part_lo, part_hi = self._part_boxes()
+        first = 0
+        while first < len(runs):                           # batches of whole stretches
+            last = first
+            while last + 1 < len(runs) and runs[last][1] - runs[first][0] < BATCH_SEGMENTS:
+                last += 1
+            a, b = runs[first][0], runs[last][1]
+            vert = self._stretch[np.minimum(np.arange(a, b + 1), b - 1)]
+            adv.set_batch(a, b, part_lo[vert], part_hi[vert])
+            idx = a + np.flatnonzero(~segs.joint[a:b])
+            self._covers = hull_covers(self.bodies, segs, idx, self._stretch[idx], self.tools)
+            hits = adv.walk(a, b, self._work(a, b), self._enter, self._stretch[a:b])
             if hits:
                 hit = min(hits, key=lambda h: (h.segment, h.s))
                 break
-        adv = self.adv
+            first = last + 1
         return SweepResult(hit is None, adv.clearance, adv.clearance_body, adv.clearance_segment, adv.configs,
                            self.pieces, len(segs), len(beads), hit, time.perf_counter() - t0, segs)
+
+    def _count(self, b: int) -> int:
+        """Beads laid before the last row of the stretch ending at segment ``b``."""
+        last_row = int(self.segs.row[b - 1])
+        return len(self.beads) if last_row >= LIVE_ROW else int(np.searchsorted(self.beads.row, last_row, "left"))
+
+    def _part_boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per stretch: the bounding box of the beads laid by its end (empty: an inverted box, far away)."""
+        beads = self.beads
+        lo = np.full((len(self._counts), 3), np.inf)
+        hi = np.full((len(self._counts), 3), -np.inf)
+        has = self._counts > 0
+        if len(beads) and has.any():
+            lo[has] = np.minimum.accumulate(beads.lo, axis=0)[self._counts[has] - 1]
+            hi[has] = np.maximum.accumulate(beads.hi, axis=0)[self._counts[has] - 1]
+        return lo, hi
 
     def _stretch_keys(self) -> np.ndarray:
         """Per segment, what its stretch shares: the tip's layer, and whether that layer's first bead is laid
@@ -144,61 +194,68 @@ class Certifier:
             started = known & (segs.row >= beads.row[first][pos])
         return segs.tip_layer * 2 + started
 
-    # --- 1. the tool's cylinders along linear moves: swept hulls ---------------------------------
+    # --- entering a stretch: the broad phase, then the tool's swept hulls -------------------------
 
-    def _hulls(self, a: int, b: int) -> list[SweepHit]:
+    def _enter(self, s: int) -> list[SweepHit]:
         segs, adv = self.segs, self.adv
-        idx = a + np.flatnonzero(~segs.joint[a:b])
-        checks = [(t, self.trees.coarse_tip if t.body.name == TIP else self.trees.coarse) for t in self.tools]
+        self.trees.advance(int(self._counts[s]), int(segs.tip_layer[self._starts[s]]))
         hits: list[SweepHit] = []
-        for (tool, _), res in zip(checks, hull_check(self.bodies, segs, idx, checks), strict=True):
-            self.pieces += res.pieces
-            adv.bound(res.clearance_mm, tool.body.name, res.nearest_segment)
+        if self._covers is None:
+            return hits
+        for tool, covers in zip(self.tools, self._covers, strict=True):
+            g0, g1 = np.searchsorted(covers.stretch, [s, s + 1])
+            if g0 == g1:
+                continue
+            lo, hi = self.trees.layer_boxes(tool.body.name == TIP)
+            dist = cover_distances(covers, slice(g0, g1), lo, hi, 2.0 * self.tol)
+            self.pieces += int(covers.edges[g1] - covers.edges[g0])
+            clear = np.where(dist > 2.0 * self.tol, dist, np.inf)
+            if np.isfinite(clear).any():
+                g = int(np.argmin(clear))
+                adv.bound(float(clear[g]), tool.body.name, int(covers.segment[covers.edges[g0 + g]]))
             item = self._body_item(tool.body)
-            for k, s0, s1 in res.touching:              # in path order: the first hit of this body ends it
-                qa, qb = segs.q_at(k, s0), segs.q_at(k, s1)
-                h = adv.refine(item, k, s0, qa, adv.probe(item, k, qa), s1, qb, adv.probe(item, k, qb))
+            for g in (g0 + np.flatnonzero(dist <= 2.0 * self.tol)).tolist():
+                h = None
+                for k, s0, s1 in covers.pieces_of(g):       # in path order: the first hit of this body ends it
+                    qa, qb = segs.q_at(k, s0), segs.q_at(k, s1)
+                    h = adv.refine(item, k, s0, qa, adv.probe(item, k, qa), s1, qb, adv.probe(item, k, qb))
+                    if h is not None:
+                        hits.append(h)
+                        break
                 if h is not None:
-                    hits.append(h)
                     break
         return hits
 
-    # --- 2. the first pass, 3. conservative advancement -------------------------------------------
+    # --- every item's walk ---------------------------------------------------------------------------
 
     def _body_item(self, body: Body) -> Item:
         return Item(body.name, body, None, body.rate_mm, body.name == TIP)
 
-    def _work(self, a: int, b: int) -> list[tuple[Item, np.ndarray]]:
-        """Every item with the segments of [a, b) the first pass leaves to its walk."""
+    def _work(self, a: int, b: int) -> list[tuple[Item, list[tuple[int, int]]]]:
+        """Every item with its runs of batch-local vertices: a body's end at every stretch (what it may
+        touch changes), and for a hulled tool cylinder they cover the joint moves only."""
         joint = self.segs.joint[a:b]
+        cuts = self._starts[(self._starts > a) & (self._starts < b)] - a
+        everywhere = _runs(np.ones(b - a, bool), cuts)
+        on_joints = _runs(joint, cuts)
         out = []
         for body in self.bodies.moving:
-            item = self._body_item(body)
-            mask = joint.copy() if body.name in self._hulled else np.ones(b - a, bool)
-            out.append((item, mask & ~self._first_pass(item, a, b)))
+            out.append((self._body_item(body), on_joints if body.name in self._hulled else everywhere))
+        whole = [(0, b - a)]
         for x, y in self.bodies.self_pairs:
-            item = Item(f"{x.name} <-> {y.name}", x, y, self.bodies.pair_rate_mm(x, y))
-            out.append((item, ~self._first_pass(item, a, b)))
+            if x.joint < y.joint:                           # named from the far end: "tool_body hits link_4"
+                x, y = y, x
+            out.append((Item(f"{x.name} <-> {y.name}", x, y, self.bodies.pair_rate_mm(x, y)), whole))
         return out
 
-    def _first_pass(self, item: Item, a: int, b: int) -> np.ndarray:
-        """Segments of [a, b) certified by bounding spheres: the body's sphere at the segment's start is
-        farther from every obstacle's bounding box (the other body's sphere, for a pair) than twice the
-        segment's motion bound. Their clearance is at least half that distance."""
-        bodies, adv = self.bodies, self.adv
-        frames = adv.frames
-        c, r = bodies.spheres(bodies.body_poses(frames, item.body), item.body)
-        if item.other is None:
-            lo, hi = self.trees.obstacle_boxes()
-            gap = np.maximum(np.maximum(lo[None] - c[:, None], c[:, None] - hi[None]), 0.0)
-            dist = np.linalg.norm(gap, axis=2).min(axis=1) - r
-        else:
-            c2, r2 = bodies.spheres(bodies.body_poses(frames, item.other), item.other)
-            dist = np.linalg.norm(c - c2, axis=1) - r - r2
-        motion = adv.motion(item)
-        ok = dist[:-1] > 2.0 * motion + 2.0 * self.tol
-        if ok.any():
-            lb = dist[:-1] - motion
-            i = int(np.argmin(np.where(ok, lb, np.inf)))
-            adv.bound(float(lb[i]), item.name, a + i)
-        return ok
+
+def _runs(mask: np.ndarray, cuts: np.ndarray) -> list[tuple[int, int]]:
+    """Runs of True segments as (first vertex, last vertex) pairs, also cut at vertices ``cuts``."""
+    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    d = np.diff(m)
+    starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    cut = np.zeros(len(mask) + 1, bool)
+    cut[cuts] = True
+    cut &= np.concatenate([mask, [False]]) & np.concatenate([[False], mask])   # inside a run only
+    points = np.sort(np.concatenate([starts, ends, np.flatnonzero(cut), np.flatnonzero(cut)]))
+    return [(int(x), int(y)) for x, y in zip(points[0::2], points[1::2], strict=True)]

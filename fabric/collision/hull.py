@@ -1,43 +1,46 @@
-"""Swept hulls of the nozzle and its tip along linear moves, checked a whole layer at a time.
+"""Swept hulls of the tool's cylinders (tip, nozzle, tool body) along linear moves.
 
-The nozzle and the tip are cylinders on the TCP's z axis. Along a linear
-move every point ``p`` of a rigid body stays within the chord error ``e`` of
-the straight chord between its two end positions
-(:meth:`RobotBodies.chord_error_mm`), and a chord from ``p_a`` to ``p_b`` lies
-in the convex hull of the body at both ends. So the whole swept volume lies
-in ``hull(B_a, B_b)`` grown by ``e``. For two cylinders of radius ``r`` and
-half-length ``h`` whose centres differ by ``v`` and axes by an angle ``t``,
-that hull lies in the cylinder centred between them along their mean axis,
-of radius ``r + |v_perp| / 2`` and half-length ``h + |v_par| / 2``, grown by
-``rho * t / 2`` (``rho``: the cylinder's half-diagonal), which is how far
-turning an end cylinder onto the mean axis moves it. The growth is coal's
-swept-sphere radius, so the solid checked contains every position the body
-takes between the two ends.
+The tip and the nozzle (and the tool body when the TCP is on the flange's
+axis) are cylinders on the TCP's z axis. Along a linear move every point
+``p`` of a rigid body stays within the chord error ``e`` of the straight
+chord between its two end positions (:meth:`RobotBodies.chord_error_mm`), and
+that chord lies in the convex hull of the body at both ends: the swept volume
+lies in ``hull(B_a, B_b)`` grown by ``e``. For a run of pieces, the cylinders
+at every piece end, turned onto their mean axis (which moves a point by at
+most ``rho * t``, ``rho`` the cylinder's half-diagonal and ``t`` the largest
+turn), fit in one cylinder on that axis: as wide as the tool plus the spread
+of the centres across the axis, as long as the tool plus their spread along
+it. That cover, grown by ``e + rho * t``, holds every position the tool takes
+along the run.
 
 A linear move is cut into pieces until the chord error is at most
-``CHORD_TARGET_MM`` and a piece at most ``PIECE_MAX_MM`` long; all pieces of
-a layer go into one dynamic AABB tree, and a single coal call per tree
-answers whether any of them touches the part, the plate or the table, and
-another the smallest distance of those that do not: a certified lower bound
-of the clearance along every linear move of the layer. The pieces that touch
-are handed back for the exact refinement (:mod:`fabric.collision.certify`).
+``CHORD_TARGET_MM`` and a piece at most ``PIECE_MAX_MM`` long; consecutive
+pieces of a stretch share a cover where it is at most ``GROUP_RADIUS_MM``
+wider than the tool (blocks of 16, else 4, else single pieces). Covers are
+measured against the obstacles' boxes (the layer boxes of
+:mod:`fabric.collision.trees`, the table's, the plate's) in numpy: a cover on
+the z axis is a disk times an interval and a box a rectangle times an
+interval, so their distance is exactly ``hypot(gap across, gap along)``;
+any other cover counts by its bounding box. A layer is flat, so over a
+layer's box the tool's clearance comes out exact: the certified clearance of
+a print is what the nozzle and the tip really keep. Covers closer than the
+tolerance hand their pieces to the exact refinement.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import coal
 import numpy as np
 
-from fabric.collision.bodies import MM, Body, RobotBodies
+from fabric.collision.bodies import GJK_EPS_MM, Body, RobotBodies
 from fabric.collision.path import Segments
 
-__all__ = ["ToolCylinder", "HullResult", "hull_check", "CHORD_TARGET_MM", "PIECE_MAX_MM", "GJK_EPS_MM"]
+__all__ = ["ToolCylinder", "HullCovers", "hull_covers", "cover_distances", "CHORD_TARGET_MM", "PIECE_MAX_MM",
+           "GROUP_RADIUS_MM"]
 
 CHORD_TARGET_MM = 0.02       # chord error allowed per piece
 GROUP_RADIUS_MM = 6.0        # consecutive pieces share a cover when they fit this much wider than the tool
-PIECE_MAX_MM = 10.0          # longest piece (the swept cylinder grows by half of it sideways)
-GJK_EPS_MM = 1e-3            # coal's distances are within 1 um (GJK tolerance): bounds give that away
+PIECE_MAX_MM = 10.0          # longest piece
 
 
 @dataclass(frozen=True)
@@ -51,84 +54,67 @@ class ToolCylinder:
 
 
 @dataclass
-class HullResult:
-    clearance_mm: float          # min distance over the pieces that do not touch (inf: none)
-    touching: list[tuple[int, float, float]]   # (segment, s0, s1) pieces that touch, in path order
-    pieces: int
+class HullCovers:
+    """The covers of one tool over a set of pieces, in path order."""
+
+    centre: np.ndarray           # (G, 3)
+    axis: np.ndarray             # (G, 3)
+    radius: np.ndarray           # (G,)
+    half: np.ndarray             # (G,)
+    grow: np.ndarray             # (G,)
+    stretch: np.ndarray          # (G,) the stretch each cover belongs to
+    edges: np.ndarray            # (G + 1,) pieces edges[g] .. edges[g + 1] - 1 are under cover g
+    segment: np.ndarray          # (P,) per piece: its segment
+    s0: np.ndarray               # (P,) and its fractions of the segment's row
+    s1: np.ndarray
+
+    def pieces_of(self, g: int) -> list[tuple[int, float, float]]:
+        return [(int(self.segment[i]), float(self.s0[i]), float(self.s1[i]))
+                for i in range(int(self.edges[g]), int(self.edges[g + 1]))]
 
 
-def hull_check(bodies: RobotBodies, segs: Segments, idx: np.ndarray,
-               checks: list[tuple[ToolCylinder, coal.BroadPhaseCollisionManager]]) -> list[HullResult]:
-    """Check the swept hulls of each tool along linear segments ``idx`` against its tree."""
+def hull_covers(bodies: RobotBodies, segs: Segments, idx: np.ndarray, stretch: np.ndarray,
+                tools: list[ToolCylinder]) -> list[HullCovers] | None:
+    """Covers of every tool along linear segments ``idx`` (in path order) whose stretches are ``stretch``
+    (per segment of ``idx``); no cover spans two stretches. None when there is no linear segment."""
     if len(idx) == 0:
-        return [HullResult(float("inf"), [], 0) for _ in checks]
+        return None
     robot = bodies.cell.robot
     dq = segs.dq_abs[idx]
-    chord = np.max([bodies.chord_error_mm(dq, tool.body) for tool, _ in checks], axis=0)
+    errors = [bodies.chord_error_mm(dq, tool.body) for tool in tools]
     tcp0 = robot.fk(segs.q0[idx])
     tcp1 = robot.fk(segs.q1[idx])
     length = np.linalg.norm(tcp1[:, :3, 3] - tcp0[:, :3, 3], axis=1)
-    n = np.maximum(np.ceil(np.sqrt(chord / CHORD_TARGET_MM)), np.ceil(length / PIECE_MAX_MM))
+    n = np.maximum(np.ceil(np.sqrt(np.max(errors, axis=0) / CHORD_TARGET_MM)), np.ceil(length / PIECE_MAX_MM))
     n = np.maximum(n, 1).astype(np.int64)
     # the pieces: segment, fractions of it, TCP at both ends
     seg = np.repeat(np.arange(len(idx)), n)
     first = np.repeat(np.cumsum(n) - n, n)
     k = np.arange(len(seg)) - first
     f0, f1 = k / n[seg], (k + 1) / n[seg]
-    qa = segs.q0[idx][seg] + (segs.q1[idx] - segs.q0[idx])[seg] * f0[:, None]
-    qb = segs.q0[idx][seg] + (segs.q1[idx] - segs.q0[idx])[seg] * f1[:, None]
-    Ta = _fk_reuse(robot, qa, f0 == 0, tcp0[seg])
-    Tb = _fk_reuse(robot, qb, f1 == 1, tcp1[seg])
+    split = n[seg] > 1
+    Ta, Tb = tcp0[seg], tcp1[seg]
+    if split.any():
+        dq_full = (segs.q1[idx] - segs.q0[idx])[seg[split]]
+        base = segs.q0[idx][seg[split]]
+        Ta[split] = robot.fk(base + dq_full * f0[split, None])
+        Tb[split] = robot.fk(base + dq_full * f1[split, None])
     glob = idx[seg]
-    s0 = segs.s0[glob] + (segs.s1[glob] - segs.s0[glob]) * f0
-    s1 = segs.s0[glob] + (segs.s1[glob] - segs.s0[glob]) * f1
+    span = segs.s1[glob] - segs.s0[glob]
+    s0, s1 = segs.s0[glob] + span * f0, segs.s0[glob] + span * f1
+    piece_stretch = stretch[seg]
     out = []
-    for tool, tree in checks:
-        error = bodies.chord_error_mm(dq, tool.body)[seg] / n[seg] ** 2    # scales with the travel squared
-        groups, covers = _groups(Ta, Tb, tool, error)
-        clearance, touching = _check_covers(covers, tree)
-        pieces = [i for g in touching for i in range(groups[g], groups[g + 1])]
-        out.append(HullResult(clearance, [(int(glob[i]), float(s0[i]), float(s1[i])) for i in pieces], len(seg)))
+    for tool, error in zip(tools, errors, strict=True):
+        edges, (centre, axis, radius, half, grow) = _groups(Ta, Tb, tool, error[seg] / n[seg] ** 2, piece_stretch)
+        out.append(HullCovers(centre, axis, radius, half, grow, piece_stretch[edges[:-1]], edges, glob, s0, s1))
     return out
 
 
-def _check_covers(covers: tuple[np.ndarray, ...], tree: coal.BroadPhaseCollisionManager) -> tuple[float, list[int]]:
-    """(smallest distance of the covers that do not touch ``tree``, indices of those that do)."""
-    centre, axis, radius, half, grow = covers
-    objs = []
-    mgr = coal.DynamicAABBTreeCollisionManager()
-    rot = _rotations_to(axis)
-    for i in range(len(centre)):
-        geom = coal.Cylinder(float(radius[i] * MM), float(2.0 * half[i] * MM))
-        geom.setSweptSphereRadius(float(grow[i] * MM))
-        obj = coal.CollisionObject(geom, rot[i], centre[i] * MM)
-        obj.computeAABB()
-        objs.append(obj)
-        mgr.registerObject(obj)
-    mgr.setup()
-    hit = coal.CollisionCallBackDefault()
-    tree.collide(mgr, hit)
-    touching: list[int] = []
-    if hit.data.result.isCollision():
-        for i, obj in enumerate(objs):            # which: one query each, in path order
-            one = coal.CollisionCallBackDefault()
-            tree.collide(obj, one)
-            if one.data.result.isCollision():
-                touching.append(i)
-                mgr.unregisterObject(obj)
-    clearance = float("inf")
-    if mgr.size():
-        dist = coal.DistanceCallBackDefault()
-        tree.distance(mgr, dist)
-        clearance = float(dist.data.result.min_distance) / MM - GJK_EPS_MM
-    return clearance, touching
-
-
-def _groups(Ta: np.ndarray, Tb: np.ndarray, tool: ToolCylinder, error: np.ndarray,
+def _groups(Ta: np.ndarray, Tb: np.ndarray, tool: ToolCylinder, error: np.ndarray, stretch: np.ndarray,
             ) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
-    """Runs of consecutive pieces under one cover where they fit in a cylinder ``GROUP_RADIUS_MM`` wider
-    than the tool (aligned blocks of 16, else of 4, else one piece): (group edges (G+1,), covers (centre,
-    axis, radius, half, grow))."""
+    """Runs of consecutive pieces of one stretch under one cover where they fit in a cylinder at most
+    ``GROUP_RADIUS_MM`` wider than the tool (aligned blocks of 16, else of 4, else single pieces):
+    (group edges (G+1,), covers (centre, axis, radius, half, grow))."""
     ends = np.concatenate([(Ta[:, :3, 3] + Ta[:, :3, 2] * tool.offset_mm)[:, None],
                            (Tb[:, :3, 3] + Tb[:, :3, 2] * tool.offset_mm)[:, None]], axis=1)   # (n, 2, 3)
     axes = np.concatenate([Ta[:, None, :3, 2], Tb[:, None, :3, 2]], axis=1)
@@ -138,8 +124,8 @@ def _groups(Ta: np.ndarray, Tb: np.ndarray, tool: ToolCylinder, error: np.ndarra
     for size in (16, 4, 1):
         cand = np.arange(0, n - size + 1, size)
         sel = cand[:, None] + np.arange(size)[None, :]
-        free = ~taken[sel].all(axis=1) if size == 1 else ~taken[sel].any(axis=1)
-        cand, sel = cand[free], sel[free]
+        ok = ~taken[sel].any(axis=1) & (stretch[sel[:, 0]] == stretch[sel[:, -1]])
+        cand, sel = cand[ok], sel[ok]
         if len(cand) == 0:
             continue
         cover = _cover(ends[sel].reshape(len(cand), 2 * size, 3), axes[sel].reshape(len(cand), 2 * size, 3),
@@ -149,15 +135,15 @@ def _groups(Ta: np.ndarray, Tb: np.ndarray, tool: ToolCylinder, error: np.ndarra
         sizes.append(np.full(int(keep.sum()), size))
         covers.append(tuple(c[keep] for c in cover[:-1]))
         taken[sel[keep].ravel()] = True
-    begin, size = np.concatenate(starts), np.concatenate(sizes)
+    begin, length = np.concatenate(starts), np.concatenate(sizes)
     order = np.argsort(begin)
     edges = np.concatenate([begin[order], [n]])
-    assert np.array_equal(edges[1:], (begin + size)[order]), "the groups tile the pieces"
+    assert np.array_equal(edges[1:], (begin + length)[order]), "the groups tile the pieces"
     return edges, tuple(np.concatenate([c[f] for c in covers])[order] for f in range(5))
 
 
 def _cover(ends: np.ndarray, axes: np.ndarray, error: np.ndarray, tool: ToolCylinder) -> tuple[np.ndarray, ...]:
-    """The cylinder containing the tool's swept volume over a run of pieces (see the module docstring):
+    """The cylinder holding the tool's swept volume over a run of pieces (see the module docstring):
     ``ends`` (G, P, 3) the tool's centre at each piece end, ``axes`` (G, P, 3) its axis there, ``error``
     (G,) the largest chord error. Returns (centre, axis, radius, half, grow, spread across the axis)."""
     axis = axes.sum(axis=1)
@@ -175,19 +161,27 @@ def _cover(ends: np.ndarray, axes: np.ndarray, error: np.ndarray, tool: ToolCyli
     return centre, axis, tool.radius_mm + spread, tool.half_mm + (hi - lo) / 2.0, grow, spread
 
 
-def _fk_reuse(robot, q: np.ndarray, known: np.ndarray, T_known: np.ndarray) -> np.ndarray:
-    """TCP poses at ``q``, reusing those already known (segment ends)."""
-    T = T_known.copy()
-    todo = ~known
-    if todo.any():
-        T[todo] = robot.fk(q[todo])
-    return T
-
-
-def _rotations_to(axis: np.ndarray) -> np.ndarray:
-    """Rotations (N, 3, 3) taking z to each unit ``axis`` (columns: x, y, axis)."""
-    helper = np.where(np.abs(axis[:, 0:1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    x = np.cross(helper, axis)
-    x /= np.linalg.norm(x, axis=1)[:, None]
-    y = np.cross(axis, x)
-    return np.stack([x, y, axis], axis=2)
+def cover_distances(c: HullCovers, sel: slice, lo: np.ndarray, hi: np.ndarray, touch_mm: float) -> np.ndarray:
+    """Distance lower bound (mm) of covers ``sel`` to the boxes (lo, hi) (B, 3) (see the module docstring):
+    exact for every cover within ``touch_mm`` of a box, and for the nearest cover; for the others, a
+    distance at least as large as the smallest. Boxes are taken nearest first (by their distance to the
+    bounding box of all the covers), and only while they can still be nearer than what is found."""
+    centre, axis, radius = c.centre[sel], c.axis[sel], c.radius[sel]
+    half, grow = c.half[sel], c.grow[sel]
+    out = np.full(len(centre), np.inf)
+    if len(lo) == 0 or len(centre) == 0:
+        return out
+    vertical = np.abs(axis[:, 2]) > 1.0 - 1e-12
+    ext = half[:, None] * np.abs(axis) + radius[:, None] * np.sqrt(np.maximum(1.0 - axis ** 2, 0.0))
+    all_lo = (centre - ext - grow[:, None]).min(axis=0)
+    all_hi = (centre + ext + grow[:, None]).max(axis=0)
+    reach = np.linalg.norm(np.maximum(np.maximum(lo - all_hi, all_lo - hi), 0.0), axis=1)
+    for b in np.argsort(reach, kind="stable").tolist():
+        if reach[b] > max(float(out.min()), touch_mm):
+            break
+        gap = np.maximum(np.maximum(lo[b] - (centre + ext), (centre - ext) - hi[b]), 0.0)          # (G, 3)
+        xy = np.maximum(np.maximum(lo[b, :2] - centre[:, :2], centre[:, :2] - hi[b, :2]), 0.0)
+        across = np.maximum(np.linalg.norm(xy, axis=1) - radius, 0.0)
+        d = np.where(vertical, np.hypot(across, gap[:, 2]), np.linalg.norm(gap, axis=1)) - grow
+        np.minimum(out, d, out=out)
+    return out

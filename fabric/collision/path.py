@@ -25,6 +25,7 @@ the return home).
 """
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,10 +34,13 @@ import numpy as np
 from fabric.motion.program import APPROACH, MOVEJ, MOVEL, RETURN_HOME, Program
 from fabric.motion.timing import StartState, time_program
 
-__all__ = ["Segments", "program_segments", "move_segments", "MOVE_KINDS", "JOINT_PIECE_RAD", "LIVE_ROW"]
+__all__ = ["Segments", "program_segments", "move_segments", "MOVE_KINDS", "JOINT_PIECE_RAD", "LIVE_ROW", "NO_LAYER",
+           "START_LAYER"]
 
 JOINT_PIECE_RAD = 0.05      # a joint move is cut into pieces of at most this much travel (sum over joints)
 LIVE_ROW = 1 << 62          # the row of a live move: after every bead the twin has laid
+NO_LAYER = -1               # a tip layer: the tip may touch nothing
+START_LAYER = -100          # a live move's tip layer: the beads the tip rests on where it starts (relabelled so)
 MOVE_KINDS = ("print", "travel", "approach", "retract", "home", "joint", "recover", "restart")
 
 
@@ -76,7 +80,7 @@ class Segments:
             return []
         cut = np.flatnonzero(key[1:] != key[:-1]) + 1
         edges = np.concatenate([[0], cut, [len(self)]])
-        return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+        return [(int(a), int(b)) for a, b in itertools.pairwise(edges)]
 
 
 def joint_trajectory(robot: Any, q_from: np.ndarray, q_to: np.ndarray, vel_r: float) -> Any:

@@ -24,6 +24,7 @@ import numpy as np
 
 from fabric.collision.beads import BeadSolids
 from fabric.collision.bodies import MM
+from fabric.collision.path import NO_LAYER
 
 __all__ = ["PartTrees"]
 
@@ -47,8 +48,9 @@ class PartTrees:
         order = np.argsort(first, kind="stable")
         self._layers = layers[order]
         self._layer_first = first[order]
-        self._boxes = [_box(beads.lo[beads.layer == layer].min(axis=0), beads.hi[beads.layer == layer].max(axis=0))
-                       for layer in self._layers]
+        self._box_lo = np.array([beads.lo[beads.layer == layer].min(axis=0) for layer in self._layers]).reshape(-1, 3)
+        self._box_hi = np.array([beads.hi[beads.layer == layer].max(axis=0) for layer in self._layers]).reshape(-1, 3)
+        self._boxes = [_box(lo, hi) for lo, hi in zip(self._box_lo, self._box_hi, strict=True)]
         self._pos = {int(layer): i for i, layer in enumerate(self._layers)}
         self._in = 0                                       # layers whose box is in ``coarse``
         self._tip_in: set[int] = set()                     # positions in _layers whose box is in ``coarse_tip``
@@ -56,7 +58,8 @@ class PartTrees:
         self._fine_count = 0
 
     def advance(self, count: int, tip_layer: int) -> None:
-        """Hold beads ``0 .. count - 1``; ``coarse_tip`` leaves out layers ``tip_layer`` and ``tip_layer - 1``."""
+        """Hold beads ``0 .. count - 1``; ``coarse_tip`` leaves out layers ``tip_layer`` and ``tip_layer - 1``
+        (none for ``NO_LAYER``)."""
         beads = self.beads
         if count > self.count:
             self.part_lo = np.minimum(self.part_lo, beads.lo[self.count:count].min(axis=0))
@@ -67,7 +70,7 @@ class PartTrees:
             self.coarse.registerObject(self._boxes[self._in])
             new.append(self._in)
             self._in += 1
-        exempt = {self._pos[x] for x in (tip_layer, tip_layer - 1) if tip_layer >= 0 and x in self._pos}
+        exempt = {self._pos[x] for x in (tip_layer, tip_layer - 1) if tip_layer != NO_LAYER and x in self._pos}
         exempt = {i for i in exempt if i < self._in}
         for i in exempt & self._tip_in:                    # layers that became exempt leave coarse_tip
             self.coarse_tip.unregisterObject(self._boxes[i])
@@ -93,6 +96,12 @@ class PartTrees:
             for obj in self.beads.objects(np.arange(self._fine_count, self.count)):
                 self.fine.registerObject(obj)
             self._fine_count = self.count
+
+    def layer_boxes(self, tip: bool) -> tuple[np.ndarray, np.ndarray]:
+        """The boxes of ``coarse`` (``coarse_tip`` when ``tip``) as arrays (lo, hi), mm: the fixed bodies'
+        bounding boxes and the layer boxes."""
+        idx = sorted(self._tip_in) if tip else list(range(self._in))
+        return np.vstack([self.env_lo, self._box_lo[idx]]), np.vstack([self.env_hi, self._box_hi[idx]])
 
     def obstacle_boxes(self) -> tuple[np.ndarray, np.ndarray]:
         """Bounding boxes (lo, hi), mm, of the fixed bodies and of the part so far."""

@@ -148,7 +148,8 @@ class ProgramTimes:
 def program_times(program: Program, robot: Any, speed_r: float = 1.0, start_state: StartState | None = None, *,
                   block_rows: int = 1 << 18, out: np.ndarray | None = None,
                   accel_mm_s2: float = DEFAULT_ACCEL_MM_S2, retract_speed_mm_s: float = DEFAULT_RETRACT_SPEED_MM_S,
-                  progress: Callable[[float], None] | None = None) -> ProgramTimes:
+                  progress: Callable[[float], None] | None = None,
+                  timed: Callable[[int], None] | None = None) -> ProgramTimes:
     """The times of :func:`time_program` from row 0, computed ``block_rows`` rows at a time (memory: a few
     blocks of rows, whatever the program's length; ``out``: where to write the times, e.g. a mapped file).
 
@@ -157,7 +158,8 @@ def program_times(program: Program, robot: Any, speed_r: float = 1.0, start_stat
     past them (a junction's speed depends on the rows within ``v^2 / 2a`` of path, ``v`` the fastest
     programmed speed: further on, the acceleration limit bounds it whatever comes; a window's ends are
     stops, as far from the block as that). Heater waits and the clock run through the blocks in order.
-    The result equals the whole program's timing up to rounding.
+    The result equals the whole program's timing up to rounding. ``timed(rows)`` is told after each block
+    how many rows' times are in ``out`` (a reader may take them while the rest are computed).
     """
     n = len(program)
     if start_state is None:
@@ -169,6 +171,8 @@ def program_times(program: Program, robot: Any, speed_r: float = 1.0, start_stat
         if out is not None:
             out[:] = t_end
             t_end = out
+        if timed is not None:
+            timed(n)
         return ProgramTimes(float(tl.total_s), t_end, tl.slowed_rows, tl.slowed_joint)
     t_end = np.empty(n) if out is None else out
     thermal = start_state.thermal.copy() if start_state.thermal is not None else Thermal()
@@ -209,6 +213,8 @@ def program_times(program: Program, robot: Any, speed_r: float = 1.0, start_stat
         np.cumsum(dur, out=t_end[a:b])
         clock = float(t_end[b - 1])
         program.release_pages(0, b)
+        if timed is not None:
+            timed(b)
         if progress is not None:
             progress(b / n)
     return ProgramTimes(clock, t_end, np.concatenate(slowed_rows).astype(np.intp),

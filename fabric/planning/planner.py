@@ -26,8 +26,10 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import queue
+import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -54,6 +56,7 @@ __all__ = ["plan_gcode", "plan_gcode_file", "plan_toolpath"]
 
 Progress = Callable[[float], None]
 ProgramReady = Callable[[Program, Reachability], None]     # told the program (and its reach) once it is final
+TimesSoFar = Callable[[np.ndarray, int], None]             # told the rows' times array and how many are computed
 JUMP_DEG = 45.0          # joint step between consecutive linear targets flagged as a jump
 
 
@@ -66,8 +69,8 @@ def _sub(progress: Progress | None, a: float, b: float) -> Progress | None:
 
 def plan_gcode(text: str | bytes | os.PathLike[str], cell: Any, options: PlanOptions | None = None,
                progress: Progress | None = None, filename: str | None = None,
-               on_program: ProgramReady | None = None, program_dir: str | os.PathLike[str] | None = None
-               ) -> PlanResult:
+               on_program: ProgramReady | None = None, program_dir: str | os.PathLike[str] | None = None,
+               on_times: TimesSoFar | None = None) -> PlanResult:
     """Plan G-code held in memory, or in a file named by a path, for ``cell`` (a :class:`fabric.robot.cell.Cell`).
 
     ``filename`` (optional) names the job: the program's ``meta`` gets
@@ -77,7 +80,8 @@ def plan_gcode(text: str | bytes | os.PathLike[str], cell: Any, options: PlanOpt
     not change either. With ``program_dir`` the program (and its per-row status, rotation and times) is
     written to files there and mapped back read-only (:class:`~fabric.motion.program_file.FileSink`): the
     process then holds a chunk of rows at a time, whatever the file's size; without it the program is
-    built in memory.
+    built in memory. ``on_times(t_end_s, rows)`` is told, as the cycle time is computed block by block, that
+    the first ``rows`` rows' times are in ``t_end_s`` (a runnable program only; e.g. to stream a CSV behind it).
     """
     opt = options or PlanOptions()
     chunks = ToolpathChunks(text, chunk_rows=opt.ik_block_rows, chord_tol_mm=opt.chord_tol_mm)
@@ -86,7 +90,7 @@ def plan_gcode(text: str | bytes | os.PathLike[str], cell: Any, options: PlanOpt
         sink: ProgramSink = FileSink(program_dir, extra=_EXTRA)
     else:
         sink = MemorySink(rows_hint=chunks.size // 12 + 64, extra=_EXTRA)
-    return _plan_chunks(chunks, cell, opt, progress, meta=meta, on_program=on_program, sink=sink)
+    return _plan_chunks(chunks, cell, opt, progress, meta=meta, on_program=on_program, sink=sink, on_times=on_times)
 
 
 def plan_gcode_file(path: str | os.PathLike[str], cell: Any, options: PlanOptions | None = None,
@@ -417,9 +421,50 @@ class _Totals:
             self.last_xyz = xyz[-1].copy()
 
 
+def _parsed_ahead(chunks: Iterable[tuple[Toolpath, bool]]) -> Iterator[tuple[Toolpath, bool]]:
+    """The chunks, parsed by a worker thread one chunk ahead of the caller, which maps and solves the one before
+    meanwhile (on the other core: NumPy lets go of the interpreter lock). An error of the parser is raised
+    where its chunk would have come; a caller that stops early stops the worker."""
+    done = object()
+    handoff: queue.Queue[Any] = queue.Queue(maxsize=1)
+    stop = threading.Event()
+
+    def put(item: Any) -> bool:
+        while not stop.is_set():
+            try:
+                handoff.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def parse() -> None:
+        try:
+            for item in chunks:
+                if not put(item):
+                    return
+            put(done)
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller, raised there
+            put(exc)
+
+    worker = threading.Thread(target=parse, name="plan-parse", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item = handoff.get()
+            if item is done:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        worker.join()
+
+
 def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, progress: Progress | None, *,
                  meta: dict[str, Any], on_program: ProgramReady | None, sink: ProgramSink,
-                 parse_s: float = 0.0) -> PlanResult:
+                 parse_s: float = 0.0, on_times: TimesSoFar | None = None) -> PlanResult:
     """Plan chunk by chunk into ``sink``, then finish the whole program: reach, cold extrusion, cycle time."""
     t0, parse_before = time.perf_counter(), parse_s     # parse_before: a whole toolpath's, parsed before
     deferred: FabricError | None = None
@@ -430,14 +475,16 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
     material = resolve_material(stated, opt.filament_diameter_mm)    # the E -> volume factor, said aloud
     opt = dataclasses.replace(opt, filament_diameter_mm=material.filament_diameter_mm)
     mono = _Progress(progress)
-    if isinstance(chunks, ToolpathChunks):
-        chunks.progress = mono.sub(0.0, 0.85)
+    streamed = isinstance(chunks, ToolpathChunks)
+    # a streamed chunk (at most ik_block_rows toolpath rows) is solved in one IK call: a call costs ~45 ms
+    # before its first row (the rotation search), so a tail block of a few rows would cost as much
+    ik_rows = opt.ik_block_rows * 5 // 4 if streamed else opt.ik_block_rows
     seed = _Seed(np.asarray(cell.home_q_rad, dtype=float))
     reach, tot = _Reach(), _Totals()
     ik_s = 0.0
     wobj = np.asarray(cell.wobj_T() if opt.wobj_T is None else opt.wobj_T, dtype=float)
+    it = _parsed_ahead(chunks) if streamed else iter(chunks)
     try:
-        it = iter(chunks)
         first = True
         while True:
             t = time.perf_counter()
@@ -448,7 +495,7 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
             tp, last = item
             prog, asm = _assemble(tp, cell, opt, first, last)
             t1 = time.perf_counter()
-            status, rot = _solve(prog, cell, opt, None, seed, last)
+            status, rot = _solve(prog, cell, dataclasses.replace(opt, ik_block_rows=ik_rows), None, seed, last)
             ik_s += time.perf_counter() - t1
             _joint_speeds(prog, cell, asm.approach_speed_mm_s)
             motion = prog.op <= MOVEL
@@ -476,6 +523,9 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
         if isinstance(sink, FileSink):
             sink.discard()
         raise
+    finally:
+        if isinstance(it, Generator):
+            it.close()                          # the parser's worker stops (at once if it is done already)
     report = reach.report(extra["status"], extra["rot_deg"])
     report.cold = first_cold_extrusion(prog)     # the nozzle's set points against the material's minimum
     prog.release_pages()
@@ -488,9 +538,13 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
     if report.reachable:
         from fabric.motion.timing import StartState, program_times
         start = StartState.at_joints(cell.robot, prog.wobj, np.asarray(cell.home_q_rad, dtype=float))
-        out = sink.column("t_end_s", "f8", len(prog)) if isinstance(sink, FileSink) else None
+        out = sink.column("t_end_s", "f8", len(prog))
+        timed = None
+        if on_times is not None:
+            on_times(out, 0)
+            timed = lambda rows: on_times(out, rows)      # noqa: E731
         times = program_times(prog, cell.robot, 1.0, start, block_rows=opt.ik_block_rows, out=out,
-                              progress=mono.sub(0.85, 1.0))
+                              progress=mono.sub(0.85, 1.0), timed=timed)
         estimate, t_end = times.total_s, times.t_end_s
         slowed_rows, slowed_joint = times.slowed_rows, times.slowed_joint
         prog.release_pages()

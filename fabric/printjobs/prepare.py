@@ -128,9 +128,13 @@ class Preparer:
                 k: v for k, v in s.to_plain(cold).items() if k != "message"})
 
     def _check(self, rec: s.JobRecord) -> None:
+        """The certified sweep of the program against its own beads (the one `fabric-cli check` runs); a
+        hit fails the job with its G-code line, move, bodies, place and time."""
         report = self.client.check(s.CollisionRequest(program_id=rec.program_id))
         rec.collisions = report
         hit = report.first_hit
         if hit is not None:
-            raise CollisionError(f"collision at t={hit.t_s:.2f} s, G-code line {hit.gcode_line}: "
-                                 f"{hit.body_a} hits {hit.body_b}", **s.to_plain(hit))
+            what = hit.message or (f"t={hit.t_s:.2f} s, G-code line {hit.gcode_line}: "
+                                   f"{hit.body_a} hits {hit.body_b}")
+            raise CollisionError(f"collision at {what}", **{k: v for k, v in s.to_plain(hit).items()
+                                                            if k != "message"})

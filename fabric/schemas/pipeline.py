@@ -182,36 +182,96 @@ class ExportRequest:
 
 # --- collision ---------------------------------------------------------------
 
-@schema("collision.CheckRequest")
+COLLISION_BEADS = ("none", "station")             # a single move: no part, or the part the twin has laid
+MOVE_KINDS = ("print", "travel", "approach", "retract", "home", "joint", "recover", "restart")
+MAX_BEADS_PAGE = 65536                            # beads per station/beads reply (about 4.5 MB)
+
+
+@schema("collision.CheckRequest", version=2)
 class CollisionRequest:
-    """Sweep a program (by id) or a single joint move (``q_from_deg`` -> ``q_to_deg``)."""
+    """Certify a program (by id) or a single joint move (``q_from_deg`` -> ``q_to_deg``): every robot body,
+    the tool and the nozzle against the table, the plate, the part as printed and the robot itself, with
+    nothing missed between checked configurations (see fabric.collision.certify)."""
     program_id: str = ""                # the planner's program to sweep ("" for a single move)
     q_from_deg: list[float] | None = None   # a single move's start joints
     q_to_deg: list[float] | None = None     # and its end joints
-    step_deg: float = f(default=2.0, ge=0.1, le=30.0)   # the largest joint step between checked configurations
-    include_part: bool = True           # the part printed so far is an obstacle too
+    step_deg: float = f(default=2.0, ge=0.1, le=30.0)   # version 1's sampling step: accepted, no longer used
+    include_part: bool = True           # a program: its own beads, each an obstacle once it is laid
+    beads: str = f(default="none", choices=COLLISION_BEADS)   # a single move: "station" takes the beads the
+                                        # twin has actually laid (asked from station/beads, kept between checks)
+    tip_layer: int = f(default=-2, ge=-2)   # a single move: the layer whose beads (and the layer under) the
+                                        # nozzle tip may touch; -1 none, -2 the layer of the last bead laid
+    vel_r: float = f(default=0.5, ge=0.001, le=1.0)   # a single move: share of the joint speed limits (the
+                                        # twin's joint move, whose path depends on it)
+    kind: str = f(default="joint", choices=MOVE_KINDS)   # a single move: what it is, for the report
+    q_start_deg: list[float] | None = None  # a program: the joints it starts from (nil: the cell's home)
+    tolerance_mm: float = f(default=0.01, ge=0.001, le=1.0)   # bodies this close count as touching
 
 
-@schema("collision.Hit")
+@schema("collision.Hit", version=2)
 class CollisionHit:
-    """The first colliding configuration of a sweep: when, where, and which two bodies touch."""
-    body_a: str                                # one body (a robot link, the tool, the table, the plate, the part)
-    body_b: str                                # the other
+    """The first contact of a sweep: which two bodies, on which move, where and when."""
+    body_a: str                                # the robot body (a link, tool_body, tool_nozzle, tool_tip)
+    body_b: str                                # what it touches: table, plate, part (a bead) or a robot body
     t_s: float = -1.0                          # program time from its start, simulated (-1: not timed, e.g. a move)
     row: int = -1                              # program row (-1 for a single joint move)
     gcode_line: int = -1                       # the G-code line of that row (-1: none)
     layer: int = -1                            # the layer of that row (0-based; -1: none)
-    move_r: float = f(default=0.0, ge=0.0, le=1.0)     # where along a single joint move (0 = start, 1 = end)
+    move_r: float = f(default=0.0, ge=0.0, le=1.0)     # where along the move (0 = start, 1 = end)
+    kind: str = f(default="", choices=("",) + MOVE_KINDS)   # the move: print, travel, approach, retract, home,
+                                               # joint (a program's joint move, or a station move), recover, restart
+    xyz_mm: list[float] | None = f(default=None, shape=(3,))   # the nozzle tip there (plate frame)
+    distance_mm: float = 0.0                   # the distance found there (<= the tolerance; < 0: overlapping)
+    bead: int = -1                             # the bead touched, in print order (-1: not a bead)
+    bead_layer: int = -1                       # its layer
+    bead_gcode_line: int = -1                  # the G-code line that laid it (-1: not known)
+    message: str = ""                          # all of the above in one line, for people
 
 
-@schema("collision.Report", version=2)
+@schema("collision.Report", version=3)
 class CollisionReport:
-    """The verdict of a sweep: collision free or the first hit, and the smallest clearance seen."""
-    collision_free: bool               # no configuration collides
-    checked_configs: int               # configurations checked
-    min_distance_mm: float             # the smallest clearance seen between bodies that may not touch
-    first_hit: CollisionHit | None = None  # the first colliding configuration (nil: none)
+    """The verdict of a certified sweep: collision free with the certified clearance, or the first hit."""
+    collision_free: bool               # no contact anywhere along the motion
+    checked_configs: int               # configurations at which exact distances were computed
+    min_distance_mm: float             # the certified clearance: a lower bound of the distance between bodies
+                                       # that may not touch, all along the motion (-1: nothing moved)
+    first_hit: CollisionHit | None = None  # the first contact along the motion (nil: none)
     elapsed_s: float = 0.0             # wall-clock time the sweep took
+    clearance_body: str = ""           # where the clearance is smallest: the body (or the pair of bodies)
+    clearance_gcode_line: int = -1     # and the G-code line (-1: none)
+    clearance_layer: int = -1          # and the layer (-1: none)
+    segments: int = 0                  # path segments certified (joint-space pieces between targets)
+    swept_pieces: int = 0              # pieces of linear moves checked as swept hulls of the nozzle and the tool
+    beads: int = 0                     # bead solids in the part (laid by the program, or by the twin)
+    exemption: str = ""                # the only contact not checked: the nozzle tip on its own and the layer
+                                       # under it (size in words)
+    tolerance_mm: float = 0.01         # bodies this close count as touching
+
+
+@schema("collision.BeadsQuery")
+class BeadsQuery:
+    """A page of the beads the twin has laid (station/beads), in deposition order."""
+    first: int = f(default=0, ge=0)                                # the first bead wanted
+    limit: int = f(default=MAX_BEADS_PAGE, ge=1, le=MAX_BEADS_PAGE)   # at most this many
+
+
+@schema("collision.Beads")
+class Beads:
+    """Beads ``first`` .. ``first + n - 1`` of the part on the plate, in the plate frame of the program that
+    laid them (``wobj``); ``part_id`` changes when another part starts (a new print, a plate cleared, a
+    station restarted), so a cache of earlier pages knows when to start over."""
+    part_id: str                                                  # which part these beads belong to
+    total: int                                                    # beads laid so far
+    first: int                                                    # the index of the first bead here
+    start_mm: np.ndarray = f(dtype="<f8", shape=(None, 3), factory=lambda: np.zeros((0, 3)))   # nozzle path
+    end_mm: np.ndarray = f(dtype="<f8", shape=(None, 3), factory=lambda: np.zeros((0, 3)))     # start to end
+    width_mm: np.ndarray = f(dtype="<f8", shape=(None,), factory=lambda: np.zeros(0))        # bead width
+    height_mm: np.ndarray = f(dtype="<f8", shape=(None,), factory=lambda: np.zeros(0))       # and height
+    layer: np.ndarray = f(dtype="<i8", shape=(None,), factory=lambda: np.zeros(0, np.int64))   # 0-based
+    row: np.ndarray = f(dtype="<i8", shape=(None,), factory=lambda: np.zeros(0, np.int64))     # program row
+    gcode_line: np.ndarray = f(dtype="<i8", shape=(None,), factory=lambda: np.zeros(0, np.int64))   # -1: none
+    wobj: np.ndarray = f(dtype="<f8", shape=(4, 4), factory=lambda: np.eye(4))    # plate frame in the robot
+                                                                  # base frame (mm)
 
 
 # --- supervisor ---------------------------------------------------------------

@@ -8,6 +8,10 @@ Layout of ``DIR``::
     passwords.txt                      the hub's user/password dictionary (``user:password`` lines)
     hub.json5                          the hub's Zenoh config: TLS only, mTLS, passwords, access control
     operator.json5 monitor.json5 service.json5     one self-contained client config per role
+
+A relay's host gets a folder of its own instead (``fabric-cli auth export DIR relay``:
+:class:`fabric.security.relay.RelayFolder`). Every file is read into a typed ``ConfigError`` naming it when it
+is missing or damaged, never a KeyError.
 """
 from __future__ import annotations
 
@@ -21,19 +25,32 @@ from fabric.security.roles import ROLES, access_control
 from fabric.security.zconfigs import client_config, hub_config, read_json5, write_json5
 from fabric.wire.errors import ConfigError
 
-__all__ = ["Credentials", "DEFAULT_SECURE_HUB"]
+__all__ = ["Credentials", "DEFAULT_SECURE_HUB", "tls_endpoint"]
 
 DEFAULT_SECURE_HUB = "tls/127.0.0.1:7447"
 _ENDPOINT_RE = re.compile(r"^tls/(\[[0-9a-fA-F:]+\]|[^:/\[\]]+):(\d+)$")
 _LOOPBACK = ("localhost", "127.0.0.1", "::1")
 
 
-def _host_port(endpoint: str) -> tuple[str, str]:
+def tls_endpoint(endpoint: str, what: str = "hub") -> tuple[str, str]:
+    """(host, port) of ``tls/<host>:<port>``; a ConfigError for anything else (a secured fabric speaks TLS only)."""
     m = _ENDPOINT_RE.match(endpoint)
     if not m:
-        raise ConfigError(f"hub endpoint {endpoint!r} must be tls/<host>:<port> (a secured hub speaks TLS only)",
-                          field="hub", value=endpoint)
+        raise ConfigError(f"{what} endpoint {endpoint!r} must be tls/<host>:<port> (a secured fabric speaks TLS "
+                          f"only)", field=what, value=endpoint)
     return m.group(1).strip("[]"), m.group(2)
+
+
+def _endpoints(path: Path, section: str) -> list[str]:
+    """The ``<section>/endpoints`` of a config written by ``auth init``; a ConfigError naming the file when it
+    is damaged (never a KeyError)."""
+    conf = read_json5(path)
+    eps = conf.get(section) if isinstance(conf, dict) else None
+    eps = eps.get("endpoints") if isinstance(eps, dict) else None
+    if not isinstance(eps, list) or not eps or not all(isinstance(e, str) and e for e in eps):
+        raise ConfigError(f"{path}: no {section}/endpoints (damaged? 'fabric-cli auth init {path.parent} --force' "
+                          f"makes the folder again)", field=str(path), missing=f"{section}/endpoints")
+    return list(eps)
 
 
 @dataclass(frozen=True)
@@ -76,11 +93,11 @@ class Credentials:
 
     def hub_endpoints(self) -> list[str]:
         """Where clients connect (the ``connect`` endpoints of the operator's config)."""
-        return list(read_json5(self.config("operator"))["connect"]["endpoints"])
+        return _endpoints(self.config("operator"), "connect")
 
     def listen_endpoints(self) -> list[str]:
         """Where the hub listens."""
-        return list(read_json5(self.hub_config)["listen"]["endpoints"])
+        return _endpoints(self.hub_config, "listen")
 
     # --- making -----------------------------------------------------------------
 
@@ -93,9 +110,9 @@ class Credentials:
         ``hub`` on loopback, else every address on its port); ``hosts``: more names or addresses of the hub.
         """
         creds = cls(Path(root).resolve())
-        host, port = _host_port(hub)
+        host, port = tls_endpoint(hub, "hub")
         listen = listen or (hub if host in _LOOPBACK else f"tls/0.0.0.0:{port}")
-        _host_port(listen)
+        tls_endpoint(listen, "hub listen")
         creds.root.mkdir(parents=True, exist_ok=True)
         creds.root.chmod(0o700)
         if creds.hub_config.exists() and not force:
@@ -121,7 +138,7 @@ class Credentials:
         password = password or secrets.token_urlsafe(18)
         if ":" in password or "\n" in password or not password:
             raise ConfigError("a password may not be empty nor hold ':' or a line break", field="password")
-        passwords = self._read_passwords()
+        passwords = self.read_passwords()
         passwords[role] = password
         self._write_client(role, self.hub_endpoints(), password)
         self._write_passwords(passwords)
@@ -133,9 +150,14 @@ class Credentials:
                     f"am-fabric {role}: fabric-cli --config {self.config(role).name}, or zenoh.Config.from_file\n"
                     "holds a password and a private key: keep it readable by its user only")
 
-    def _read_passwords(self) -> dict[str, str]:
+    def read_passwords(self) -> dict[str, str]:
+        """The hub's dictionary: user -> password (a ConfigError naming the file when it cannot be read)."""
+        try:
+            text = self.passwords.read_text()
+        except OSError as exc:
+            raise ConfigError(f"{self.passwords}: cannot read it ({exc.strerror})", field=str(self.passwords)) from None
         out = {}
-        for line in self.passwords.read_text().splitlines():
+        for line in text.splitlines():
             user, sep, password = line.partition(":")
             if sep:
                 out[user] = password

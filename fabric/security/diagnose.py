@@ -7,6 +7,7 @@ CA) and a hub that accepts the certificate, so that what it refused was the user
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
 import socket
 import ssl
@@ -19,7 +20,9 @@ import zenoh
 from fabric.security.zconfigs import read_json5
 from fabric.wire.errors import ConfigError
 
-__all__ = ["explain_refusal"]
+__all__ = ["explain_refusal", "explain"]
+
+RELAY_ROLE = "monitor"     # the only credentials a relay's own folder admits (fabric.security.relay)
 
 HANDSHAKE_TIMEOUT_S = 2.0
 VERDICT_WAIT_S = 0.5       # a hub that refuses our certificate says so right after the handshake
@@ -68,34 +71,57 @@ def _context(tls: dict[str, Any], tmp: Path) -> tuple[ssl.SSLContext, bool]:
     return ctx, bool(cert and key)
 
 
-def _probe(endpoint: str, ctx: ssl.SSLContext, has_cert: bool, usrpwd: dict[str, Any]) -> str | None:
+def _common_name(tls: ssl.SSLSocket) -> str:
+    """The common name of the certificate the other end presented: ``hub``, or ``relay`` (its own certificate,
+    from 'fabric-cli auth export ... relay')."""
+    with contextlib.suppress(ValueError, AttributeError, TypeError):
+        subject: Any = (tls.getpeercert() or {}).get("subject", ())
+        for rdn in subject:
+            for name, value in rdn:
+                if name == "commonName":
+                    return str(value)
+    return ""
+
+
+def _probe(endpoint: str, ctx: ssl.SSLContext, has_cert: bool, usrpwd: dict[str, Any]) -> tuple[str, str] | None:
+    """(who answered at ``endpoint``: "the hub" or "the relay", why it refused); None: nothing answered."""
     host, _, port = endpoint.removeprefix("tls/").rpartition(":")
     host = host.strip("[]")
     try:
         raw = socket.create_connection((host, int(port)), timeout=HANDSHAKE_TIMEOUT_S)
     except (OSError, ValueError):
         return None                                   # not reachable: the caller says so
+    who = "the hub"
     with raw:
         try:
             tls = ctx.wrap_socket(raw, server_hostname=host)
         except ssl.SSLCertVerificationError as exc:
-            return (f"the hub's certificate is not trusted by this config (another fabric's credentials? "
-                    f"{exc.verify_message})")
+            return who, (f"its certificate is not trusted by this config (another fabric's credentials? "
+                         f"{exc.verify_message})")
         except (ssl.SSLError, OSError) as exc:
-            return f"TLS with the hub failed ({exc})"
+            return who, f"TLS with it failed ({exc})"
         with tls:
+            if _common_name(tls) == "relay":
+                who = "the relay"
             tls.settimeout(VERDICT_WAIT_S)
             try:
                 tls.recv(1)
             except TimeoutError:
-                pass                                  # the hub accepted our certificate and waits for us
+                pass                                  # it accepted our certificate and waits for us
             except (ssl.SSLError, OSError):
                 if not has_cert:
-                    return "the hub requires a client certificate and this config has none"
-                return "the hub refused this config's certificate (not signed by the fabric's CA)"
-    if not usrpwd.get("user"):
-        return "the hub requires a user name and password and this config has none"
-    return f"the hub refused the user name or password of {usrpwd['user']!r} (wrong, or changed since)"
+                    return who, "it requires a client certificate and this config has none"
+                return who, "it refused this config's certificate (not signed by the fabric's CA)"
+    user = usrpwd.get("user")
+    if not user:
+        return who, "it requires a user name and password and this config has none"
+    if who == "the relay" and user != RELAY_ROLE:
+        return who, (f"a relay admits dashboards with the {RELAY_ROLE}'s config only (its folder holds no other "
+                     f"password), and this config is the {user}'s: run commands against the hub")
+    if who == "the relay":
+        return who, (f"it refused the {user}'s password (changed since? after 'fabric-cli auth passwd DIR "
+                     f"{user}' export the relay's folder again)")
+    return who, f"it refused the user name or password of {user!r} (wrong, or changed since)"
 
 
 def _without_credentials(endpoints: list[str]) -> str | None:
@@ -115,10 +141,18 @@ def _without_credentials(endpoints: list[str]) -> str | None:
 
 
 def explain_refusal(config_path: str | None, endpoints: list[str]) -> str | None:
-    """Why the hub at one of ``endpoints`` refused a session opened with ``config_path``; None when no TLS
-    endpoint answered (the hub is not there) or the config has no TLS to check."""
+    """Why the hub (or relay) at one of ``endpoints`` refused a session opened with ``config_path``; None when
+    no TLS endpoint answered (nothing is there) or the config has no TLS to check."""
+    found = explain(config_path, endpoints)
+    return None if found is None else f"{found[0]} refused this session: {found[1]}"
+
+
+def explain(config_path: str | None, endpoints: list[str]) -> tuple[str, str] | None:
+    """(who refused: "the hub" or "the relay", why) a session opened with ``config_path`` at one of
+    ``endpoints``; None as :func:`explain_refusal`."""
     if not config_path:
-        return _without_credentials(endpoints)
+        why = _without_credentials(endpoints)
+        return None if why is None else ("the hub", why)
     if not any(ep.startswith("tls/") for ep in endpoints):
         return None
     tls, usrpwd = _tls_section(config_path)
@@ -126,10 +160,10 @@ def explain_refusal(config_path: str | None, endpoints: list[str]) -> str | None
         try:
             ctx, has_cert = _context(tls, Path(tmp))
         except (OSError, ssl.SSLError, ValueError) as exc:
-            return f"this config's certificates cannot be read ({exc})"
+            return "this config", f"its certificates cannot be read ({exc})"
         for ep in endpoints:
             if ep.startswith("tls/"):
-                why = _probe(ep, ctx, has_cert, usrpwd)
-                if why is not None:
-                    return why
+                found = _probe(ep, ctx, has_cert, usrpwd)
+                if found is not None:
+                    return found
     return None

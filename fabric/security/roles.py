@@ -98,8 +98,10 @@ def relay_access_control() -> dict[str, Any]:
     hub holds it to those rights whatever is configured here."""
     acl = access_control()
     acl["subjects"].append({"id": "hub", "cert_common_names": ["hub"]})
+    # what the relay is (am/@relay/<its id>, answered by the relay itself): how a client learns it is on one
+    acl["rules"].append(_rule("relay_info", ["ingress", "egress"], ["query", "reply"], ["am/@relay/*"]))
     monitor = next(p["rules"] for p in acl["policies"] if p["subjects"] == ["monitor"])
     acl["policies"] = [{"rules": ["service_all"], "subjects": ["hub"]},
-                       {"rules": monitor, "subjects": list(ROLES)}]
+                       {"rules": [*monitor, "relay_info"], "subjects": list(ROLES)}]
     return acl
 

@@ -73,11 +73,19 @@ def read_json5(path: Path) -> dict[str, Any]:
     try:
         lines = Path(path).read_text().splitlines()
     except OSError as exc:
-        raise ConfigError(f"cannot read {path}: {exc.strerror}", field=str(path)) from None
+        raise ConfigError(f"{path}: cannot read it ({exc.strerror})", field=str(path)) from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not text (damaged? make it again with 'fabric-cli auth')",
+                          field=str(path)) from None
     try:
-        return json.loads("\n".join(ln for ln in lines if not ln.lstrip().startswith("//")))
+        conf = json.loads("\n".join(ln for ln in lines if not ln.lstrip().startswith("//")))
     except json.JSONDecodeError as exc:
-        raise ConfigError(f"{path} is not a config written by 'fabric-cli auth init': {exc}", field=str(path)) from None
+        raise ConfigError(f"{path}: not a config written by 'fabric-cli auth' ({exc}): make it again",
+                          field=str(path)) from None
+    if not isinstance(conf, dict):
+        raise ConfigError(f"{path}: not a config written by 'fabric-cli auth' (not an object): make it again",
+                          field=str(path))
+    return conf
 
 
 def role_of_config(path: str | Path | None) -> str | None:

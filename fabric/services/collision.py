@@ -1,4 +1,17 @@
-"""Collision service: sweeps programs (by id, fetched from the planner) and single joint moves."""
+"""Collision service: certifies programs (by id, fetched from the planner) and the station's live moves.
+
+A program is certified against its own beads, each an obstacle from the row
+after it is laid (:class:`fabric.collision.certify.Certifier`). A live move
+(home, recover, a restart at a layer) is certified against the beads the
+twin has actually laid: with ``beads="station"`` the service asks
+``station/beads`` for them, a page at a time, and keeps them, so a million
+beads cross the fabric once per part and each later check asks only for the
+beads laid since. The alternative, the station sending its beads with every
+request, would move tens of MB per ``home``.
+
+``sweep_program`` is version 1's sampled sweep (joint configurations every few
+degrees against one box per layer), kept for comparison (tools/bench/collision_bench.py).
+"""
 from __future__ import annotations
 
 import argparse
@@ -11,6 +24,9 @@ import zenoh
 
 from fabric import schemas as s
 from fabric.client import Client
+from fabric.collision.beads import BeadSolids
+from fabric.collision.certify import Certifier
+from fabric.collision.report import collision_report
 from fabric.collision.sweep import CollisionChecker, layer_boxes
 from fabric.motion.program import Program
 from fabric.motion.timing import time_program
@@ -20,12 +36,13 @@ from fabric.server.service import Service
 from fabric.wire.config import add_cell_argument, service_data_dir
 from fabric.wire.errors import BadRequest
 
-__all__ = ["CollisionService", "build", "add_arguments", "sweep_program"]
+__all__ = ["CollisionService", "StationBeads", "build", "add_arguments", "sweep_program"]
 
 
 def sweep_program(checker: CollisionChecker, program: Program, step_deg: float, include_part: bool,
                   t_end_s: np.ndarray | None = None) -> s.CollisionReport:
-    """Sweep a whole program; report the first hit with its time, row, G-code line and bodies."""
+    """Version 1's sampled sweep of a whole program (kept for comparison): the first hit with its time,
+    row, G-code line and bodies, and the smallest clearance seen at the samples (not a bound)."""
     t0 = time.perf_counter()
     qs, rows, frac = checker.sample(program, None, step_deg)
     boxes = layer_boxes(program, program.wobj) if include_part else None
@@ -45,50 +62,102 @@ def sweep_program(checker: CollisionChecker, program: Program, step_deg: float, 
                              first_hit=first, elapsed_s=time.perf_counter() - t0)
 
 
+class StationBeads:
+    """The beads the station's twin has laid, kept as bead solids and brought up to date page by page."""
+
+    def __init__(self, client: Client) -> None:
+        self.client = client
+        self.part_id = ""
+        self.solids = BeadSolids.empty()
+        self.wobj = np.eye(4)
+
+    def current(self) -> BeadSolids:
+        """Every bead laid so far: the ones kept, and those laid since (all of them for another part)."""
+        page = self._page(len(self.solids))
+        if page.part_id != self.part_id or page.total < len(self.solids) or page.first != len(self.solids):
+            self.part_id, self.solids = page.part_id, BeadSolids.empty()
+            page = self._page(0) if page.first != 0 else page
+        self.wobj = np.asarray(page.wobj, dtype=float)
+        while True:
+            if len(page.row):
+                arrays = {"start_mm": page.start_mm, "end_mm": page.end_mm, "width_mm": page.width_mm,
+                          "height_mm": page.height_mm, "layer": page.layer, "row": page.row}
+                self.solids = self.solids.extend(BeadSolids.from_arrays(arrays, self.wobj, page.gcode_line))
+            if len(self.solids) >= page.total or not len(page.row):
+                return self.solids
+            page = self._page(len(self.solids))
+
+    def _page(self, first: int) -> s.Beads:
+        return self.client.call("station", "beads", s.BeadsQuery(first=first, limit=s.pipeline.MAX_BEADS_PAGE))
+
+
 class CollisionService(Service):
     name = "collision"
 
     def __init__(self, session: zenoh.Session, cell_id: str, cell: Cell, data_dir: Path | None = None) -> None:
         super().__init__(session, cell_id, data_dir)
-        self.checker = CollisionChecker(cell)
         self.cell = cell
         self.client = Client(session, cell_id)
-        self._cache: dict[str, Program] = {}
+        self._certifiers: dict[float, Certifier] = {}
+        self._certifier(0.01)                              # built now: the first check does not wait for it
+        self._cache: dict[str, tuple[Program, BeadSolids]] = {}
+        self._times: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self.station_beads = StationBeads(self.client)
         self._check_lock = threading.Lock()
         self.handle("check", self.on_check)
 
-    def _program(self, program_id: str) -> Program:
+    def _certifier(self, tolerance_mm: float) -> Certifier:
+        key = round(float(tolerance_mm), 6)
+        if key not in self._certifiers:
+            self._certifiers[key] = Certifier(self.cell, key)
+        return self._certifiers[key]
+
+    def _program(self, program_id: str) -> tuple[Program, BeadSolids]:
         if program_id not in self._cache:
-            self._cache = {program_id: program_from_artifact(self.client.artifact("planner", program_id))}
+            program = program_from_artifact(self.client.artifact("planner", program_id))
+            self._cache = {program_id: (program, BeadSolids.from_program(program))}
+            self._times = {}
         return self._cache[program_id]
 
+    def _row_times(self, program_id: str, program: Program) -> tuple[np.ndarray, np.ndarray]:
+        if program_id not in self._times:
+            tl = time_program(program, self.cell.robot)
+            self._times = {program_id: (tl.t_start_s, tl.t_end_s)}
+        return self._times[program_id]
+
     def on_check(self, req: s.CollisionRequest) -> s.CollisionReport:
-        nq = self.cell.robot.nq
         with self._check_lock:
+            cert = self._certifier(req.tolerance_mm)
             if req.program_id:
-                program = self._program(req.program_id)
-                t_end = _timeline_ends(program, self.cell)
-                return sweep_program(self.checker, program, req.step_deg, req.include_part, t_end)
-            if req.q_from_deg is None or req.q_to_deg is None:
-                raise BadRequest("give a program_id, or both q_from_deg and q_to_deg", field="program_id")
-            for name, v in (("q_from_deg", req.q_from_deg), ("q_to_deg", req.q_to_deg)):
-                if len(v) != nq:
-                    raise BadRequest(f"{name} has {len(v)} joints, the robot has {nq}", field=name)
-            t0 = time.perf_counter()
-            q0, q1 = np.radians(req.q_from_deg), np.radians(req.q_to_deg)
-            n = int(max(1, np.ceil(np.abs(q1 - q0).max() / np.radians(req.step_deg))))
-            qs = q0 + (q1 - q0) * np.linspace(0.0, 1.0, n + 1)[:, None]
-            hit, min_d, checked = self.checker.check_configs(qs)
-            first = None
-            if hit is not None:
-                first = s.CollisionHit(body_a=hit.body_a, body_b=hit.body_b, move_r=float(hit.config / n))
-            return s.CollisionReport(collision_free=hit is None, checked_configs=checked,
-                                     min_distance_mm=float(min_d) if np.isfinite(min_d) else -1.0,
-                                     first_hit=first, elapsed_s=time.perf_counter() - t0)
+                return self._check_program(req, cert)
+            return self._check_move(req, cert)
 
+    def _check_program(self, req: s.CollisionRequest, cert: Certifier) -> s.CollisionReport:
+        program, solids = self._program(req.program_id)
+        q0 = self._joints("q_start_deg", req.q_start_deg) if req.q_start_deg is not None else None
+        beads = solids if req.include_part else BeadSolids.empty()
+        res = cert.sweep_program(program, q0, beads)
+        return collision_report(res, cert, beads, program.wobj, program,
+                                lambda: self._row_times(req.program_id, program))
 
-def _timeline_ends(program: Program, cell: Cell) -> np.ndarray:
-    return time_program(program, cell.robot).t_end_s
+    def _check_move(self, req: s.CollisionRequest, cert: Certifier) -> s.CollisionReport:
+        if req.q_from_deg is None or req.q_to_deg is None:
+            raise BadRequest("give a program_id, or both q_from_deg and q_to_deg", field="program_id")
+        q0, q1 = self._joints("q_from_deg", req.q_from_deg), self._joints("q_to_deg", req.q_to_deg)
+        beads, wobj = BeadSolids.empty(), self.cell.wobj_T()
+        if req.beads == "station":
+            beads, wobj = self.station_beads.current(), self.station_beads.wobj
+        tip_layer = req.tip_layer
+        if tip_layer == -2:                                # where the nozzle rests: the last bead's layer
+            tip_layer = int(beads.layer[-1]) if len(beads) else -1
+        res = cert.sweep_move(q0, q1, beads, tip_layer, req.vel_r, req.kind)
+        return collision_report(res, cert, beads, wobj)
+
+    def _joints(self, name: str, deg: list[float]) -> np.ndarray:
+        nq = self.cell.robot.nq
+        if len(deg) != nq:
+            raise BadRequest(f"{name} has {len(deg)} joints, the robot has {nq}", field=name)
+        return np.radians(np.asarray(deg, dtype=float))
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -17,7 +17,7 @@ from fabric import schemas as s
 from fabric.motion.program import Program
 from fabric.wire.errors import ColdExtrusionError, FabricError, UnreachableError
 
-__all__ = ["PlanHandoff"]
+__all__ = ["PlanHandoff", "TimesSoFar"]
 
 CHECK_S = 1.0       # how often a waiting export asks whether the job ended without telling (a bug)
 
@@ -34,6 +34,7 @@ class PlanHandoff:
         self._cold: s.ColdExtrusion | None = None
         self._timed = False
         self._t_end_s: np.ndarray | None = None
+        self._timed_rows = -1                           # rows whose times are known while they are computed
         self._error: FabricError | None = None
         self.released = False                           # the program forgotten: export it by its id
 
@@ -52,6 +53,12 @@ class PlanHandoff:
         """The time at each row (None when the program is not runnable: no times)."""
         with self._cond:
             self._timed, self._t_end_s = True, t_end_s
+            self._cond.notify_all()
+
+    def times_so_far(self, t_end_s: np.ndarray, rows: int) -> None:
+        """The cycle time is being computed into ``t_end_s``: its first ``rows`` rows are known."""
+        with self._cond:
+            self._t_end_s, self._timed_rows = t_end_s, rows
             self._cond.notify_all()
 
     def finished(self, program_id: str) -> None:
@@ -98,8 +105,35 @@ class PlanHandoff:
             assert self._program is not None            # the wait ended ready
             return self._program
 
-    def t_end_s(self, job_failed: Callable[[], FabricError | None]) -> np.ndarray | None:
-        """The time at each row, once the cycle time is known (None for a program that is not runnable)."""
+    def t_end_s(self, job_failed: Callable[[], FabricError | None]) -> np.ndarray | TimesSoFar | None:
+        """The time at each row (None for a program that is not runnable): all of them once the cycle time is
+        known, or while it is computed a :class:`TimesSoFar` whose rows wait for their times (a CSV export
+        follows the computation block by block)."""
         with self._cond:
-            self._wait(lambda: self._timed, job_failed)
-            return self._t_end_s
+            self._wait(lambda: self._timed or self._timed_rows >= 0, job_failed)
+            if self._timed:
+                return self._t_end_s
+            assert self._t_end_s is not None
+            return TimesSoFar(self, self._t_end_s, job_failed)
+
+    def wait_timed(self, rows: int, job_failed: Callable[[], FabricError | None]) -> None:
+        """Wait until the first ``rows`` rows' times are known (or the job failed: its error)."""
+        with self._cond:
+            self._wait(lambda: self._timed or self._timed_rows >= rows, job_failed)
+
+
+class TimesSoFar:
+    """The rows' times while they are computed: indexing waits until the rows asked for are timed."""
+
+    def __init__(self, handoff: PlanHandoff, t_end_s: np.ndarray, job_failed: Callable[[], FabricError | None]
+                 ) -> None:
+        self._handoff, self._t_end_s, self._job_failed = handoff, t_end_s, job_failed
+
+    def __len__(self) -> int:
+        return len(self._t_end_s)
+
+    def __getitem__(self, rows: np.ndarray) -> np.ndarray:
+        rows = np.asarray(rows)
+        if rows.size:
+            self._handoff.wait_timed(int(rows.max()) + 1, self._job_failed)
+        return self._t_end_s[rows]

@@ -37,7 +37,7 @@ from fabric.client import Client
 from fabric.motion.program import Program
 from fabric.motion.timing import StartState, time_program
 from fabric.planning import PlanOptions, plan_gcode
-from fabric.planning.memory import keep_freed_memory
+from fabric.planning.memory import give_back_freed_memory, keep_freed_memory
 from fabric.planning.post import write_export
 from fabric.planning.post.stream import ExportStream
 from fabric.planning.report import Reachability
@@ -45,9 +45,9 @@ from fabric.programs import content_id, program_artifact_pieces, program_from_ar
 from fabric.robot.cell import Cell
 from fabric.robot.frames import xyzrpy_to_T
 from fabric.schemas.upload import MAX_GCODE_BYTES
+from fabric.server.disk import disk_full_of, require_room
 from fabric.server.jobs import Job, JobRunner
 from fabric.server.service import Service
-from fabric.server.disk import disk_full_of, require_room
 from fabric.server.uploads import UploadStore
 from fabric.services.plan_handoff import PlanHandoff
 from fabric.wire import codec
@@ -83,7 +83,9 @@ class PlannedProgram:
     program: Program
     t_end_s: np.ndarray | None
 
-PROGRAM_PER_GCODE_BYTE = 3      # room a plan needs: the program artifact and its pieces, per byte of G-code
+# room a plan needs per byte of G-code: the program artifact and the plan's own files (the program again, its
+# status, rotation and times), each ~170 bytes a row, a row per ~25 bytes of dense infill G-code
+PROGRAM_PER_GCODE_BYTE = 14
 
 class PlannerService(Service):
     name = "planner"
@@ -174,8 +176,18 @@ class PlannerService(Service):
         finally:
             if req.upload_id:                    # the upload served its job: its file goes, whatever the outcome
                 self.uploads.discard(req.upload_id)
+            self._when_idle(finishing=job.job_id)
         handoff.finished(pid)
         return pid
+
+    def _when_idle(self, finishing: str = "") -> None:
+        """No plan running (but ``finishing``) and no export being read: what they freed goes back to the OS
+        (fabric.planning.memory), so the idle planner does not keep the highest working set it ever had."""
+        if self.exports:
+            return
+        if any(st.state in ("queued", "running") and st.job_id != finishing for st in self.jobs.all()):
+            return
+        give_back_freed_memory()
 
     def _plan(self, job: Job, req: s.PlanRequest, options: PlanOptions, data: bytes | Path,
               handoff: PlanHandoff) -> str:
@@ -190,7 +202,8 @@ class PlannerService(Service):
 
         self._forget_plans(keep=job.job_id)
         result = plan_gcode(data, self.cell, options, progress=lambda fr: job.progress(fr, "planning"),
-                            filename=req.filename, on_program=program_ready, program_dir=self.plans_dir / job.job_id)
+                            filename=req.filename, on_program=program_ready, program_dir=self.plans_dir / job.job_id,
+                            on_times=handoff.times_so_far)
         program = result.program
         handoff.times_ready(result.t_end_s)
         # the job ends (its result is acknowledged) only once the program is on disk: a planner killed
@@ -275,6 +288,7 @@ class PlannerService(Service):
             raise
         if stream.done:
             self.exports.pop(key, None)
+            self._when_idle()
         program_id, name = req.program_id, stream.name
         if not program_id:
             handoff = self.handoffs.get(req.job_id)

@@ -370,12 +370,18 @@ class StationService(Service):
         return "max speed" if self.meta.rtf == 0 else f"{self.meta.rtf:g}x real time"
 
     def _check_move(self, q_from: np.ndarray, q_to: np.ndarray, what: str) -> None:
-        """A joint move the station is about to make, swept by the collision service (raises on a hit)."""
-        report = self.client.check(s.CollisionRequest(q_from_deg=np.degrees(q_from).tolist(),
-                                                      q_to_deg=np.degrees(q_to).tolist()))
+        """A joint move the station is about to make, certified by the collision service against the beads
+        the twin has actually laid (it asks ``station/beads`` for them, and keeps them between checks): a
+        million beads cross once, not with every move. The nozzle tip may touch the last bead's layer and
+        the one under it (where an interrupted print left it). Raises CollisionError on a hit."""
+        kind = "home" if "home" in what else "recover" if "back to" in what else "restart"
+        report = self.client.check(s.CollisionRequest(
+            q_from_deg=np.degrees(q_from).tolist(), q_to_deg=np.degrees(q_to).tolist(), beads="station",
+            tip_layer=-2, vel_r=float(self.twin.config.home_vel_r), kind=kind))
         hit = report.first_hit
         if hit is not None:
-            raise CollisionError(f"{what} would collide: {hit.body_a} <-> {hit.body_b}", **s.to_plain(hit))
+            raise CollisionError(f"{what} would collide: {hit.message or f'{hit.body_a} <-> {hit.body_b}'}",
+                                 **{k: v for k, v in s.to_plain(hit).items() if k != "message"})
 
     def on_pause(self, _: s.Empty) -> s.Ack:
         def act() -> s.Ack:
@@ -545,6 +551,36 @@ class StationService(Service):
         data = beads.export_csv() if req.fmt == "csv" else beads.export_mesh(req.fmt)
         media = {"stl": "model/stl", "glb": "model/gltf-binary", "csv": "text/csv"}[req.fmt]
         return s.Artifact(artifact_id=content_id(data), name=f"as-printed.{req.fmt}", media_type=media, data=data)
+
+    def on_beads(self, req: s.BeadsQuery) -> s.Beads:
+        """A page of the beads laid so far (read in one step of the writer), for the collision service's
+        checks of live moves. ``part_id`` names this deposit: another print, a cleared plate or a restart
+        of the station makes a new one."""
+        import uuid
+        import weakref
+
+        def read() -> s.Beads:
+            beads = self.twin.beads
+            ids = self.__dict__.setdefault("_bead_ids", weakref.WeakKeyDictionary())
+            part_id = ids.setdefault(beads, uuid.uuid4().hex)
+            n = len(beads)
+            lo = min(req.first, n)
+            hi = min(n, lo + req.limit)
+            rows = np.asarray(beads.row[lo:hi], dtype=np.int64)
+            program = self.twin.program
+            lines = np.full(len(rows), -1, dtype=np.int64)
+            if program is not None and len(rows):
+                ok = (rows >= 0) & (rows < len(program))
+                lines[ok] = program.gcode_line[rows[ok]]
+            wobj = program.wobj if program is not None else self.twin.work_object_T
+            return s.Beads(part_id=part_id, total=n, first=lo,
+                           start_mm=np.array(beads.start_mm[lo:hi], dtype="<f8"),
+                           end_mm=np.array(beads.end_mm[lo:hi], dtype="<f8"),
+                           width_mm=np.array(beads.width_mm[lo:hi], dtype="<f8"),
+                           height_mm=np.array(beads.height_mm[lo:hi], dtype="<f8"),
+                           layer=np.array(beads.layer[lo:hi], dtype="<i8"), row=rows.astype("<i8"),
+                           gcode_line=lines.astype("<i8"), wobj=np.array(wobj, dtype="<f8"))
+        return self._step(read)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -38,6 +38,7 @@ from fabric import schemas as s
 from fabric.client import Client
 from fabric.printjobs.events import apply_event, job_id_of_event
 from fabric.printjobs.follower import EventFollower
+from fabric.printjobs.live import LIVE_PERIOD_S, apply_live
 from fabric.printjobs.prepare import PrepareCancelled, Preparer
 from fabric.printjobs.queue import PREPARER_FIELDS, STATION_FREE, WAITING_STATES, WAITING_TEXT, next_to_load
 from fabric.programs import content_id
@@ -46,6 +47,7 @@ from fabric.server.disk import require_room
 from fabric.server.service import Service
 from fabric.server.writer import Writer
 from fabric.store.jobs import JobStore
+from fabric.wire import codec
 from fabric.wire.config import service_data_dir
 from fabric.wire.errors import BadRequest, DiskFull, FabricError, NotFound, StateError, ValidationError
 from fabric.wire.keys import SERVICES, parse_alive
@@ -72,6 +74,7 @@ class SupervisorService(Service):
         self._alive: dict[str, float] = {}                # service -> since (wall time)
         self._alive_lock = threading.Lock()
         self._live: queue.Queue[tuple[str, str]] = queue.Queue()
+        self._station_state: bytes | None = None          # the station's last state (for the live figures)
         self.handle("status", self.on_status)
         self.handle("submit", self.on_submit)
         self.handle("job", lambda q: self.store.get(q.job_id))
@@ -86,10 +89,12 @@ class SupervisorService(Service):
         self._live_sub = self.session.liveliness().declare_subscriber(
             self.keys.alive_all(), lambda smp: self._live.put((str(smp.kind), str(smp.key_expr))), history=True)
         self._events = self.client.subscribe("station", "events")
+        self._state_sub = self.session.declare_subscriber(          # keeps only the last one
+            self.keys.topic("station", "state"), lambda smp: setattr(self, "_station_state", smp.payload.to_bytes()))
         self._workers = [threading.Thread(target=target, name=f"supervisor:{name}", daemon=True)
                          for target, name in ((lambda: self.writer.run(self.closed), "writer"),
                                               (self._track, "liveliness"), (self._prepare_loop, "prepare"),
-                                              (self._follow_events, "follow"))]
+                                              (self._follow_events, "follow"), (self._live_figures, "live"))]
         for t in self._workers:
             t.start()
         super().start()
@@ -104,6 +109,7 @@ class SupervisorService(Service):
         if hasattr(self, "_live_sub"):
             self._live_sub.undeclare()
             self._events.close()
+            self._state_sub.undeclare()
         self.store.close()
 
     # --- records: changed only by steps of the writer ---------------------------------
@@ -432,6 +438,29 @@ class SupervisorService(Service):
                 self.store.save(last_event_seq=ev.seq)
                 self._seen_saved_s = time.monotonic()
         return ended, False
+
+    def _live_figures(self) -> None:
+        """Every LIVE_PERIOD_S during a print, the printing job's record takes the station's last state's
+        figures (progress, volume, layer, time so far: :mod:`fabric.printjobs.live`), one writer step."""
+        while not self.closed.wait(LIVE_PERIOD_S):
+            data, self._station_state = self._station_state, None
+            if data is None:
+                continue
+            try:
+                st = codec.decode(data, s.StationState)
+            except FabricError:
+                continue
+            if st.state != "printing" or not st.job_id:
+                continue
+
+            def step(st: s.StationState = st) -> None:
+                rec = self._record_of(st.job_id)
+                if rec is not None and apply_live(rec, st, time.time()):
+                    self._save(rec)
+            try:
+                self._step(step)
+            except FabricError as err:                   # busy: the next period tries again
+                self.log.debug("live figures of job %s: %s", st.job_id, err.message)
 
     def _record_of(self, job_id: str) -> s.JobRecord | None:
         if not job_id:

@@ -117,7 +117,9 @@ def describe(name: str, result: Any) -> tuple[str, str]:
         if result.collision_free:
             line = (f"collision-free: {result.checked_configs} configurations, clearance "
                     f"{result.min_distance_mm:.1f} mm")
-        elif (h := result.first_hit) is not None:
+        elif (h := result.first_hit) is not None and h.message:
+            line = f"COLLISION at {h.message}"      # line, move, layer, bodies, where and when
+        elif h is not None:
             line = (f"COLLISION at t={h.t_s:.1f} s, G-code line {h.gcode_line}, layer {h.layer + 1}: "
                     f"{h.body_a} <-> {h.body_b}")
         else:

@@ -66,6 +66,8 @@ def job_report(rec: s.JobRecord) -> str:
         c, hit = rec.collisions, rec.collisions.first_hit
         if c.collision_free:
             lines.append("check     collision-free")
+        elif hit is not None and hit.message:
+            lines.append(f"check     COLLISION at {hit.message}")
         else:
             lines.append("check     COLLISION" + (f" {hit.body_a} <-> {hit.body_b}" if hit is not None else ""))
     if rec.error is not None:

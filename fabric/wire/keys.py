@@ -81,6 +81,8 @@ _TABLE = [
     _ep("station", "rtf", s.StartRequest, s.StationState, doc="change the simulation's real-time factor live"),
     _ep("station", "mesh", s.MeshRequest, s.Artifact, 60.0, "as-printed part as STL or GLB, or its beads as CSV",
         bulk=True),
+    _ep("station", "beads", s.BeadsQuery, s.Beads, 30.0,
+        "a page of the beads the twin has laid (the part on the plate), for collision checks", bulk=True),
     # slicer
     _ep("slicer", "slice", s.SliceRequest, s.JobAccepted, 10.0, "start slicing a model (a job)", bulk=True),
     _ep("slicer", "job", s.JobQuery, s.JobStatus, doc="a slicing job's status"),

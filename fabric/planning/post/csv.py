@@ -1,7 +1,7 @@
 """CSV export: one row per target (TCP in the plate frame, orientation, joints, speed, extrusion, time)."""
 from __future__ import annotations
 
-from typing import TextIO
+from typing import Protocol, TextIO
 
 import numpy as np
 
@@ -10,14 +10,22 @@ from fabric.motion.program import MOVEL, Program
 from fabric.planning.post.common import check_program, row_blocks, write_ascii
 from fabric.planning.post.numtext import FixedColumn, format_rows
 
-__all__ = ["write_csv", "csv_rows", "CSV_COLUMNS"]
+__all__ = ["write_csv", "csv_rows", "CSV_COLUMNS", "RowTimes"]
 
 CSV_COLUMNS = ["gcode_line", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz",
                "q1_deg", "q2_deg", "q3_deg", "q4_deg", "q5_deg", "q6_deg", "speed_mm_s", "extrude", "t_s"]
 CSV_BLOCK_ROWS = 50_000      # rows formatted at once (measured fastest of 4k-50k; a block's bytes stay ~7 MB)
 
 
-def write_csv(program: Program, out: TextIO, t_end_s: np.ndarray | None = None) -> int:
+class RowTimes(Protocol):
+    """Times by row, indexed by arrays of rows (an array, or times still being computed that wait for their rows)."""
+
+    def __len__(self) -> int: ...
+
+    def __getitem__(self, rows: np.ndarray) -> np.ndarray: ...
+
+
+def write_csv(program: Program, out: TextIO, t_end_s: np.ndarray | RowTimes | None = None) -> int:
     """Write the targets (MOVEJ / MOVEL rows) of ``program``; returns the number of rows written.
 
     ``t_end_s`` (one per program row, e.g. ``Timeline.t_end_s``) gives the time
@@ -36,7 +44,7 @@ def write_csv(program: Program, out: TextIO, t_end_s: np.ndarray | None = None) 
     return n
 
 
-def csv_rows(program: Program, idx: np.ndarray, t_end_s: np.ndarray | None = None) -> bytes:
+def csv_rows(program: Program, idx: np.ndarray, t_end_s: np.ndarray | RowTimes | None = None) -> bytes:
     """The CSV text of rows ``idx`` (vectorised: the characters ``%.<d>f`` would write)."""
     q_deg = np.degrees(program.q_rad[idx])
     xyz, quat = program.xyz_mm[idx], program.quat_wxyz[idx]

@@ -7,7 +7,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from fabric.motion.program import Program
-from fabric.planning.post.csv import write_csv
+from fabric.planning.post.csv import RowTimes, write_csv
 from fabric.planning.post.krl import write_krl
 from fabric.planning.post.names import program_name
 from fabric.planning.post.rapid import RapidOptions, write_rapid
@@ -20,7 +20,7 @@ FORMATS = ("rapid", "krl", "urscript", "csv")
 
 
 def export_program(program: Program, fmt: str, path: str | Path, *, tool_T: np.ndarray | None = None,
-                   t_end_s: np.ndarray | None = None, rapid: RapidOptions | None = None,
+                   t_end_s: np.ndarray | RowTimes | None = None, rapid: RapidOptions | None = None,
                    name: str = "am_print") -> list[Path]:
     """Export ``program`` as ``fmt`` (one of :data:`FORMATS`); returns the files written.
 
@@ -69,7 +69,7 @@ def export_program(program: Program, fmt: str, path: str | Path, *, tool_T: np.n
 
 
 def write_export(program: Program, fmt: str, out: TextIO, cell: Any = None, *, module_targets: int = 5000,
-                 t_end_s: np.ndarray | None = None, name: str = "am_print") -> None:
+                 t_end_s: np.ndarray | RowTimes | None = None, name: str = "am_print") -> None:
     """Export ``program`` as ``fmt`` into one text stream (the TCP from ``cell.robot.tool_T`` if given).
 
     RAPID writes its modules one after another (main first, print modules of at

@@ -1,0 +1,99 @@
+"""The collision service over real in-process Zenoh peers: programs by id, and the station's live moves
+checked against the beads the twin has actually laid (station/beads, kept between checks)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fabric import schemas as s
+from fabric.client import Client
+from fabric.motion.testprog import square_program
+from fabric.programs import program_artifact
+from fabric.robot.cell import Cell
+from fabric.services.collision import CollisionService
+from fabric.services.planner import PlannerService
+from fabric.services.station import StationService
+from fabric.wire.errors import BadRequest, CollisionError, ValidationError
+
+pytestmark = pytest.mark.timeout(240)
+
+
+@pytest.fixture(scope="module")
+def cell():
+    return Cell.builtin("irb140")
+
+
+@pytest.fixture
+def fabric(session, settings, cell):
+    """Station, collision and planner services in this process, a client, and a 12-layer tower program."""
+    planner = PlannerService(session, settings.cell, cell)
+    collision = CollisionService(session, settings.cell, cell)
+    station = StationService(session, settings.cell, cell, pose_hz=50.0)
+    program = square_program(cell, size_mm=20, layers=12, layer_height_mm=0.5, speed_mm_s=60, nozzle_c=200.0)
+    pid = planner.store_artifact(program_artifact(program))
+    for svc in (planner, collision, station):
+        svc.start()
+    with Client.connect(settings) as client:
+        client.wait_alive(("station", "collision", "planner"), deadline_s=20)
+        yield client, station, collision, pid, program
+    for svc in (station, collision, planner):
+        svc.close()
+
+
+def wait_event(sub, kinds: tuple[str, ...], timeout: float = 120.0) -> s.Event:
+    while True:
+        ev = sub.get(timeout=timeout)
+        if ev.kind in kinds:
+            return ev
+
+
+def test_a_program_by_id_is_certified_against_its_own_beads(fabric):
+    client, _, _, pid, _ = fabric
+    rep = client.check(s.CollisionRequest(program_id=pid))
+    assert rep.collision_free and rep.first_hit is None
+    assert rep.beads == 12 * 4 and rep.segments > 40 and rep.min_distance_mm > 0.3
+    assert rep.clearance_body and rep.exemption.startswith("tool_tip")
+    old = client.check(s.CollisionRequest(program_id=pid, step_deg=5.0))      # a version 1 request still works
+    assert old.collision_free
+
+
+def test_bad_single_moves_get_typed_errors(fabric, cell):
+    client = fabric[0]
+    with pytest.raises(BadRequest):
+        client.check(s.CollisionRequest(q_from_deg=[0.0] * 6))
+    with pytest.raises(BadRequest):
+        client.check(s.CollisionRequest(q_from_deg=[0.0] * 5, q_to_deg=[0.0] * 6))
+    with pytest.raises(ValidationError):
+        client.check(s.CollisionRequest(q_from_deg=[0.0] * 6, q_to_deg=[0.0] * 6, beads="everything"))
+
+
+def test_live_moves_are_checked_against_the_beads_the_twin_laid(fabric, cell):
+    client, _, collision, pid, program = fabric
+    home = np.degrees(cell.home_q_rad).tolist()
+    above = np.degrees(program.q_rad[3]).tolist()            # above the tower's first corner (the approach)
+    before = client.check(s.CollisionRequest(q_from_deg=home, q_to_deg=above, beads="station"))
+    assert before.collision_free and before.beads == 0
+    client.load(pid)
+    events = client.subscribe("station", "events")
+    try:
+        client.start(rtf=0)
+        assert wait_event(events, ("finished", "fault")).kind == "finished"
+    finally:
+        events.close()
+    page = client.call("station", "beads", s.BeadsQuery(first=0, limit=5))
+    assert page.total == 12 * 4 and len(page.row) == 5 and page.first == 0 and page.part_id
+    assert np.all(page.gcode_line == program.gcode_line[page.row])
+    # the station's own check of a restart at layer 1: the move goes down inside the printed tower
+    with pytest.raises(CollisionError) as err:
+        client.start(rtf=0, from_layer=0)
+    assert "the move to layer 1 would collide" in err.value.message and "hits the part" in err.value.message
+    assert err.value.details["kind"] == "restart" and err.value.details["bead"] >= 0
+    assert len(collision.station_beads.solids) == 12 * 4           # kept: the next check asks for nothing new
+    part = collision.station_beads.part_id
+    rep = client.check(s.CollisionRequest(q_from_deg=home, q_to_deg=home[:5] + [home[5] + 1.0], beads="station"))
+    assert rep.collision_free and rep.beads == 12 * 4 and collision.station_beads.part_id == part
+    # the top layer: at home the robot is far above it; the same move with the part ignored would pass
+    free = client.check(s.CollisionRequest(q_from_deg=home, q_to_deg=above))
+    assert free.collision_free
+    hit = client.check(s.CollisionRequest(q_from_deg=home, q_to_deg=above, beads="station")).first_hit
+    assert hit is not None and hit.body_b == "part" and hit.bead_layer >= 1
