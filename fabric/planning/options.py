@@ -49,7 +49,7 @@ class PlanOptions:
     zone_mm: float = 0.5                 # blend zone of print and travel moves
     fw_retract_mm: float = 0.8           # filament length of a firmware retraction (G10 / G11)
     chord_tol_mm: float = 0.01           # arc (G2/G3) chord tolerance
-    ik_block_rows: int = 200_000         # rows solved per IK call: bounds memory, paces progress
+    ik_block_rows: int = 1 << 18         # toolpath rows planned at a time (a chunk: one IK call): bounds memory
     wobj_T: np.ndarray | None = None     # work object (plate frame in the base frame, mm); None: the cell's
     allow_off_plate: bool = False        # targets off the plate or below it: counted, not fatal (envelope.py)
 

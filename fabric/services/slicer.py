@@ -11,9 +11,9 @@ from fabric import schemas as s
 from fabric.programs import content_id
 from fabric.robot.cell import Cell
 from fabric.schemas.upload import MAX_MODEL_BYTES
+from fabric.server.disk import require_room
 from fabric.server.jobs import Job, JobRunner
 from fabric.server.service import Service
-from fabric.server.disk import require_room
 from fabric.server.uploads import UploadStore
 from fabric.slicing import Placement, available_backends, list_profiles, load_profile, slice_model
 from fabric.wire.config import add_cell_argument, service_data_dir

@@ -235,6 +235,7 @@ def _write(r: dict) -> None:
     peaks = [x["peak_mb"] for x in runs]
     idles = [x["idle_mb"] for x in runs]
     growth = (idles[-1] - idles[0]) / idles[0] if idles else float("nan")
+    worst = (max(idles[1:] or idles) - idles[0]) / idles[0] if idles else float("nan")
     ok = lambda c: "met" if c else "NOT met"          # noqa: E731
     rows = "\n".join(
         f"| {i + 1} | {x['wall_s']:.1f} s | {x['planner_user_s'] + x['planner_system_s']:.1f} s, "
@@ -261,9 +262,10 @@ figures for the planner before chunked planning (commit {BEFORE['commit']}, same
 |---|---|---|---|---|---|---|---|
 {rows}
 
-Peak {max(peaks):.0f} MB (goal < {GOAL_1M_PEAK_MB:.0f} MB: {ok(max(peaks) < GOAL_1M_PEAK_MB)}); idle after the
-last plan {growth:+.1%} against after the first (goal: within {GOAL_GROWTH_R:.0%}, {ok(abs(growth) <= GOAL_GROWTH_R)};
-before: {(BEFORE['one_idle_mb'][-1] - BEFORE['one_idle_mb'][0]) / BEFORE['one_idle_mb'][0]:+.0%}).
+Peak {max(peaks):.0f} MB (goal < {GOAL_1M_PEAK_MB:.0f} MB: {ok(max(peaks) < GOAL_1M_PEAK_MB)}). Idle after the
+last plan {growth:+.1%} against after the first, the largest after a later plan {worst:+.1%} (goal: no growth beyond
+{GOAL_GROWTH_R:.0%}, {ok(worst <= GOAL_GROWTH_R)}; before:
+{(BEFORE['one_idle_mb'][-1] - BEFORE['one_idle_mb'][0]) / BEFORE['one_idle_mb'][0]:+.0%}).
 """
     if "big" in r:
         b = r["big"]
@@ -288,7 +290,7 @@ Measured on 1 M moves (tracemalloc and resident size per stage, then the planner
   into a program (168 bytes a row) with the mapping's temporaries, solved the IK in blocks but into the whole
   program, then timed the whole program in one pass (some 15 arrays of 8 bytes a row) while the program was
   hashed, written and exported: some 370 bytes a row at the peak, 6.4 GB for the 500 MB file. Now the toolpath
-  comes in chunks of `ik_block_rows` (200,000) rows cut between two extruding moves
+  comes in chunks of `ik_block_rows` (262,144) rows cut between two extruding moves
   (`fabric.gcode.ToolpathChunks`), each chunk is mapped, solved and appended to files, one per column, under the
   planner's data directory (`fabric.motion.program_file.FileSink`), and the program is mapped back read-only; the
   cycle time is computed in blocks of rows (`fabric.motion.timing.program_times`, windows wide enough that the
