@@ -53,6 +53,7 @@ from fabric.server.service import Service
 from fabric.server.writer import Stale, Writer
 from fabric.services.readiness import ReadyFacts, print_temp_c, ready_report
 from fabric.services.station_messages import StationMessages
+from fabric.services.station_plate import PlateGuard
 from fabric.sim.deposition import Deposition
 from fabric.sim.twin import EVENT_KINDS, Twin
 from fabric.store.journal import DEFAULT_CHECKPOINT_PERIOD_S, StationJournal, StationMeta
@@ -89,6 +90,7 @@ class StationService(Service):
         self.twin, self._backlog = self._restore()
         self.clock_stop = threading.Event()         # set first on close: the clock thread ends
         self.msgs = StationMessages(self.twin, self.meta)
+        self.plate = PlateGuard(self.twin, self.meta)          # the part on the plate, and its rules
         self._generation = 0                        # counts the commands that changed the twin (compare-and-set)
         self._last_state: tuple = ()
         self._last_state_s = 0.0
@@ -215,7 +217,7 @@ class StationService(Service):
             msgs = [self.msgs.event(ev) for ev in backlog + events]
             backlog = []
             ext_now = self.twin.extrusion()
-            self._track_plate(ext_now.extruded_mm3)
+            self.plate.track(ext_now.extruded_mm3)
             key = self.msgs.state_key(ext_now)
             state_due = key != self._last_state or now - self._last_state_s >= STATE_PERIOD_S
             state = self.msgs.state(ext_now) if state_due else None       # built only when published
@@ -241,43 +243,6 @@ class StationService(Service):
             if now - ok_since > CLOCK_HEALTHY_S:              # a clock that failed once has run well since
                 self.health.clear("clock")
                 ok_since = float("inf")
-
-    def _track_plate(self, extruded_mm3: float) -> None:
-        """The first bead of a print puts a part on the plate (the print's ``started`` event says so to
-        followers); it stays there, with what was deposited on it, until the operator says it is off
-        (``clear_plate``, event ``plate_cleared``), whatever happens to the job or the station."""
-        meta = self.meta
-        if not meta.plate_occupied and len(self.twin.beads):
-            meta.plate_occupied, meta.plate_job_id, meta.plate_program_id = True, meta.job_id, meta.program_id
-        if meta.plate_occupied and meta.plate_program_id == meta.program_id:
-            meta.plate_mm3 = max(meta.plate_mm3, float(extruded_mm3))
-
-    def _plate_text(self) -> str:
-        m = self.meta
-        return f"the part of job {m.plate_job_id or '(loaded by hand)'} ({m.plate_mm3:.0f} mm3)"
-
-    def _refuse_on_part(self, command: str, from_layer: int | None) -> None:
-        """A print from the start needs a clear plate and a job that has not printed yet (a job is printed
-        once: its record is its history); a restart at a layer needs this program's part on the plate."""
-        m = self.meta
-        if from_layer is None and m.job_id and self.twin.s.t_ended_s is not None:
-            raise StateError(f"cannot {command} job {m.job_id} from the beginning: its print ended "
-                             f"({self.twin.reason}); print it again as a new job (fabric-cli job submit), or go "
-                             f"on at a layer of its part (start --layer N)", state=self.twin.state,
-                             command=command, job_id=m.job_id)
-        if from_layer is None and m.plate_occupied:
-            raise StateError(f"cannot {command} from the beginning: the plate holds {self._plate_text()}; take it "
-                             f"off and say so (fabric-cli plate-clear, or job next), or go on at a layer of it "
-                             f"(start --layer N)", state=self.twin.state, command=command, plate="occupied",
-                             plate_job_id=m.plate_job_id)
-        if from_layer is not None and not m.plate_occupied:
-            raise StateError(f"cannot {command} at layer {from_layer + 1}: the plate is clear, there is no part to "
-                             f"go on with; start from the beginning", state=self.twin.state, command=command,
-                             plate="clear")
-        if from_layer is not None and m.plate_program_id != m.program_id:
-            raise StateError(f"cannot {command} at layer {from_layer + 1}: the plate holds {self._plate_text()}, "
-                             f"not this program's part", state=self.twin.state, command=command, plate="occupied",
-                             plate_job_id=m.plate_job_id)
 
     def _stalled(self, gap_s: float) -> None:
         """The tick came ``gap_s`` late: simulated time does not jump (it is held, and the stall noted).
@@ -323,10 +288,7 @@ class StationService(Service):
         def act() -> s.TimeInfo:
             if self.twin.state in ("printing", "paused"):
                 raise StateError(f"cannot load while {self.twin.state}", state=self.twin.state, command="load")
-            if self.meta.plate_occupied:
-                raise StateError(f"cannot load a program while the plate holds {self._plate_text()}: take it off "
-                                 f"and say so first (fabric-cli plate-clear, or job next)", state=self.twin.state,
-                                 command="load", plate="occupied", plate_job_id=self.meta.plate_job_id)
+            self.plate.refuse_load()
             self.twin.load(program)
             self.journal.keep_program(art)
             self.meta.program_id, self.meta.job_id = req.program_id, req.job_id
@@ -344,7 +306,7 @@ class StationService(Service):
         def act() -> s.Ack:
             if stamp is not None:
                 self._still(stamp, f"the move to layer {(layer or 0) + 1}", "start")
-            self._refuse_on_part("start", layer)
+            self.plate.refuse_start("start", layer)
             self.twin.start(from_layer=layer)
             self._set_rtf(req.rtf)
             self._changed()
@@ -352,7 +314,7 @@ class StationService(Service):
             return self._ack(f"printing{where} at {self._rtf_text()}")
 
         def plan(layer: int) -> tuple[tuple[np.ndarray, np.ndarray], tuple]:
-            self._refuse_on_part("start", layer)
+            self.plate.refuse_start("start", layer)
             return self.twin.layer_move(layer), self._stamp()
 
         stamp = None
@@ -430,16 +392,9 @@ class StationService(Service):
 
     def on_clear_plate(self, _: s.Empty) -> s.Ack:
         def act() -> s.Ack:
-            if self.twin.state in ("printing", "paused", "interrupted"):
-                raise StateError(f"the part is still being printed ({self.twin.state}): stop first",
-                                 state=self.twin.state, command="clear_plate")
-            m = self.meta
-            if not m.plate_occupied:
+            what = self.plate.clear()
+            if not what:
                 return self._ack("the plate was clear already")
-            what = self._plate_text()
-            self.twin.note("plate_cleared", {"job_id": m.plate_job_id, "plate_mm3": round(m.plate_mm3, 3)})
-            m.plate_occupied, m.plate_job_id, m.plate_program_id, m.plate_mm3 = False, "", "", 0.0
-            self.twin.clear_plate()
             self._changed()
             return self._ack(f"plate clear: {what} taken off")
         return self._step(act)
@@ -501,7 +456,7 @@ class StationService(Service):
                               nozzle_c=float(self.twin.temps().nozzle_c),
                               print_temp_c=print_temp_c(program) if program is not None else None,
                               state=self.twin.state, reason=self.twin.reason,
-                              plate=self._plate_text() if self.meta.plate_occupied else "")
+                              plate=self.plate.text() if self.meta.plate_occupied else "")
         return self._step(read)
 
     def _time_msg(self) -> s.TimeInfo:

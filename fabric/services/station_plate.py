@@ -1,0 +1,79 @@
+"""The part on the plate: when a print puts one there, what it allows and refuses, and taking it off.
+
+The station owns it (its fields live in :class:`~fabric.store.journal.StationMeta`,
+so it survives restarts). Every method runs on the station's writer, like any
+other change of the twin.
+"""
+from __future__ import annotations
+
+from fabric.sim.twin import Twin
+from fabric.store.journal import StationMeta
+from fabric.wire.errors import StateError
+
+__all__ = ["PlateGuard"]
+
+
+class PlateGuard:
+    """The part on the plate of one station (``twin`` and ``meta`` are the station's, for its whole life)."""
+
+    def __init__(self, twin: Twin, meta: StationMeta) -> None:
+        self.twin, self.meta = twin, meta
+
+    def track(self, extruded_mm3: float) -> None:
+        """The first bead of a print puts a part on the plate (the print's ``started`` event says so to
+        followers); it stays there, with what was deposited on it, until the operator says it is off
+        (:meth:`clear`, event ``plate_cleared``), whatever happens to the job or the station."""
+        meta = self.meta
+        if not meta.plate_occupied and len(self.twin.beads):
+            meta.plate_occupied, meta.plate_job_id, meta.plate_program_id = True, meta.job_id, meta.program_id
+        if meta.plate_occupied and meta.plate_program_id == meta.program_id:
+            meta.plate_mm3 = max(meta.plate_mm3, float(extruded_mm3))
+
+    def text(self) -> str:
+        """What is on the plate, in words."""
+        m = self.meta
+        return f"the part of job {m.plate_job_id or '(loaded by hand)'} ({m.plate_mm3:.0f} mm3)"
+
+    def refuse_load(self) -> None:
+        """A program is loaded onto a clear plate only."""
+        if self.meta.plate_occupied:
+            raise StateError(f"cannot load a program while the plate holds {self.text()}: take it off "
+                             f"and say so first (fabric-cli plate-clear, or job next)", state=self.twin.state,
+                             command="load", plate="occupied", plate_job_id=self.meta.plate_job_id)
+
+    def refuse_start(self, command: str, from_layer: int | None) -> None:
+        """A print from the start needs a clear plate and a job that has not printed yet (a job is printed
+        once: its record is its history); a restart at a layer needs this program's part on the plate."""
+        m, state = self.meta, self.twin.state
+        if from_layer is None and m.job_id and self.twin.s.t_ended_s is not None:
+            raise StateError(f"cannot {command} job {m.job_id} from the beginning: its print ended "
+                             f"({self.twin.reason}); print it again as a new job (fabric-cli job submit), or go "
+                             f"on at a layer of its part (start --layer N)", state=state, command=command,
+                             job_id=m.job_id)
+        if from_layer is None and m.plate_occupied:
+            raise StateError(f"cannot {command} from the beginning: the plate holds {self.text()}; take it off "
+                             f"and say so (fabric-cli plate-clear, or job next), or go on at a layer of it "
+                             f"(start --layer N)", state=state, command=command, plate="occupied",
+                             plate_job_id=m.plate_job_id)
+        if from_layer is not None and not m.plate_occupied:
+            raise StateError(f"cannot {command} at layer {from_layer + 1}: the plate is clear, there is no part to "
+                             f"go on with; start from the beginning", state=state, command=command, plate="clear")
+        if from_layer is not None and m.plate_program_id != m.program_id:
+            raise StateError(f"cannot {command} at layer {from_layer + 1}: the plate holds {self.text()}, not "
+                             f"this program's part", state=state, command=command, plate="occupied",
+                             plate_job_id=m.plate_job_id)
+
+    def clear(self) -> str:
+        """The operator took the part off (refused while it is being printed); what was taken off, in words
+        ("" when the plate was clear already)."""
+        if self.twin.state in ("printing", "paused", "interrupted"):
+            raise StateError(f"the part is still being printed ({self.twin.state}): stop first",
+                             state=self.twin.state, command="clear_plate")
+        m = self.meta
+        if not m.plate_occupied:
+            return ""
+        what = self.text()
+        self.twin.note("plate_cleared", {"job_id": m.plate_job_id, "plate_mm3": round(m.plate_mm3, 3)})
+        m.plate_occupied, m.plate_job_id, m.plate_program_id, m.plate_mm3 = False, "", "", 0.0
+        self.twin.clear_plate()
+        return what
