@@ -8,8 +8,17 @@ exceeds the bound ``M`` on how far any point of the body moves over it
 (relative to the other body for a pair): it cannot reach anything it was not
 already closer to. Walking along the path, one distance certifies the
 following segments up to a total motion of ``d`` (less twice the tolerance),
-so far bodies take few queries. The walks of all items share one placement
-of the robot per configuration.
+so far bodies take few queries. The motion bound of a pair counts only the
+joints that do not move both bodies (turning both together changes nothing
+between them). The walks of all items go in path order (the broad phase
+follows) and share one placement of the robot per configuration.
+
+A first pass gives a distance lower bound at every configuration for free:
+a few spheres covering each body against the bounding boxes of the fixed
+bodies and of the part laid so far (for a pair, one sphere around each). Where
+those bounds alone carry the walk on, it jumps along them (all vertices'
+jumps are found at once by pointer doubling), and coal is asked only where
+they run out.
 
 A single segment that moves further than the clearance is bisected at the
 exact midpoint of the twin's path (:meth:`Segments.q_at`). A piece is
@@ -46,6 +55,7 @@ __all__ = ["Advancer", "Item", "Probe", "SweepHit", "GJK_EPS_MM", "EXACT_MARGIN_
 
 EXACT_MARGIN_MM = 2.0        # an exact query looks this far around a body for beads
 FINE_BELOW_MM = 5.0          # the beads' tree is asked only when the layer boxes are this close
+FINE_TREE_MAX_BEADS = 200_000   # above this, exact queries (by bounding boxes) stand in for the beads' tree
 _MAX_DEPTH = 60              # bisections of one segment
 
 
@@ -80,6 +90,8 @@ class _Walk:
     runs: list[tuple[int, int]]
     cum: np.ndarray
     free: np.ndarray
+    stop: np.ndarray                        # per vertex: where the first pass's bounds alone certify on to
+    low: np.ndarray                         # and the smallest clearance they certify on the way
     run: int = 0
     prev: tuple[int, float] | None = None
 
@@ -119,68 +131,51 @@ class Advancer:
     # --- a batch of segments: motion bounds and first-pass distances, vectorised ---------------------
 
     def set_batch(self, a: int, b: int, part_lo: np.ndarray, part_hi: np.ndarray) -> None:
-        """Segments [a, b): every body's motion bounds (J, C, E: joint bound, chord part, chord error;
-        :meth:`RobotBodies.chord_parts_mm`) and the spheres covering it at every vertex, from one vectorised
-        FK; ``part_lo``/``part_hi`` (b - a + 1, 3) bound the part laid by each vertex's stretch."""
+        """Segments [a, b): every body's motion bound per segment (:meth:`RobotBodies.motion_mm`) and the
+        spheres covering it at every vertex, from one vectorised FK; ``part_lo``/``part_hi`` (b - a + 1, 3)
+        bound the part laid by each vertex's stretch."""
         segs, bodies = self.segs, self.bodies
         frames = bodies.joint_frames(np.vstack([segs.q0[a:b], segs.q1[b - 1:b]]))
         dq = segs.dq_abs[a:b]
         self._a = a
-        self._parts = {}
+        self._motion: dict[str, np.ndarray] = {}
         self.spheres: dict[str, tuple[np.ndarray, float]] = {}
+        self.sphere: dict[str, tuple[np.ndarray, float]] = {}
         for body in bodies.bodies:
             poses = bodies.body_poses(frames, body)
             self.spheres[body.name] = bodies.spheres(poses, body)
-            if body.joint == 0:                                # on the base: does not move
-                zero = np.zeros(b - a)
-                self._parts[body.name] = (zero, zero, zero)
-                continue
-            C, E = bodies.chord_parts_mm(poses, body, dq)
-            self._parts[body.name] = (bodies.motion_mm(dq, body), C, E)
+            self.sphere[body.name] = bodies.sphere(poses, body)
+            self._motion[body.name] = bodies.motion_mm(dq, body)
         env_lo, env_hi = self.trees.env_lo, self.trees.env_hi
         self._box_lo = np.concatenate([np.broadcast_to(env_lo, (len(part_lo), *env_lo.shape)), part_lo[:, None]], 1)
         self._box_hi = np.concatenate([np.broadcast_to(env_hi, (len(part_hi), *env_hi.shape)), part_hi[:, None]], 1)
 
-    def free(self, item: Item) -> np.ndarray:
-        """A distance lower bound at every vertex of the batch, from the spheres covering each body: to the
-        bounding boxes of the fixed bodies and of the part laid so far (to the other body's spheres, for a
-        pair). Cheap, vectorised, and enough for bodies far from everything."""
+    def free(self, item: Item, at: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """A distance lower bound at the vertices ``at`` of the batch, from the spheres covering each body:
+        to the bounding boxes of the fixed bodies and of the part laid so far (for a pair, the sphere
+        around each body's box to the other's). Cheap, vectorised, and enough for bodies far from
+        everything."""
         c, r = self.spheres[item.body.name]                                           # (N, k, 3)
+        c = c[at]
         if item.other is None:
-            lo, hi = self._box_lo, self._box_hi                                     # (N, B, 3)
+            lo, hi = self._box_lo[at], self._box_hi[at]                             # (N, B, 3)
             gap = np.maximum(np.maximum(lo[:, None] - c[:, :, None], c[:, :, None] - hi[:, None]), 0.0)
-            return np.linalg.norm(gap, axis=3).min(axis=(1, 2)) - r
-        c2, r2 = self.spheres[item.other.name]
-        return np.linalg.norm(c[:, :, None] - c2[:, None], axis=3).min(axis=(1, 2)) - r - r2
-
-    def _item_parts(self, item: Item) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        J, C, E = self._parts[item.body.name]
-        if item.other is None:
-            return J, C, E
-        _, C2, E2 = self._parts[item.other.name]
-        return self.segs.dq_abs[self._a:self._a + len(J)] @ item.rate_mm, C + C2, E + E2
+            return np.sqrt(np.square(gap).sum(axis=3).min(axis=(1, 2))) - r
+        (c1, r1), (c2, r2) = self.sphere[item.body.name], self.sphere[item.other.name]   # one each: enough
+        return np.linalg.norm(c1[at] - c2[at], axis=1) - r1 - r2                     # for pairs, far or not
 
     def motion(self, item: Item) -> np.ndarray:
-        """Per segment of the batch: how far the item's body can move (a pair: relative to the other)."""
-        J, C, E = self._item_parts(item)
-        linear = ~self.segs.joint[self._a:self._a + len(J)]
-        return np.where(linear, np.minimum(J, C + 2.0 * E), J)
+        """Per segment of the batch: how far the item's body can move; for a pair, relative to the other
+        (the joint bound of the joints that do not move both: turning both together changes nothing)."""
+        if item.other is None:
+            return self._motion[item.body.name]
+        n = len(self._motion[item.body.name])
+        return self.segs.dq_abs[self._a:self._a + n] @ item.rate_mm
 
     def piece_motion(self, item: Item, k: int, sa: float, sb: float, qa: np.ndarray, qb: np.ndarray) -> float:
-        """The motion bound of the piece [sa, sb] of segment ``k`` (in the current batch)."""
-        segs = self.segs
-        joint = float(np.abs(qb - qa) @ item.rate_mm)
-        if segs.joint[k]:
-            return joint                                   # the joints move monotonically: travel = difference
-        _, C, E = self._parts[item.body.name]
-        i = k - self._a
-        Ck, Ek = float(C[i]), float(E[i])
-        if item.other is not None:
-            _, C2, E2 = self._parts[item.other.name]
-            Ck, Ek = Ck + float(C2[i]), Ek + float(E2[i])
-        span = float(segs.s1[k] - segs.s0[k])
-        f = (sb - sa) / span if span > 0 else 1.0
-        return min(joint, f * Ck + 4.0 * Ek) if f < 1.0 else min(joint, Ck + 2.0 * Ek)
+        """The motion bound of the piece [sa, sb] of segment ``k``: the joints move monotonically (a linear
+        move's interpolation, a rest-to-rest joint move), so a joint travels the difference of the ends."""
+        return float(np.abs(qb - qa) @ item.rate_mm)
 
     # --- the walk ---------------------------------------------------------------------------------
 
@@ -195,7 +190,16 @@ class Advancer:
         state: list[_Walk] = []
         heap: list[tuple[int, int]] = []
         for j, (item, runs) in enumerate(work):
-            state.append(_Walk(runs, np.concatenate([[0.0], np.cumsum(self.motion(item))]), self.free(item)))
+            cum = np.concatenate([[0.0], np.cumsum(self.motion(item))])
+            covered = sum(r1 - r0 + 1 for r0, r1 in runs)
+            if covered < (n + 1) // 4:                      # a few short runs (joint moves): just those vertices
+                at = np.concatenate([np.arange(r0, r1 + 1) for r0, r1 in runs]) if runs else np.zeros(0, int)
+                free = np.full(n + 1, -np.inf)
+                free[at] = self.free(item, at)
+            else:
+                free = self.free(item)
+            stop, low = self._chains(cum, free, runs)
+            state.append(_Walk(runs, cum, free, stop, low))
             if runs:
                 heap.append((runs[0][0], j))
         heapq.heapify(heap)
@@ -217,7 +221,7 @@ class Advancer:
             cum, free = st.cum, st.free
             if i >= r1:                                     # end of a run: close its last stretch, go on
                 if st.prev is not None:
-                    end = float(free[i]) if free[i] > 0 else self._query(item, segs.q1[a + i - 1]).d
+                    end = float(free[i]) if free[i] > 0 else self.probe(item, a + i - 1, segs.q1[a + i - 1]).d
                     self._close(item, st, i, Probe(end), a + i - 1)
                 st.prev = None
                 st.run += 1
@@ -227,10 +231,15 @@ class Advancer:
             k = a + i
             q = segs.q0[k]
             step = float(cum[i + 1] - cum[i])
-            if free[i] > step + 2.0 * self.tol:            # the first pass's bound suffices: no query
-                probe = Probe(float(free[i]))
-            else:
-                probe = self.probe(item, k, q, step + 2.0 * self.tol)
+            v = int(st.stop[i])
+            if v > i:                                       # the first pass's bounds certify on to vertex v
+                if st.prev is not None:
+                    self._close(item, st, i, Probe(float(free[i])), k)
+                st.prev = None
+                self.bound(float(st.low[i]), item.name, k)
+                heapq.heappush(heap, (v, j))
+                continue
+            probe = self.probe(item, k, q, step + 2.0 * self.tol)
             if st.prev is not None:
                 self._close(item, st, i, probe, k)
             if probe.d <= self.tol:
@@ -254,6 +263,29 @@ class Advancer:
                 continue
             heapq.heappush(heap, (i + 1, j))
         return hits
+
+    def _chains(self, cum: np.ndarray, free: np.ndarray, runs: list[tuple[int, int]],
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Where the first pass's bounds alone take the walk from each vertex, and the smallest clearance
+        they certify on the way: from vertex ``i`` a bound ``free[i]`` certifies on to the last vertex ``u``
+        of its run with ``cum[u] - cum[i] < free[i] - 2 tol`` (with clearance ``max(free[i] - span,
+        (free[i] + free[u] - span) / 2)``), then from ``u`` again, until a vertex whose bound does not take
+        it one segment on. Followed for every vertex at once by pointer doubling."""
+        n = len(cum)
+        end = np.arange(n)
+        for r0, r1 in runs:
+            end[r0:r1] = r1
+        nxt = np.searchsorted(cum, cum + free - 2.0 * self.tol, "left") - 1
+        nxt = np.clip(np.minimum(nxt, end), np.arange(n), None)          # never back, never past the run
+        span = cum[nxt] - cum
+        low = np.where(nxt > np.arange(n), np.maximum(free - span, (free + free[nxt] - span) / 2.0), np.inf)
+        for _ in range(max(1, int(np.ceil(np.log2(max(n, 2)))))):
+            low = np.minimum(low, low[nxt])
+            after = nxt[nxt]
+            if np.array_equal(after, nxt):                 # every chain has reached its stop
+                break
+            nxt = after
+        return nxt, low
 
     def _close(self, item: Item, st: _Walk, i: int, probe: Probe, k: int) -> None:
         """The clearance lower bound of the stretch certified from the item's last query to vertex ``i``."""
@@ -325,6 +357,8 @@ class Advancer:
         d = self._tree_distance(self.trees.coarse, obj)
         if d > need_mm or d > FINE_BELOW_MM:       # far from the layer boxes: bisecting is cheaper than beads
             return Probe(d)
+        if self.trees.count > FINE_TREE_MAX_BEADS:  # a tree that big takes longer to build than to go exact
+            return Probe(-1.0)
         return Probe(self._tree_distance(self.trees.fine_tree(), obj))
 
     def probe(self, item: Item, k: int, q: np.ndarray, need_mm: float = float("inf")) -> Probe:

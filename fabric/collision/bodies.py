@@ -106,6 +106,9 @@ class RobotBodies:
         self._joint_T = [_mm(self.model.jointPlacements[j].homogeneous) for j in range(self.model.njoints)]
         self.by_name = {b.name: b for b in self.bodies}
         self._spheres = {b.name: _sphere_cover(b.corners) for b in self.bodies}
+        self._sphere = {b.name: ((b.corners.min(axis=0) + b.corners.max(axis=0)) / 2.0,
+                                 float(np.linalg.norm(b.corners.max(axis=0) - b.corners.min(axis=0)) / 2.0))
+                        for b in self.bodies}
         self.tcp_joint = int(tcp.parentJoint)
         self._tcp_placement = _mm(tcp.placement.homogeneous)
         self.moving = [b for b in self.bodies if b.joint > 0]
@@ -132,6 +135,11 @@ class RobotBodies:
                 g = b.geometry
                 out.append((b, float(g.radius) / MM, float(g.halfLength) / MM, float(rel[2, 3])))
         return out
+
+    def sphere(self, poses: np.ndarray, body: Body) -> tuple[np.ndarray, float]:
+        """The sphere around the body's bounding box, at ``poses`` (N, 4, 4): centres (N, 3), radius (mm)."""
+        c, r = self._sphere[body.name]
+        return poses[:, :3, :3] @ c + poses[:, :3, 3], r
 
     def spheres(self, poses: np.ndarray, body: Body) -> tuple[np.ndarray, float]:
         """A few equal spheres covering the body's bounding box, at ``poses`` (N, 4, 4): centres (N, k, 3)
@@ -200,45 +208,28 @@ class RobotBodies:
         after = np.cumsum((d * body.reach_mm)[:, ::-1], axis=1)[:, ::-1]       # sum_{k>=j} |dq_k| D_k
         return np.sum(d * (2.0 * before * body.reach_mm + after), axis=1) / 8.0
 
-    def joint_frames(self, q: np.ndarray) -> np.ndarray:
-        """World poses (N, njoints, 4, 4), mm, of every joint at joints ``q`` (N, nq): the chain product
-        of the joints' placements and rotations, vectorised over configurations."""
+    def joint_frames(self, q: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """World rotation (N, 3, 3) and position (N, 3, mm) of every joint at joints ``q`` (N, nq): the
+        chain product of the joints' placements and rotations, vectorised over configurations."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
         m = self.model
-        out = np.empty((len(q), m.njoints, 4, 4))
-        out[:, 0] = np.eye(4)
+        n = len(q)
+        out = [(np.broadcast_to(np.eye(3), (n, 3, 3)), np.zeros((n, 3)))]
         for j in range(1, m.njoints):
-            rot = np.zeros((len(q), 4, 4))
-            rot[:, :3, :3] = _rodrigues(self._axes[j], q[:, m.joints[j].idx_q])
-            rot[:, 3, 3] = 1.0
-            out[:, j] = out[:, int(m.parents[j])] @ (self._joint_T[j] @ rot)
+            Rp, tp = out[int(m.parents[j])]
+            P = self._joint_T[j]
+            local = P[:3, :3] @ _rodrigues(self._axes[j], q[:, m.joints[j].idx_q])      # (N, 3, 3)
+            out.append((Rp @ local, tp + Rp @ P[:3, 3]))
         return out
 
-    def body_poses(self, frames: np.ndarray, body: Body) -> np.ndarray:
+    def body_poses(self, frames: list[tuple[np.ndarray, np.ndarray]], body: Body) -> np.ndarray:
         """World poses (N, 4, 4), mm, of ``body`` from :meth:`joint_frames`."""
-        return frames[:, body.joint] @ body.placement
-
-    def chord_parts_mm(self, poses: np.ndarray, body: Body, dq_abs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For a linear joint interpolation between consecutive ``poses`` (N+1, 4, 4) of ``body``: ``C``,
-        how far any of its points is from its start at the end (``|dc| + 2 sin(t/2) r_u``, with ``t`` the
-        turn between the two poses and ``r_u`` the farthest corner from the turn's axis), and ``E``, the
-        chord error (:meth:`chord_error_mm`). A point at fraction ``f`` of the way is within ``E`` of the
-        point ``f`` along its chord, so the path from the start is at most ``f C + E`` long in straight
-        line, and ``C + 2 E`` bounds the sum of its distances to both ends: a motion bound like
-        :meth:`motion_mm` (which holds for any monotone joint path), and much tighter on short moves."""
-        Ra, Rb = poses[:-1, :3, :3], poses[1:, :3, :3]
-        dc = np.linalg.norm(poses[1:, :3, 3] - poses[:-1, :3, 3], axis=1)
-        rel = np.einsum("nji,njk->nik", Ra, Rb)                       # Ra^T Rb
-        cos_t = np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
-        turn = np.arccos(cos_t)
-        u = np.stack([rel[:, 2, 1] - rel[:, 1, 2], rel[:, 0, 2] - rel[:, 2, 0], rel[:, 1, 0] - rel[:, 0, 1]], 1)
-        un = np.linalg.norm(u, axis=1)
-        u = np.where(un[:, None] > 1e-12, u / np.maximum(un, 1e-300)[:, None], 0.0)
-        x = body.corners
-        along = u @ x.T                                                   # (N, 8)
-        perp = np.sqrt(np.maximum(np.sum(x * x, axis=1)[None, :] - along ** 2, 0.0)).max(axis=1)
-        perp = np.where(un > 1e-12, perp, np.linalg.norm(x, axis=1).max())
-        return dc + 2.0 * np.sin(turn / 2.0) * perp, self.chord_error_mm(dq_abs, body)
+        R, t = frames[body.joint]
+        out = np.empty((len(t), 4, 4))
+        out[:, :3, :3] = R @ body.placement[:3, :3]
+        out[:, :3, 3] = t + R @ body.placement[:3, 3]
+        out[:, 3] = (0.0, 0.0, 0.0, 1.0)
+        return out
 
     # --- placements --------------------------------------------------------------------
 

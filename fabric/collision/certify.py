@@ -16,26 +16,28 @@ the layer it is laying and of the layer under it, and only those, it is not
 checked. The rest of the nozzle begins where the tip ends, so it clears the
 bead being laid by ``nozzle_clearance_mm`` and is checked against
 everything. The tip is checked against the plate, the table and every other
-bead: printing the first layer it is one layer height above the plate.
+bead: printing the first layer it is one layer height above the plate. For a
+live move the tip is laying nothing: it may only leave the beads of the last
+layer (and the one under) that it rests on where the move starts, within its
+radius and one layer height of the tip.
 
 How. The path is cut into stretches where the tip's layer changes (and
-where that layer's first bead is laid); before each, the beads laid up to
-its last row go into the broad phase (:mod:`fabric.collision.trees`). Then,
-for the stretch:
+where that layer's first bead is laid); as the sweep reaches each, the beads
+laid up to its last row go into the broad phase (:mod:`fabric.collision.trees`).
+For a batch of stretches at a time:
 
-1. the nozzle, the tip, and the tool body when it is a cylinder on the same
-   axis, along linear moves: swept hulls, all of the stretch in one coal call
-   per body (:mod:`fabric.collision.hull`);
-2. every other body, those along joint moves, and every pair of robot bodies:
-   conservative advancement (:mod:`fabric.collision.advance`), bisecting
-   where the clearance is small. A vectorised first pass gives a distance
-   lower bound at every configuration for free (spheres covering each body
-   against the boxes around the fixed bodies and the part so far, or against
-   the other body's spheres); coal is asked only where that is not enough.
+1. the tool's cylinders on the TCP axis (the tip, the nozzle, and the tool
+   body when the TCP is on the flange axis) along linear moves: swept hulls,
+   measured against the layer boxes a stretch at a time, in numpy
+   (:mod:`fabric.collision.hull`);
+2. every other body, the tool's along joint moves, and every pair of robot
+   bodies: conservative advancement (:mod:`fabric.collision.advance`), with a
+   vectorised first pass of bounding spheres and coal where that runs out,
+   bisecting where the clearance is small.
 
-Pieces the hulls cannot certify are refined by the second. The certified
-clearance is the smallest lower bound of all; the first hit is the earliest
-along the path, and ends the sweep.
+Hull pieces that come within the tolerance are refined by the second, with
+exact distances. The certified clearance is the smallest lower bound of all;
+the first hit is the earliest along the path, and ends the sweep.
 """
 from __future__ import annotations
 
@@ -62,7 +64,8 @@ BATCH_SEGMENTS = 20_000      # stretches are prepared (vectorised bounds, hull c
 def exemption_text(bodies: RobotBodies) -> str:
     """The exemption zone in words, for reports and docs."""
     return (f"{TIP}: r {bodies.tip_radius_mm:g} mm x {bodies.tip_length_mm:g} mm at the nozzle tip, "
-            f"exempt against the layer being laid and the one under it")
+            f"exempt against the layer being laid and the one under it (a live move: those it rests on at "
+            f"its start, within r + one layer height)")
 
 
 @dataclass
@@ -87,7 +90,10 @@ class Certifier:
         self.cell = cell
         self.bodies = RobotBodies(cell)
         self.tol = float(tolerance_mm)
-        self.tools = [ToolCylinder(b, r, h, off) for b, r, h, off in self.bodies.axial_cylinders()]
+        # the tool's cylinders on the TCP axis go by swept hulls; link_6 (also on it) is far enough above
+        # the part for bounding spheres, and walks
+        self.tools = [ToolCylinder(b, r, h, off) for b, r, h, off in self.bodies.axial_cylinders()
+                      if b.name.startswith("tool_")]
         self._hulled = {t.body.name for t in self.tools}
 
     @property
@@ -202,13 +208,14 @@ class Certifier:
         hits: list[SweepHit] = []
         if self._covers is None:
             return hits
-        for tool, covers in zip(self.tools, self._covers, strict=True):
+        for t, (tool, covers) in enumerate(zip(self.tools, self._covers, strict=True)):
             g0, g1 = np.searchsorted(covers.stretch, [s, s + 1])
             if g0 == g1:
                 continue
             lo, hi = self.trees.layer_boxes(tool.body.name == TIP)
             dist = cover_distances(covers, slice(g0, g1), lo, hi, 2.0 * self.tol)
-            self.pieces += int(covers.edges[g1] - covers.edges[g0])
+            if t == 0:                                      # the tools share their pieces
+                self.pieces += int(covers.edges[g1] - covers.edges[g0])
             clear = np.where(dist > 2.0 * self.tol, dist, np.inf)
             if np.isfinite(clear).any():
                 g = int(np.argmin(clear))

@@ -16,7 +16,9 @@ along the run.
 A linear move is cut into pieces until the chord error is at most
 ``CHORD_TARGET_MM`` and a piece at most ``PIECE_MAX_MM`` long; consecutive
 pieces of a stretch share a cover where it is at most ``GROUP_RADIUS_MM``
-wider than the tool (blocks of 16, else 4, else single pieces). Covers are
+wider than the tool (blocks of 16, else 4, else single pieces). The tools
+share the grouping: their centres differ only along the common axis, by a
+fixed offset (up to the offset times the turn, which the growth takes). Covers are
 measured against the obstacles' boxes (the layer boxes of
 :mod:`fabric.collision.trees`, the table's, the plate's) in numpy: a cover on
 the z axis is a disk times an interval and a box a rectangle times an
@@ -103,24 +105,32 @@ def hull_covers(bodies: RobotBodies, segs: Segments, idx: np.ndarray, stretch: n
     span = segs.s1[glob] - segs.s0[glob]
     s0, s1 = segs.s0[glob] + span * f0, segs.s0[glob] + span * f1
     piece_stretch = stretch[seg]
+    # one grouping for every tool: they share the axis, so their centres differ only along it
+    ref = tools[0]
+    edges, centre, axis, spread, along, turn = _groups(Ta, Tb, ref, piece_stretch)
     out = []
     for tool, error in zip(tools, errors, strict=True):
-        edges, (centre, axis, radius, half, grow) = _groups(Ta, Tb, tool, error[seg] / n[seg] ** 2, piece_stretch)
-        out.append(HullCovers(centre, axis, radius, half, grow, piece_stretch[edges[:-1]], edges, glob, s0, s1))
+        shift = tool.offset_mm - ref.offset_mm     # moving the covers along; turns move it by |shift| * turn
+        worst = np.maximum.reduceat(error[seg] / n[seg] ** 2, edges[:-1])     # chord error ~ travel squared
+        rho = float(np.hypot(tool.radius_mm, tool.half_mm))
+        grow = worst + (rho + abs(shift)) * turn + GJK_EPS_MM
+        out.append(HullCovers(centre + axis * shift, axis, tool.radius_mm + spread, tool.half_mm + along, grow,
+                              piece_stretch[edges[:-1]], edges, glob, s0, s1))
     return out
 
 
-def _groups(Ta: np.ndarray, Tb: np.ndarray, tool: ToolCylinder, error: np.ndarray, stretch: np.ndarray,
-            ) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
-    """Runs of consecutive pieces of one stretch under one cover where they fit in a cylinder at most
-    ``GROUP_RADIUS_MM`` wider than the tool (aligned blocks of 16, else of 4, else single pieces):
-    (group edges (G+1,), covers (centre, axis, radius, half, grow))."""
+def _groups(Ta: np.ndarray, Tb: np.ndarray, tool: ToolCylinder, stretch: np.ndarray,
+            ) -> tuple[np.ndarray, ...]:
+    """Runs of consecutive pieces of one stretch under one cover where the centres of ``tool`` at their
+    ends fit within ``GROUP_RADIUS_MM`` of a line along their mean axis (aligned blocks of 16, else of 4,
+    else single pieces): (group edges (G+1,), and per group: the centre between them, the mean axis, their
+    spread across it and half their spread along it, the largest turn of an axis from the mean)."""
     ends = np.concatenate([(Ta[:, :3, 3] + Ta[:, :3, 2] * tool.offset_mm)[:, None],
                            (Tb[:, :3, 3] + Tb[:, :3, 2] * tool.offset_mm)[:, None]], axis=1)   # (n, 2, 3)
     axes = np.concatenate([Ta[:, None, :3, 2], Tb[:, None, :3, 2]], axis=1)
     n = len(ends)
     taken = np.zeros(n, bool)
-    starts, sizes, covers = [], [], []
+    starts, sizes, parts = [], [], []
     for size in (16, 4, 1):
         cand = np.arange(0, n - size + 1, size)
         sel = cand[:, None] + np.arange(size)[None, :]
@@ -128,24 +138,23 @@ def _groups(Ta: np.ndarray, Tb: np.ndarray, tool: ToolCylinder, error: np.ndarra
         cand, sel = cand[ok], sel[ok]
         if len(cand) == 0:
             continue
-        cover = _cover(ends[sel].reshape(len(cand), 2 * size, 3), axes[sel].reshape(len(cand), 2 * size, 3),
-                       error[sel].max(axis=1), tool)
-        keep = cover[-1] <= GROUP_RADIUS_MM if size > 1 else np.ones(len(cand), bool)
+        cover = _cover(ends[sel].reshape(len(cand), 2 * size, 3), axes[sel].reshape(len(cand), 2 * size, 3))
+        keep = cover[2] <= GROUP_RADIUS_MM if size > 1 else np.ones(len(cand), bool)
         starts.append(cand[keep])
         sizes.append(np.full(int(keep.sum()), size))
-        covers.append(tuple(c[keep] for c in cover[:-1]))
+        parts.append(tuple(c[keep] for c in cover))
         taken[sel[keep].ravel()] = True
     begin, length = np.concatenate(starts), np.concatenate(sizes)
     order = np.argsort(begin)
     edges = np.concatenate([begin[order], [n]])
     assert np.array_equal(edges[1:], (begin + length)[order]), "the groups tile the pieces"
-    return edges, tuple(np.concatenate([c[f] for c in covers])[order] for f in range(5))
+    return (edges, *(np.concatenate([c[f] for c in parts])[order] for f in range(5)))
 
 
-def _cover(ends: np.ndarray, axes: np.ndarray, error: np.ndarray, tool: ToolCylinder) -> tuple[np.ndarray, ...]:
-    """The cylinder holding the tool's swept volume over a run of pieces (see the module docstring):
-    ``ends`` (G, P, 3) the tool's centre at each piece end, ``axes`` (G, P, 3) its axis there, ``error``
-    (G,) the largest chord error. Returns (centre, axis, radius, half, grow, spread across the axis)."""
+def _cover(ends: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, ...]:
+    """For runs of pieces (see the module docstring): ``ends`` (G, P, 3) the tool's centre at each piece end,
+    ``axes`` (G, P, 3) its axis there. Returns (centre, mean axis, spread across it, half the spread along
+    it, the largest turn of an axis from the mean)."""
     axis = axes.sum(axis=1)
     axis /= np.linalg.norm(axis, axis=1)[:, None]
     turn = np.arccos(np.clip(np.einsum("gpk,gk->gp", axes, axis), -1.0, 1.0)).max(axis=1)
@@ -156,9 +165,7 @@ def _cover(ends: np.ndarray, axes: np.ndarray, error: np.ndarray, tool: ToolCyli
     mid -= np.sum(mid * axis, axis=1)[:, None] * axis                  # onto the plane across the axis
     spread = np.linalg.norm(across - mid[:, None, :], axis=2).max(axis=1)
     centre = mid + ((lo + hi) / 2.0)[:, None] * axis
-    rho = float(np.hypot(tool.radius_mm, tool.half_mm))
-    grow = error + rho * turn + GJK_EPS_MM
-    return centre, axis, tool.radius_mm + spread, tool.half_mm + (hi - lo) / 2.0, grow, spread
+    return centre, axis, spread, (hi - lo) / 2.0, turn
 
 
 def cover_distances(c: HullCovers, sel: slice, lo: np.ndarray, hi: np.ndarray, touch_mm: float) -> np.ndarray:

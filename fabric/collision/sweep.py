@@ -1,4 +1,6 @@
-"""Collision sweep of a robot program: robot and tool against table, plate and the part as it grows.
+"""Version 1's sampled collision sweep, kept to compare against: the certified check that replaced it is
+:mod:`fabric.collision.certify` (this one can miss a contact between two samples, and models the part as
+one box per layer).
 
 The robot's collision geometry (from its URDF, via Pinocchio) is checked with
 coal against boxes for the table and the plate; pairs that touch by design

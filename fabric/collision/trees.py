@@ -4,17 +4,20 @@ Three levels, each containing the next, so each gives a distance lower bound
 of the one below:
 
 * the part's bounding box so far and the fixed bodies' boxes, as arrays: the
-  vectorised first pass of :mod:`fabric.collision.certify` (a body's bounding
-  sphere against them);
+  vectorised first pass of :mod:`fabric.collision.advance` (spheres around
+  each body against them);
 * ``coarse``: one box per layer around all of that layer's beads (a layer is
   flat, so the box's top is the beads' top), with the table and the plate;
-  ``coarse_tip`` is the same without the tip's two exempt layers;
+  ``coarse_tip`` is the same without the tip's two exempt layers. The swept
+  hulls of the tool are measured against these boxes as arrays
+  (:meth:`layer_boxes`), the walks in the trees;
 * ``fine``: every bead laid so far, one box each, built the first time a
-  query needs it and kept up to date from then on.
+  query needs it (a body within a few mm of a layer box: beside a wall, in a
+  gap) and kept up to date from then on.
 
 A layer's box goes in with the layer's first bead, and holds the beads the
 layer will get later in the stretch too: a superset, which can only make a
-distance smaller (:mod:`fabric.collision.certify` asks again with exactly the
+distance smaller (:mod:`fabric.collision.advance` asks again with exactly the
 beads laid before a row when that matters).
 """
 from __future__ import annotations
