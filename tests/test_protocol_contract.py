@@ -247,6 +247,7 @@ def test_real_replies_and_publications_validate_against_the_description(cell_in_
             time.sleep(0.1)
         assert client.state().reason == "finished"
         raw.ask("station", "mesh", s.MeshRequest(fmt="csv"))
+        raw.ask("station", "beads", s.BeadsQuery(first=0, limit=100))
         raw.ask("station", "pause", ok=False)                # not printing: a state error with `allowed`
         raw.ask("station", "recover", ok=False)              # nothing interrupted
         raw.ask("station", "clear_plate")

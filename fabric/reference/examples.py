@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from fabric import schemas as s
 
 __all__ = ["COMMAND_EXAMPLES", "TOPIC_EXAMPLES", "Example"]
@@ -89,6 +91,12 @@ COMMAND_EXAMPLES: dict[tuple[str, str], Example] = {
     ("station", "rtf"): (s.StartRequest(rtf=10.0), STATE),
     ("station", "mesh"): (s.MeshRequest(fmt="stl"), s.Artifact(artifact_id=MESH_ID, name="as-printed.stl",
                                                                media_type="model/stl", data=b"<binary STL>")),
+    ("station", "beads"): (s.BeadsQuery(first=0, limit=2), s.Beads(
+        part_id=f"{PROGRAM_ID[:12]}:412.800", total=2, first=0,
+        start_mm=np.array([[100.0, 100.0, 0.3], [120.0, 100.0, 0.3]]),
+        end_mm=np.array([[120.0, 100.0, 0.3], [120.0, 120.0, 0.3]]),
+        width_mm=np.array([1.2, 1.2]), height_mm=np.array([0.6, 0.6]), layer=np.array([0, 0]),
+        row=np.array([3, 4]), gcode_line=np.array([48, 49]), wobj=np.eye(4))),
     ("slicer", "slice"): (s.SliceRequest(model=b"<binary STL>", filename="sample_part.stl",
                                          profile="taz-pla-medium", backend="builtin"),
                           s.JobAccepted(job_id=SLICE_JOB, kind="slice")),

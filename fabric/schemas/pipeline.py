@@ -260,7 +260,7 @@ class Beads:
     """Beads ``first`` .. ``first + n - 1`` of the part on the plate, in the plate frame of the program that
     laid them (``wobj``); ``part_id`` changes when another part starts (a new print, a plate cleared, a
     station restarted), so a cache of earlier pages knows when to start over."""
-    part_id: str                                                  # which part these beads belong to
+    part_id: str                                                  # names the part these beads make up
     total: int                                                    # beads laid so far
     first: int                                                    # the index of the first bead here
     start_mm: np.ndarray = f(dtype="<f8", shape=(None, 3), factory=lambda: np.zeros((0, 3)))   # nozzle path
