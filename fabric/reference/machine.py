@@ -87,8 +87,9 @@ def _type_schema(tp: Any, spec: Any | None) -> dict[str, Any]:
 
 
 def _message_schema(name: str, cls: type) -> dict[str, Any]:
+    version = cls.VERSION  # type: ignore[attr-defined]
     props: dict[str, Any] = {"_t": {"const": name, "description": "the message type."},
-                             "_v": {"type": "integer", "minimum": 1, "maximum": cls.VERSION,  # type: ignore[attr-defined]
+                             "_v": {"type": "integer", "minimum": 1, "maximum": version,
                                     "description": "the schema version (see the versioning rule)."}}
     required = []
     for fd in field_docs(cls):

@@ -178,7 +178,7 @@ class StationService(Service):
         backoff = Backoff(healthy_s=CLOCK_HEALTHY_S)
         while not self.clock_stop.is_set():
             try:
-                self._run_clock()
+                self._run_clock(backoff)
             except Exception as exc:  # noqa: BLE001 - a bug or a full disk: fault the print, say why, try later
                 pause_s = backoff.failed()
                 why = f"{type(exc).__name__}: {exc}"
@@ -191,12 +191,11 @@ class StationService(Service):
                 while not self.clock_stop.is_set() and time.monotonic() < resume_at:   # commands still run
                     self.writer.run_pending(min(TICK_S, max(resume_at - time.monotonic(), 0.0)))
 
-    def _run_clock(self) -> None:
+    def _run_clock(self, backoff: Backoff) -> None:
         last = time.monotonic()
         next_pose = last
         chunk_s = 1.0
         backlog, self._backlog = self._backlog, []
-        ok_since = time.monotonic()
         while not self.clock_stop.is_set():
             self.writer.run_pending(max(0.0, min(TICK_S, next_pose - time.monotonic())))
             if self.clock_stop.is_set():
@@ -240,9 +239,9 @@ class StationService(Service):
                 self.pub_extrusion.send(ext)
             if temps is not None:
                 self.pub_temps.send(temps)
-            if now - ok_since > CLOCK_HEALTHY_S:              # a clock that failed once has run well since
+            if backoff.failures and backoff.recovered():       # a clock that failed has run well since
                 self.health.clear("clock")
-                ok_since = float("inf")
+                backoff.failures = 0
 
     def _stalled(self, gap_s: float) -> None:
         """The tick came ``gap_s`` late: simulated time does not jump (it is held, and the stall noted).
