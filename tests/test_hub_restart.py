@@ -1,6 +1,7 @@
 """The hub dies mid-print and comes back: services and clients reconnect by themselves, the print goes on."""
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import time
@@ -74,3 +75,23 @@ def test_the_cell_goes_on_after_the_hub_restarts(tmp_path) -> None:
         cell.stop()
         hub.kill()
         hub.wait()
+
+
+def test_status_wait_waits_for_a_secured_hub_still_starting(tmp_path) -> None:
+    """``fabric-cli status --config operator.json5 --wait N`` run while the hub is not up yet (a host just
+    booted, as in the deployment guide): it waits for the hub, is admitted with the operator's password
+    (a hub that does not answer yet is not "refused the password"), then waits for the services (this cell has none)."""
+    creds = Credentials.init(tmp_path / "creds", hub=f"tls/127.0.0.1:{free_port()}")
+    status = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "status", "--json", "--wait", "8",
+                               "--config", str(creds.config("operator")), "--cell", "nosuchcell"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(4.0)                                    # longer than a plain command's connect window
+    hub = start_hub(creds)
+    try:
+        out, err = status.communicate(timeout=60)
+    finally:
+        hub.kill()
+        hub.wait()
+    said = out + err
+    assert "refused" not in said and "cannot reach" not in said, said
+    assert json.loads(out)["error"]["message"].startswith("not alive after 8 s"), said   # admitted; no service

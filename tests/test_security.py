@@ -14,6 +14,7 @@ import zenoh
 from fabric import schemas as s
 from fabric.cli.up import CellProcesses
 from fabric.client import Client
+from fabric.client.sessions import CONNECT_WINDOW_S
 from fabric.security.credentials import Credentials
 from fabric.security.hub import hub_zenoh_config
 from fabric.security.roles import MONITOR_COMMANDS, ROLES, may_call
@@ -173,12 +174,15 @@ def test_wrong_or_missing_credentials_cannot_join(secured_cell, creds, other_fab
     def wrong_password(conf: dict) -> None:
         conf["transport"]["auth"]["usrpwd"]["password"] = "guess"
 
+    # a certificate refusal is proven by the handshake and said at once; a password refusal is a verdict by
+    # elimination (a hub starting or slow under load fails an open the same way): said at the end of the window
     cases = {
-        _variant(creds, tmp_path, "wrong-password", wrong_password): "refused the user name or password",
-        _variant(creds, tmp_path, "no-certificate", drop_cert): "requires a client certificate",
-        other_fabric.config("operator"): "not trusted by this config",
+        _variant(creds, tmp_path, "wrong-password", wrong_password): ("refused the user name or password",
+                                                                     CONNECT_WINDOW_S + 3.0),
+        _variant(creds, tmp_path, "no-certificate", drop_cert): ("requires a client certificate", 3.0),
+        other_fabric.config("operator"): ("not trusted by this config", 3.0),
     }
-    for config, why in cases.items():
+    for config, (why, within_s) in cases.items():
         with pytest.raises(zenoh.ZError):
             zenoh.open(zenoh.Config.from_file(str(config)))
         st = SessionSettings(mode="client", connect=creds.hub_endpoints(), config_file=str(config),
@@ -186,7 +190,7 @@ def test_wrong_or_missing_credentials_cannot_join(secured_cell, creds, other_fab
         t0 = time.monotonic()
         with pytest.raises(PermissionDenied, match=why), Client.connect(st):
             pass
-        assert time.monotonic() - t0 < 3.0
+        assert time.monotonic() - t0 < within_s
     no_credentials = SessionSettings(mode="client", connect=creds.hub_endpoints(), cell=secured_cell.settings.cell)
     with pytest.raises(PermissionDenied, match="secured hub and this session has no credentials"):
         with Client.connect(no_credentials):

@@ -11,6 +11,7 @@ from pathlib import Path
 from fabric.cli import auth_cmds, check_cmds, doctor, job_cmds, pipeline_cmds, station_cmds
 from fabric.cli.output import emit, fail
 from fabric.client import Client
+from fabric.client.sessions import CONNECT_WINDOW_S
 from fabric.extras import missing_extra, require
 from fabric.wire.config import add_cell_argument, add_data_argument, add_session_args, settings_from_args
 from fabric.wire.errors import FabricError
@@ -216,6 +217,12 @@ def _command_name(a: argparse.Namespace) -> str:
     return " ".join(["fabric-cli", *words])
 
 
+def _connect_window_s(a: argparse.Namespace) -> float:
+    """How long to wait for the hub: ``status --wait N`` waits for a hub still starting too."""
+    wait = getattr(a, "wait", None) if a.command == "status" else None
+    return max(CONNECT_WINDOW_S, float(wait)) if isinstance(wait, (int, float)) else CONNECT_WINDOW_S
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     a = parser.parse_args(argv)
@@ -223,7 +230,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if hasattr(a, "local"):
             return a.local(a)
-        with Client.connect(settings_from_args(a, default_mode="client")) as client:
+        with Client.connect(settings_from_args(a, default_mode="client"), _connect_window_s(a)) as client:
             return a.run(client, a)
     except FabricError as err:
         return fail(err.message, as_json, err.code, err.details)

@@ -191,7 +191,7 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
                        help="which services are alive and how they are (exit 3: one is dead, 4: one is degraded)")
     p.add_argument("--timeout", type=float, default=2.0, help="how long to wait for the hub's answer")
     p.add_argument("--wait", type=float, default=0.0, metavar="SECONDS",
-                   help="first wait (up to SECONDS) until every service is alive")
+                   help="first wait (up to SECONDS) until the hub answers and every service is alive")
     p.set_defaults(run=cmd_status)
     p = sub.add_parser("cells", parents=[common], help="the cells present on the fabric and their services")
     p.add_argument("--timeout", type=float, default=2.0, help="how long to wait for the hub's answer")

@@ -61,13 +61,14 @@ class Client:
 
     @classmethod
     @contextmanager
-    def connect(cls, settings: SessionSettings) -> Iterator[Client]:
-        """Open a session from ``settings`` and close it on exit."""
+    def connect(cls, settings: SessionSettings, window_s: float = CONNECT_WINDOW_S) -> Iterator[Client]:
+        """Open a session from ``settings`` and close it on exit; ``window_s``: how long to wait for the hub
+        (one that is starting)."""
         from fabric.security.zconfigs import role_of_config
-        session = open_session(settings)
+        session = open_session(settings, window_s)
         try:
             if settings.connect:
-                wait_connected(session, CONNECT_WINDOW_S)
+                wait_connected(session, window_s)
             yield cls(session, settings.cell, role_of_config(settings.config_file))
         finally:
             session.close()

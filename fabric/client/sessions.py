@@ -18,17 +18,21 @@ __all__ = ["open_session", "wait_connected", "check_role", "error_of", "relay_in
 CONNECT_WINDOW_S = 3.0     # how long opening waits for the hub, and connect() for the first link
 
 
-def open_session(settings: SessionSettings) -> zenoh.Session:
-    """Open a session; a client that finds no router retries briefly, then says where it looked."""
-    end = time.monotonic() + CONNECT_WINDOW_S
+def open_session(settings: SessionSettings, window_s: float = CONNECT_WINDOW_S) -> zenoh.Session:
+    """Open a session; a client that finds no router retries briefly, then says where it looked.
+
+    A refusal the TLS handshake proves (a certificate) is said at once; one reached by elimination (the
+    handshake passed, so the password?) only if the hub still refuses at the end of the window (``window_s``):
+    a hub that is starting, or slow under load, fails an open the same way."""
+    end = time.monotonic() + window_s
     first = True
     while True:
         try:
             return zenoh.open(zenoh_config(settings))
         except zenoh.ZError as exc:
             last = time.monotonic() >= end
-            if (first and settings.config_file) or last:     # a secured hub that refused us: say why
-                _refused(settings)
+            if (first and settings.config_file) or last:
+                _refused(settings, certain_only=not last)
             first = False
             if last:
                 raise ServiceUnavailable(f"cannot reach the fabric hub at {', '.join(settings.connect)} "
@@ -37,18 +41,20 @@ def open_session(settings: SessionSettings) -> zenoh.Session:
             time.sleep(0.1)
 
 
-def _refused(settings: SessionSettings) -> None:
-    """Raise PermissionDenied with the reason when a secured hub refused these credentials."""
+def _refused(settings: SessionSettings, certain_only: bool) -> None:
+    """Raise PermissionDenied with the reason when a secured hub refused these credentials (``certain_only``:
+    only when the handshake proves it)."""
     from fabric.security.diagnose import explain
     found = explain(settings.config_file, settings.connect)
-    if found is not None:
-        who, why = found
-        if who == "the relay" and why.endswith("run commands against the hub"):
-            hub = [ep for ep in _config_connect(settings.config_file) if ep not in settings.connect]
-            why += f" ({', '.join(hub)}, where this config connects)" if hub else ""
-        raise PermissionDenied(f"{'the fabric hub' if who == 'the hub' else who} at {', '.join(settings.connect)} "
-                               f"refused this session: {why}", connect=settings.connect, config=settings.config_file,
-                               by=who.removeprefix("the "))
+    if found is None or (certain_only and not found.certain):
+        return
+    who, why = found.who, found.why
+    if who == "the relay" and why.endswith("run commands against the hub"):
+        hub = [ep for ep in _config_connect(settings.config_file) if ep not in settings.connect]
+        why += f" ({', '.join(hub)}, where this config connects)" if hub else ""
+    raise PermissionDenied(f"{'the fabric hub' if who == 'the hub' else who} at {', '.join(settings.connect)} "
+                           f"refused this session: {why}", connect=settings.connect, config=settings.config_file,
+                           by=who.removeprefix("the "))
 
 
 def _config_connect(path: str | None) -> list[str]:

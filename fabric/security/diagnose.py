@@ -13,19 +13,28 @@ import socket
 import ssl
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import zenoh
 
 from fabric.security.zconfigs import read_json5
 from fabric.wire.errors import ConfigError
 
-__all__ = ["explain_refusal", "explain"]
+__all__ = ["explain_refusal", "explain", "Refusal"]
 
 RELAY_ROLE = "monitor"     # the only credentials a relay's own folder admits (fabric.security.relay)
 
 HANDSHAKE_TIMEOUT_S = 2.0
 VERDICT_WAIT_S = 0.5       # a hub that refuses our certificate says so right after the handshake
+
+
+class Refusal(NamedTuple):
+    """Who refused a session and why. ``certain``: the TLS handshake itself showed it (a certificate); False
+    when the verdict is by elimination (the handshake passed, so it must have been the password), which a
+    hub still starting or slow under load can also cause: the caller retries before saying so."""
+    who: str
+    why: str
+    certain: bool = True
 
 
 def _tls_section(config_path: str) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -83,7 +92,7 @@ def _common_name(tls: ssl.SSLSocket) -> str:
     return ""
 
 
-def _probe(endpoint: str, ctx: ssl.SSLContext, has_cert: bool, usrpwd: dict[str, Any]) -> tuple[str, str] | None:
+def _probe(endpoint: str, ctx: ssl.SSLContext, has_cert: bool, usrpwd: dict[str, Any]) -> Refusal | None:
     """(who answered at ``endpoint``: "the hub" or "the relay", why it refused); None: nothing answered."""
     host, _, port = endpoint.removeprefix("tls/").rpartition(":")
     host = host.strip("[]")
@@ -96,10 +105,10 @@ def _probe(endpoint: str, ctx: ssl.SSLContext, has_cert: bool, usrpwd: dict[str,
         try:
             tls = ctx.wrap_socket(raw, server_hostname=host)
         except ssl.SSLCertVerificationError as exc:
-            return who, (f"its certificate is not trusted by this config (another fabric's credentials? "
-                         f"{exc.verify_message})")
+            return Refusal(who, f"its certificate is not trusted by this config (another fabric's credentials? "
+                                f"{exc.verify_message})")
         except (ssl.SSLError, OSError) as exc:
-            return who, f"TLS with it failed ({exc})"
+            return Refusal(who, f"TLS with it failed ({exc})", certain=False)
         with tls:
             if _common_name(tls) == "relay":
                 who = "the relay"
@@ -110,18 +119,19 @@ def _probe(endpoint: str, ctx: ssl.SSLContext, has_cert: bool, usrpwd: dict[str,
                 pass                                  # it accepted our certificate and waits for us
             except (ssl.SSLError, OSError):
                 if not has_cert:
-                    return who, "it requires a client certificate and this config has none"
-                return who, "it refused this config's certificate (not signed by the fabric's CA)"
+                    return Refusal(who, "it requires a client certificate and this config has none")
+                return Refusal(who, "it refused this config's certificate (not signed by the fabric's CA)")
     user = usrpwd.get("user")
     if not user:
-        return who, "it requires a user name and password and this config has none"
+        return Refusal(who, "it requires a user name and password and this config has none")
     if who == "the relay" and user != RELAY_ROLE:
-        return who, (f"a relay admits dashboards with the {RELAY_ROLE}'s config only (its folder holds no other "
-                     f"password), and this config is the {user}'s: run commands against the hub")
+        return Refusal(who, f"a relay admits dashboards with the {RELAY_ROLE}'s config only (its folder holds no "
+                            f"other password), and this config is the {user}'s: run commands against the hub")
     if who == "the relay":
-        return who, (f"it refused the {user}'s password (changed since? after 'fabric-cli auth passwd DIR "
-                     f"{user}' export the relay's folder again)")
-    return who, f"it refused the user name or password of {user!r} (wrong, or changed since)"
+        return Refusal(who, f"it refused the {user}'s password (changed since? after 'fabric-cli auth passwd DIR "
+                            f"{user}' export the relay's folder again)", certain=False)
+    return Refusal(who, f"it refused the user name or password of {user!r} (wrong, or changed since)",
+                   certain=False)
 
 
 def _without_credentials(endpoints: list[str]) -> str | None:
@@ -147,12 +157,12 @@ def explain_refusal(config_path: str | None, endpoints: list[str]) -> str | None
     return None if found is None else f"{found[0]} refused this session: {found[1]}"
 
 
-def explain(config_path: str | None, endpoints: list[str]) -> tuple[str, str] | None:
+def explain(config_path: str | None, endpoints: list[str]) -> Refusal | None:
     """(who refused: "the hub" or "the relay", why) a session opened with ``config_path`` at one of
     ``endpoints``; None as :func:`explain_refusal`."""
     if not config_path:
         why = _without_credentials(endpoints)
-        return None if why is None else ("the hub", why)
+        return None if why is None else Refusal("the hub", why, certain=False)
     if not any(ep.startswith("tls/") for ep in endpoints):
         return None
     tls, usrpwd = _tls_section(config_path)
@@ -160,7 +170,7 @@ def explain(config_path: str | None, endpoints: list[str]) -> tuple[str, str] | 
         try:
             ctx, has_cert = _context(tls, Path(tmp))
         except (OSError, ssl.SSLError, ValueError) as exc:
-            return "this config", f"its certificates cannot be read ({exc})"
+            return Refusal("this config", f"its certificates cannot be read ({exc})")
         for ep in endpoints:
             if ep.startswith("tls/"):
                 found = _probe(ep, ctx, has_cert, usrpwd)

@@ -56,6 +56,7 @@ __all__ = ["SupervisorService", "build", "add_arguments"]
 
 MODEL_MEDIA = {"model": "application/octet-stream", "gcode": "text/x-gcode"}
 STEP_TIMEOUT_S = 4.0          # a change not begun by then is dropped (under the 5 s a caller waits)
+LOAD_WAIT_S = 20.0            # "job next" waits this long for a load under way (its caller waits 60 s)
 T = TypeVar("T")
 
 
@@ -71,6 +72,7 @@ class SupervisorService(Service):
         self.pub_jobs = self.publisher("jobs", lossless=True)
         self.preparer = Preparer(self.client, self.artifacts, self._save_prepared, self.closed)
         self._loading = ""                                # the job being loaded on the station (writer's)
+        self._plate_epoch = 0                             # counts the operator's "plate clear" (writer's)
         self._alive: dict[str, float] = {}                # service -> since (wall time)
         self._alive_lock = threading.Lock()
         self._live: queue.Queue[tuple[str, str]] = queue.Queue()
@@ -243,6 +245,7 @@ class SupervisorService(Service):
                 raise StateError(f"job {busy.job_id} is {busy.state} on the station", state=busy.state,
                                  command="job next")
             self.store.set_plate_clear(True)
+            self._plate_epoch += 1                        # a load that read the plate before this one retries
             waiting = self._waiting()
             return waiting[0] if waiting else None
         head = self._step(step)
@@ -254,7 +257,7 @@ class SupervisorService(Service):
             self.wake.set()
             return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} is {then} once prepared "
                                           f"({head.state})", state=head.state)
-        self._load_next()
+        self._load_now()
         try:
             head = self.store.get(head.job_id)
         except NotFound:                                  # removed meanwhile by another operator
@@ -287,28 +290,38 @@ class SupervisorService(Service):
             except FabricError as err:                   # e.g. the station is away: try again on the next wake
                 self.log.warning("job queue: %s: %s", err.code, err.message)
 
-    def _load_next(self) -> None:
+    def _load_now(self, wait_s: float = LOAD_WAIT_S) -> None:
+        """Load the head of the queue now; a load the loop has under way is waited for (bounded) first, so that
+        the operator's ``job next`` answers with what it did rather than "queued"."""
+        end = time.monotonic() + wait_s
+        while not self._load_next() and time.monotonic() < end and not self.closed.is_set():
+            time.sleep(0.05)
+
+    def _load_next(self) -> bool:
         """Load the head of the queue when it is prepared, the station has no job and the plate is clear;
         otherwise say on each prepared job what it waits for. One load at a time: the writer marks the job
         being loaded, the station is asked outside it, and the record is changed in a second step from the
-        record as it is then (a ``job next`` meanwhile is honoured)."""
-        head = self._step(self._pick_for_loading)
+        record as it is then (a ``job next`` meanwhile is honoured). False: another load was under way."""
+        busy, head, epoch = self._step(self._pick_for_loading)
         if head is None:
-            return
+            return not busy
         try:
             station = self.client.state()
             if not station.plate_clear:                   # the station owns the part on the plate
                 self.log.info("job %s waits: the plate holds a part (%.0f mm3)", head.job_id, station.plate_mm3)
 
                 def plate_taken() -> None:
+                    if self._plate_epoch != epoch:        # the operator cleared it since we asked: look again
+                        self.wake.set()
+                        return
                     self.store.set_plate_clear(False)
                     self._wait_for(self.store.get(head.job_id), "plate")
                 self._step(plate_taken)
-                return
+                return True
             if station.state not in STATION_FREE:
                 self.log.info("job %s waits: the station is %s", head.job_id, station.state)
                 self._step(lambda: self._wait_for(self.store.get(head.job_id), "station"))
-                return
+                return True
             try:
                 self.client.load(head.program_id, job_id=head.job_id)
             except (DiskFull, BadRequest) as err:  # a load that cannot succeed is not tried again: the job fails
@@ -317,34 +330,36 @@ class SupervisorService(Service):
                 self._step(lambda: self._fail(head.job_id, failure))
                 self._release_if_final(head)
                 self.wake.set()
-                return
+                return True
             except StateError as err:             # the station is busy after all (e.g. a stop's lift): wait
                 self.log.info("job %s waits: %s", head.job_id, err.message)
                 self._step(lambda: self._wait_for(self.store.get(head.job_id), "station"))
-                return
+                return True
             except NotFound as err:             # its program is gone (never acknowledged durably): plan again
                 self.log.warning("job %s: %s; preparing it again", head.job_id, err.message)
                 why = err.message
                 self._step(lambda: self._prepare_again(head.job_id, why))
                 self.wake.set()
-                return
+                return True
             start, rtf = self._step(lambda: self._loaded(head.job_id))
             self.log.info("job %s loaded on the station", head.job_id)
             if start:
                 self.client.start(rtf=rtf)
+            return True
         finally:
             self._step(self._done_loading)
 
-    def _pick_for_loading(self) -> s.JobRecord | None:
-        """(Writer) The job to load now, marked as being loaded; None when there is none or one is loading."""
+    def _pick_for_loading(self) -> tuple[bool, s.JobRecord | None, int]:
+        """(Writer) (another load is under way, the job to load now marked as being loaded or None, the plate
+        epoch it was picked in)."""
         if self._loading:
-            return None
+            return True, None, self._plate_epoch
         decision = next_to_load(self._waiting(), self._on_station(), self.store.plate_clear())
         for rec, what in decision.waits:
             self._wait_for(rec, what)
         if decision.load is not None:
             self._loading = decision.load.job_id
-        return decision.load
+        return False, decision.load, self._plate_epoch
 
     def _loaded(self, job_id: str) -> tuple[bool, float]:
         """(Writer) The station took the job: record it, and whether to start it now (as the record says now)."""
