@@ -279,6 +279,13 @@ def test_real_replies_and_publications_validate_against_the_description(cell_in_
         raw.ask("supervisor", "job_next")
         second = raw.ask("supervisor", "submit", s.JobSubmit(model=CUBE_GCODE, filename="second.gcode"))
         raw.ask("supervisor", "job_remove", s.JobQuery(job_id=second["job_id"]))
+        # the file library: both files are in it; one added, shown and removed
+        listed = raw.ask("supervisor", "files", s.FilesQuery(limit=10))
+        assert {f["name"] for f in listed["files"]} >= {"cube.gcode", "second.gcode"}
+        added = raw.ask("supervisor", "file_add", s.FileAdd(data=CUBE_GCODE, name="third.gcode"))
+        raw.ask("supervisor", "file", s.FileQuery(file_id=added["file_id"][:6]))
+        raw.ask("supervisor", "file_remove", s.FileQuery(file_id=added["file_id"]))
+        raw.ask("supervisor", "file", s.FileQuery(file_id=added["file_id"]), ok=False)
         # every event seen so far fits its kind's documented data
         for ev in client.events(0).events:
             data = to_json_value(ev.data)

@@ -64,7 +64,8 @@ def test_monitor_may_only_read() -> None:
     assert {ep for ep in ENDPOINTS if may_call("monitor", *ep)} == MONITOR_COMMANDS
     assert all(may_call("operator", *ep) and may_call("service", *ep) for ep in ENDPOINTS)
     for service, command in MONITOR_COMMANDS:      # nothing a monitor may call changes a cell
-        assert command in ("position", "state", "time", "events", "status", "jobs", "job"), (service, command)
+        assert command in ("position", "state", "time", "events", "status", "jobs", "job", "files", "file"), \
+            (service, command)
 
 
 def test_auth_init_writes_one_private_config_per_role(creds) -> None:

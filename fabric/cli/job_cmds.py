@@ -20,7 +20,7 @@ from fabric.printjobs.history import override_lines, segment_lines
 from fabric.samples import SAMPLES_DIR, Sample, samples
 from fabric.wire.errors import NotFound, ValidationError
 
-__all__ = ["register"]
+__all__ = ["register", "submit_and_follow", "add_follow_args"]
 
 
 
@@ -134,6 +134,11 @@ def cmd_submit(c: Client, a: argparse.Namespace) -> int:
     req = s.JobSubmit(model=read_whole(a.file), filename=Path(a.file).name, source=a.source or "", profile=a.profile,
                       backend=a.backend, overrides=parse_sets(a.set), start=a.start, rtf=a.rtf,
                       filament_diameter_mm=a.filament_diameter)
+    return submit_and_follow(c, a, req)
+
+
+def submit_and_follow(c: Client, a: argparse.Namespace, req: s.JobSubmit) -> int:
+    """Submit ``req``; with ``--wait`` or ``--follow`` (``a``) show the job until it settles or the print ends."""
     acc = c.submit(req)
     if not (a.wait or a.follow):
         emit(acc, a.json, lambda r: f"job {r.job_id} queued")
@@ -156,6 +161,12 @@ def cmd_submit(c: Client, a: argparse.Namespace) -> int:
     return 1 if result["job"].state == "failed" else 0
 
 
+def add_follow_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--wait", action="store_true", help="wait until the job is prepared or loaded")
+    p.add_argument("--follow", action="store_true", help="with --start: wait for the print to end")
+    p.add_argument("--timeout", type=float, default=None)
+
+
 def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     job = sub.add_parser("job", help="print jobs: a durable queue (slice -> plan -> check -> load -> print)")
     jsub = job.add_subparsers(dest="job_cmd", required=True)
@@ -172,9 +183,7 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
                    help="real-time factor of the print (default 1: real time, as on the wire; 0 = as fast as possible)")
     p.add_argument("--source", choices=s.pipeline.JOB_SOURCES, default=None,
                    help="model or gcode (default: from the file name: .gcode/.gco/.g/.nc, .stl/.obj/.3mf)")
-    p.add_argument("--wait", action="store_true", help="wait until the job is prepared or loaded")
-    p.add_argument("--follow", action="store_true", help="with --start: wait for the print to end")
-    p.add_argument("--timeout", type=float, default=None)
+    add_follow_args(p)
     p.set_defaults(run=cmd_submit)
     p = jsub.add_parser("list", parents=[common], help="the queue and the history, a page at a time")
     p.add_argument("--offset", type=int, default=0, help="skip this many jobs (queue order)")

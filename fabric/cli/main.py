@@ -8,7 +8,7 @@ import sys
 import threading
 from pathlib import Path
 
-from fabric.cli import auth_cmds, check_cmds, doctor, job_cmds, pipeline_cmds, station_cmds
+from fabric.cli import auth_cmds, check_cmds, doctor, file_cmds, job_cmds, pipeline_cmds, station_cmds
 from fabric.cli.output import emit, fail
 from fabric.client import Client
 from fabric.client.sessions import CONNECT_WINDOW_S
@@ -73,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     pipeline_cmds.register(sub, common)
     check_cmds.register(sub, common)
     job_cmds.register(sub, common)
+    file_cmds.register(sub, common)
     importlib.import_module("fabric.cli.record_cmds").register(sub, common)     # record, plot, preview
     auth_cmds.register(sub, common)
     doctor.register(sub, common)                      # check and repair the cell's stores

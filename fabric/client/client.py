@@ -337,6 +337,17 @@ class Client:
         return self.call("supervisor", "job_move", s.JobMove(job_id=job_id, position=position))
     def job_next(self) -> s.Ack: return self.call("supervisor", "job_next")
 
+    # --- the file library ---------------------------------------------------
+    def files(self, offset: int = 0, limit: int = 100, name_contains: str = "") -> s.FileList:
+        """A page of the supervisor's file library, most recently used first."""
+        return self.call("supervisor", "files", s.FilesQuery(offset=offset, limit=limit, name_contains=name_contains))
+    def file(self, file_id: str) -> s.LibraryFile:
+        return self.call("supervisor", "file", s.FileQuery(file_id=file_id))
+    def file_add(self, data: bytes, name: str, source: str = "") -> s.LibraryFile:
+        return self.call("supervisor", "file_add", s.FileAdd(data=data, name=name, source=source))
+    def file_remove(self, file_id: str) -> s.Ack:
+        return self.call("supervisor", "file_remove", s.FileQuery(file_id=file_id))
+
     def wait_print_job(self, job_id: str, done: Callable[[s.JobRecord], bool], timeout: float = 600.0,
                        on_change: Callable[[s.JobRecord], None] | None = None) -> s.JobRecord:
         """Follow a print job until ``done(record)`` or a final state (``fabric.client.job_waits.wait_print_job``)."""

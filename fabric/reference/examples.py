@@ -50,6 +50,11 @@ QUEUED = s.JobRecord(job_id="71d2e08f5c3a", filename="bracket.gcode", source="gc
                      state="queued", prepared=True, waiting_for="plate",
                      stage="prepared: confirm the plate is clear (job next)", progress_r=1.0,
                      created_s=1764031990.0, updated_s=1764032010.5, program_id=PROGRAM_ID)
+LIBRARY_FILE = s.LibraryFile(file_id="8c1f0a9e7b52", name="bracket.gcode", source="gcode",
+                             content_id="4b9e2d7a1c6f3e8b5d0a9c4f7e2b1d6a3c8f5e0b9d4a7c2f1e6b3d8a5c0f9e4b",
+                             size_bytes=1873402, added_s=1764020410.7, used_s=1764031990.0, jobs=3,
+                             last_job_id="71d2e08f5c3a", last_state="queued", profile="taz-pla-medium",
+                             backend="builtin", rtf=1.0, layers=41, extruded_mm3=5210.6, estimate_s=1804.2)
 EVENT = s.Event(seq=2291, t_sim_s=842.1, kind="layer", row=19804, gcode_line=20417, layer=15,
                 data={"z_mm": 4.65, "job_id": JOB, "elapsed_s": 412.5})
 
@@ -148,6 +153,13 @@ COMMAND_EXAMPLES: dict[tuple[str, str], Example] = {
     ("supervisor", "job_next"): (s.Empty(), _ack("plate marked clear; job 71d2e08f5c3a (bracket.gcode) loaded "
                                                  "(submitted without start: start it with fabric-cli start once "
                                                  "loaded)", "loaded")),
+    ("supervisor", "files"): (s.FilesQuery(limit=1), s.FileList(files=[LIBRARY_FILE], total=4, offset=0)),
+    ("supervisor", "file"): (s.FileQuery(file_id=LIBRARY_FILE.file_id[:6]), LIBRARY_FILE),
+    ("supervisor", "file_add"): (s.FileAdd(data=b"<binary STL>", name="sample_part.stl"), s.LibraryFile(
+        file_id="0d4be97c21a5", name="sample_part.stl", source="model", content_id=MODEL_ID, size_bytes=68484,
+        added_s=1764031690.2)),
+    ("supervisor", "file_remove"): (s.FileQuery(file_id="0d4be97c21a5"),
+                                    _ack("removed sample_part.stl (0d4be97c21a5) from the library", "")),
     **{(svc, "health"): (s.Empty(), s.Health(service=svc, state="ok"))
        for svc in ("station", "slicer", "planner", "collision", "supervisor")},
 }

@@ -13,6 +13,7 @@ from fabric.schemas.common import (
                                    PinRequest,
 )
 from fabric.schemas.export import ExportChunk, ExportChunkRequest
+from fabric.schemas.library import MAX_FILES_PAGE, FileAdd, FileList, FileQuery, FilesQuery, LibraryFile
 from fabric.schemas.pipeline import (
                                    FINAL_JOB_STATES,
                                    MAX_JOBS_PAGE,
@@ -74,6 +75,7 @@ __all__ = [
     "ProgramMsg", "ServiceInfo",
     "SliceRequest", "SliceResult", "SlowedMove", "UnreachableTarget",
     "ExportChunk", "ExportChunkRequest", "UploadChunk", "UploadStatus",
+    "MAX_FILES_PAGE", "FileAdd", "FileList", "FileQuery", "FilesQuery", "LibraryFile",
     "CalibrationReport", "Check", "Event", "EventList", "EventsQuery", "Extrusion", "LoadRequest",
     "MeshRequest", "Overrides", "Pose", "ReadyReport", "StartRequest", "StationState", "Temps", "TimeInfo",
 ]

@@ -183,13 +183,14 @@ class ExportRequest:
 # --- collision ---------------------------------------------------------------
 
 COLLISION_BEADS = ("none", "station")             # a single move: no part, or the part the twin has laid
-MOVE_KINDS = ("print", "travel", "approach", "retract", "home", "joint", "recover", "restart")
+MOVE_KINDS = ("print", "travel", "approach", "retract", "home", "joint", "recover", "restart", "descent")
 MAX_BEADS_PAGE = 65536                            # beads per station/beads reply (about 4.5 MB)
 
 
-@schema("collision.CheckRequest", version=2)
+@schema("collision.CheckRequest", version=3)
 class CollisionRequest:
-    """Certify a program (by id) or a single joint move (``q_from_deg`` -> ``q_to_deg``): every robot body,
+    """Certify a program (by id) or a single joint move (``q_from_deg`` -> ``q_to_deg``), with the straight
+    descent that follows it when a print restarts at a layer (``q_down_deg``, version 3): every robot body,
     the tool and the nozzle against the table, the plate, the part as printed and the robot itself, with
     nothing missed between checked configurations (see fabric.collision.certify)."""
     program_id: str = ""                # the planner's program to sweep ("" for a single move)
@@ -206,6 +207,11 @@ class CollisionRequest:
     kind: str = f(default="joint", choices=MOVE_KINDS)   # a single move: what it is, for the report
     q_start_deg: list[float] | None = None  # a program: the joints it starts from (nil: the cell's home)
     tolerance_mm: float = f(default=0.01, ge=0.001, le=1.0)   # bodies this close count as touching
+    q_down_deg: list[float] | None = None   # a single move: after it, straight down from ``q_to_deg`` to these
+                                        # joints (a linear move, joints interpolated as the twin does; kind
+                                        # "descent" in a hit): a restart's way onto the part (nil: none)
+    down_layer: int = f(default=-1, ge=-1)  # the layer that descent goes on printing: the nozzle tip may touch
+                                        # its beads and those of the layer under, as when printing it (-1: none)
 
 
 @schema("collision.Hit", version=2)
@@ -383,17 +389,19 @@ class FabricStatus:
     job_error: str = ""                         # why the latest job could not be read (then ``job`` is nil)
 
 
-@schema("supervisor.JobSubmit", version=4)
+@schema("supervisor.JobSubmit", version=5)
 class JobSubmit:
     """STL/OBJ/3MF bytes -> slice -> plan -> collision check -> load (-> start); or G-code bytes
-    (``source`` "gcode") -> plan -> check -> load (-> start).
+    (``source`` "gcode") -> plan -> check -> load (-> start). The file enters the supervisor's library
+    (``supervisor/files``); ``model`` empty and ``file_id`` given prints a library file again (version 5).
 
     ``source`` empty (the default) is taken from ``filename``: .gcode, .gco, .g and .nc are G-code; .stl,
     .obj and .3mf a model; any other name is a ``validation`` error naming ``source``. The print runs at
     real time (``rtf`` 1) unless asked otherwise, as ``fabric-cli job submit`` does. Version 3: ``source``
     defaults to "" (inferred) and ``rtf`` to 1 (it was "model" and 0, as fast as possible)."""
-    model: bytes                                # the file's bytes (a model, or G-code)
-    filename: str = f(max_len=255)              # its name (its suffix gives ``source`` when that is empty)
+    model: bytes                                # the file's bytes (a model, or G-code); empty with ``file_id``
+    filename: str = f(max_len=255)              # its name (its suffix gives ``source`` when that is empty;
+                                                # "" with ``file_id``: the library's name)
     source: str = f(default="", choices=("", *JOB_SOURCES))    # model, gcode, or "": from the file name
     profile: str = "taz-pla-medium"             # the slicing profile (a model)
     backend: str = f(default="builtin", choices=BACKENDS)      # the slicer (a model)
@@ -404,6 +412,7 @@ class JobSubmit:
     filament_diameter_mm: float | None = f(default=None, ge=0.5, le=5.0)   # the filament the print uses, for
                                                 # G-code that does not say it (nil: as stated, else assumed);
                                                 # a model is sliced for it (version 4)
+    file_id: str = f(default="", max_len=64)    # a library entry to print (``model`` empty), version 5
 
 
 def source_of(filename: str, source: str = "") -> str:

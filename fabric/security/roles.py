@@ -25,7 +25,8 @@ ROLES = ("operator", "monitor", "service")
 
 MONITOR_COMMANDS: frozenset[tuple[str, str]] = frozenset({
     ("station", "position"), ("station", "state"), ("station", "time"), ("station", "events"),
-    ("supervisor", "status"), ("supervisor", "jobs"), ("supervisor", "job"),
+    ("supervisor", "status"), ("supervisor", "jobs"), ("supervisor", "job"), ("supervisor", "files"),
+    ("supervisor", "file"),
 })
 """The read-only queries a monitor may make (plus liveliness: ``status`` and ``cells`` need no service)."""
 

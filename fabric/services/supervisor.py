@@ -42,10 +42,9 @@ from fabric.printjobs.live import LIVE_PERIOD_S, apply_live
 from fabric.printjobs.prepare import PrepareCancelled, Preparer
 from fabric.printjobs.queue import PREPARER_FIELDS, STATION_FREE, WAITING_STATES, WAITING_TEXT, next_to_load
 from fabric.programs import content_id
-from fabric.schemas.pipeline import source_of
-from fabric.server.disk import require_room
 from fabric.server.service import Service
 from fabric.server.writer import Writer
+from fabric.services.supervisor_files import LibraryCommands
 from fabric.store.jobs import JobStore
 from fabric.wire import codec
 from fabric.wire.config import service_data_dir
@@ -54,7 +53,6 @@ from fabric.wire.keys import SERVICES, parse_alive
 
 __all__ = ["SupervisorService", "build", "add_arguments"]
 
-MODEL_MEDIA = {"model": "application/octet-stream", "gcode": "text/x-gcode"}
 STEP_TIMEOUT_S = 4.0          # a change not begun by then is dropped (under the 5 s a caller waits)
 LOAD_WAIT_S = 20.0            # "job next" waits this long for a load under way (its caller waits 60 s)
 T = TypeVar("T")
@@ -84,6 +82,11 @@ class SupervisorService(Service):
         self.handle("job_remove", self.on_job_remove)
         self.handle("job_move", self.on_job_move)
         self.handle("job_next", self.on_job_next)
+        self.library = LibraryCommands(self.data_dir, self.artifacts, self.name, self._step, self.log)
+        self.handle("files", self.library.on_files)
+        self.handle("file", lambda q: self.library.library.get(q.file_id))
+        self.handle("file_add", self.library.on_file_add)
+        self.handle("file_remove", self.library.on_file_remove)
         self._requeue_interrupted_preparations()
 
     def start(self) -> None:
@@ -113,6 +116,7 @@ class SupervisorService(Service):
             self._events.close()
             self._state_sub.undeclare()
         self.store.close()
+        self.library.close()
 
     # --- records: changed only by steps of the writer ---------------------------------
 
@@ -124,6 +128,7 @@ class SupervisorService(Service):
         rec.updated_s = time.time()
         self.store.save(rec, last_event_seq=last_event_seq)
         self.pub_jobs.send(rec)
+        self.library.job_changed(rec)
 
     def _save_prepared(self, prepared: s.JobRecord) -> None:
         """The preparer's progress: its own fields are written onto the record as it is now (a ``job next``
@@ -179,30 +184,28 @@ class SupervisorService(Service):
     def on_submit(self, req: s.JobSubmit) -> s.JobAccepted:
         """Queue a print job. ``source`` not given is taken from the file name (``s.pipeline.source_of``), here
         at the boundary, so a client that sends a ``.gcode`` without it is understood (or refused at once)."""
-        if not req.model:
-            raise ValidationError("the submitted file is empty", field="model")
-        source = source_of(req.filename, req.source)
+        sub = self.library.submission(req)          # its bytes, or a library file's
+        source = sub.source
         if source == "gcode" and req.overrides:   # G-code is not sliced: a profile key would be kept and ignored
             raise ValidationError(f"a G-code job is not sliced: the profile keys {sorted(req.overrides)} would change "
                                   f"nothing; the filament's diameter is filament_diameter_mm (job submit "
                                   f"--filament-diameter)", field="overrides")
-        require_room(self.data_dir, len(req.model), self.name, "the submitted file")
-        art = s.Artifact(artifact_id=content_id(req.model), name=req.filename, media_type=MODEL_MEDIA[source],
-                         data=req.model)
+        sub = self.library.keep(sub)                # on disk (content-addressed) and in the library
         job_id = uuid.uuid4().hex[:12]
-        self.artifacts.put(art)                       # the file on disk (content-addressed) before the record
-        self.artifacts.pin(art.artifact_id, job_id)
+        model_id = content_id(sub.data)
+        self.artifacts.pin(model_id, job_id)
         now = time.time()
-        rec = s.JobRecord(job_id=job_id, filename=req.filename, source=source, profile=req.profile,
-                          backend=req.backend, model_id=art.artifact_id, overrides=dict(req.overrides),
+        rec = s.JobRecord(job_id=job_id, filename=sub.filename, source=source, profile=req.profile,
+                          backend=req.backend, model_id=model_id, overrides=dict(req.overrides),
                           start=req.start, rtf=req.rtf, state="queued", stage="queued", created_s=now,
                           updated_s=now, filament_diameter_mm=req.filament_diameter_mm)
 
         def step() -> None:
             self.store.add(rec)
             self.pub_jobs.send(rec)
+            self.library.job_made(sub.file_id, rec)
         self._step(step)
-        self.log.info("job %s queued: %s (%s)", job_id, req.filename, source)
+        self.log.info("job %s queued: %s (%s, library file %s)", job_id, sub.filename, source, sub.file_id)
         self.wake.set()
         return s.JobAccepted(job_id=job_id, kind="print")
 

@@ -114,6 +114,11 @@ _TABLE = [
     _ep("supervisor", "job_move", s.JobMove, s.JobList, doc="reorder the waiting queue"),
     _ep("supervisor", "job_next", s.Empty, s.Ack, 60.0,
         "the plate is clear: load the next prepared job, started if it was submitted with start"),
+    _ep("supervisor", "files", s.FilesQuery, s.FileList, doc="a page of the file library, most recently used first"),
+    _ep("supervisor", "file", s.FileQuery, s.LibraryFile, doc="one library file (by its id or a unique start of it)"),
+    _ep("supervisor", "file_add", s.FileAdd, s.LibraryFile, 60.0, "keep a model or G-code file in the library",
+        bulk=True),
+    _ep("supervisor", "file_remove", s.FileQuery, s.Ack, doc="forget a library file"),
 ]
 # every service answers for its own health (served by the runtime, fabric.server.service)
 _TABLE += [_ep(svc, "health", s.Empty, s.Health, 2.0, "ok, or degraded with the reasons") for svc in SERVICES]
