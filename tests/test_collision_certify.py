@@ -7,7 +7,7 @@ import pytest
 
 from fabric.collision.beads import BeadSolids
 from fabric.collision.certify import Certifier
-from fabric.collision.path import move_segments, program_segments
+from fabric.collision.path import MOVE_KINDS, move_segments, program_segments
 from fabric.collision.report import collision_report
 from fabric.collision.sweep import CollisionChecker
 from fabric.motion.testprog import square_program
@@ -185,6 +185,37 @@ def test_the_exemption_zone_is_the_tip_and_its_two_layers_only(cell, cert):
     up = bead_at(-1.6, layer=9)                                         # above the tip: the nozzle's
     hit = still(up, tip_layer=9).first_hit
     assert hit is not None and hit.body == "tool_nozzle"                # never exempt
+
+
+def test_a_restarts_descent_is_certified_with_the_print_exemption_of_its_layer(cell, cert):
+    """The straight way down after a restart's joint move: the tip lands on a bead of the layer under the one
+    it goes on printing (exempt, as when printing), never on an older one; a bead the tip rested on where the
+    move started stays exempt on the way down only if it is of those two layers."""
+    q_down = np.radians([0.0, 40.0, 10.0, 0.0, 40.0, 0.0])
+    T = cell.robot.fk(q_down)
+    tip = T[:3, 3]
+    up = T.copy()
+    up[2, 3] += 3.0
+    q_above = np.asarray(cell.robot.ik(up[None], q_down)[0], dtype=float).reshape(-1, 6)[0]
+    assert np.allclose(cell.robot.fk(q_above)[:3, 3], tip + [0.0, 0.0, 3.0], atol=1e-6)
+    a, b = tip + [-3.0, 0.0, 0.0], tip + [3.0, 0.0, 0.0]
+    landing = BeadSolids.from_path(a[None], b[None], [2.0], [0.5], [7], [0], [-1], np.eye(4))   # its top: the tip
+
+    def kind(res) -> str:
+        return MOVE_KINDS[int(res.segs.kind[res.first_hit.segment])]
+
+    # from above it (a joint move that only turns the nozzle), then down onto it
+    q_from = q_above + np.radians([0.0, 0.0, 0.0, 0.0, 0.0, 2.0])
+    assert cert.sweep_move(q_from, q_above, landing).collision_free           # the joint move alone: 3 mm clear
+    for down_layer in (7, 8):                                                   # its layer, or the one above it
+        assert cert.sweep_move(q_from, q_above, landing, q_down=q_down, down_layer=down_layer).collision_free
+    res = cert.sweep_move(q_from, q_above, landing, q_down=q_down, down_layer=9)   # two layers down: a hit
+    assert res.first_hit.body == "tool_tip" and res.first_hit.other == "part" and kind(res) == "descent"
+    assert res.first_hit.s > 0.9                                                # at the end of the way down
+    # resting on it where the move starts (tip layer 7), up, and down onto it again
+    assert cert.sweep_move(q_down, q_above, landing, tip_layer=7, q_down=q_down, down_layer=8).collision_free
+    res = cert.sweep_move(q_down, q_above, landing, tip_layer=7, q_down=q_down, down_layer=9)
+    assert res.first_hit is not None and kind(res) == "descent"                 # left freely, not landed on
 
 
 def test_joint_moves_follow_the_twins_path_and_turn_each_joint_monotonically(cell):

@@ -97,3 +97,74 @@ def test_live_moves_are_checked_against_the_beads_the_twin_laid(fabric, cell):
     assert free.collision_free
     hit = client.check(s.CollisionRequest(q_from_deg=home, q_to_deg=above, beads="station")).first_hit
     assert hit is not None and hit.body_b == "part" and hit.bead_layer >= 1
+
+
+def deg(q: np.ndarray) -> list[float]:
+    return np.degrees(q).tolist()
+
+
+def print_tower(client) -> None:
+    events = client.subscribe("station", "events")
+    try:
+        client.start(rtf=0)
+        assert wait_event(events, ("finished", "fault")).kind == "finished"
+    finally:
+        events.close()
+
+
+def test_a_restart_whose_descent_goes_through_the_part_is_refused_and_changes_nothing(fabric):
+    """Layer 10 of the 12-layer tower: the joint move ends 5 mm above the layer's first point, 4 mm over the
+    top (free), but the straight way down from there goes through layers 11 and 12."""
+    client, station, _, pid, _ = fabric
+    client.load(pid)
+    print_tower(client)
+    path = station._step(lambda: station._restart_path(9, "start"))
+    joint_only = client.check(s.CollisionRequest(q_from_deg=deg(path.q_from_rad), q_to_deg=deg(path.q_above_rad),
+                                                 beads="station", tip_layer=-2, kind="restart",
+                                                 vel_r=station.twin.config.home_vel_r))
+    assert joint_only.collision_free                  # the move the station checked before: free
+    before, last_seq, where = client.state(), client.events(0).last_seq, client.position().q_deg
+    with pytest.raises(CollisionError) as err:
+        client.start(rtf=0, from_layer=9)
+    hit = err.value.details
+    assert hit["kind"] == "descent" and hit["body_b"] == "part" and hit["bead_layer"] in (10, 11)
+    assert hit["body_a"].startswith("tool_") and 0.0 < hit["move_r"] < 1.0
+    assert err.value.message.startswith("the move to layer 10 would collide: the descent move: tool_")
+    # refused: nothing changed, and the station goes on serving
+    after = client.state()
+    assert (after.state, after.program_id, after.job_id) == (before.state, before.program_id, before.job_id)
+    assert client.events(0).last_seq == last_seq and client.position().q_deg == where
+    # the top layer: the tip lands on layer 11's beads and lays layer 12 again, as the print does: certified
+    events = client.subscribe("station", "events")
+    try:
+        assert "from layer 12" in client.start(rtf=0, from_layer=11).message
+        assert wait_event(events, ("at_layer", "fault")).kind == "at_layer"
+        assert wait_event(events, ("finished", "fault")).kind == "finished"
+    finally:
+        events.close()
+
+
+def test_a_recovery_at_a_layer_under_the_part_is_refused_by_its_descent(fabric):
+    """Interrupted on the top layer, recovered at layer 10: the descent is checked like a restart's."""
+    client, station, _, pid, _ = fabric
+    client.load(pid)
+    print_tower(client)
+    events = client.subscribe("station", "events")
+    try:
+        client.start(rtf=0.5, from_layer=11)                 # the top layer again, slowly
+        assert wait_event(events, ("at_layer", "fault")).kind == "at_layer"
+
+        def crash() -> None:                                 # the controller dies where it is
+            station.twin.interrupt("killed by the test")
+            station._changed()
+        station._step(crash)
+        assert client.state().state == "interrupted"
+        with pytest.raises(CollisionError) as err:
+            client.recover(rtf=0, from_layer=9)
+        assert err.value.details["kind"] == "descent" and err.value.details["bead_layer"] in (10, 11)
+        assert "the move back to layer 10 would collide: the descent move" in err.value.message
+        assert client.state().state == "interrupted"
+        client.recover(rtf=0)                                # back to the interrupted spot, and on
+        assert wait_event(events, ("finished", "fault")).kind == "finished"
+    finally:
+        events.close()

@@ -8,7 +8,10 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from test_collision_certify import travel_through
+from test_tui_collision_hit import cell_of, glyphs
 
+from fabric import schemas as s
 from fabric.cli.up import CellProcesses
 from fabric.client import Client
 from fabric.demo import sample_model
@@ -18,6 +21,7 @@ from fabric.tui.screens.confirm import ConfirmDialog
 from fabric.tui.screens.report import ReportDialog
 from fabric.tui.screens.submit import SubmitDialog
 from fabric.tui.screens.values import ValuesDialog
+from fabric.tui.widgets.toolpath_view import HIT_GLYPH, ToolpathView
 from fabric.wire.keys import SERVICES
 
 from conftest import make_settings
@@ -229,6 +233,40 @@ def test_stl_to_finished_print_with_a_pause_an_override_and_the_history(console_
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
+
+
+def test_the_layer_view_marks_where_the_check_hits(console_cell):
+    """Issue 18: a program whose last travel goes through a printed tower, loaded on the station (the
+    supervisor would refuse it); c in the console: the hit on the reply line, and the layer view on the hit's
+    layer with the hit marked where it is."""
+    cell, _ = console_cell
+    gcode, line = travel_through(12.0)                  # 30 layers of 0.4 mm, then the travel through, at 8 mm
+
+    async def scenario() -> None:
+        with Client.connect(replace(cell.settings, mode="client")) as client:
+            station = client.state()
+            if not station.plate_clear:                 # another test's part
+                client.clear_plate()
+            req = s.PlanRequest(gcode=gcode.encode(), filename="through.gcode", wobj_xyz_mm=station.wobj_xyz_mm,
+                                wobj_rpy_deg=station.wobj_rpy_deg)     # the plate as calibrated (if it was)
+            pid = client.wait_job("planner", client.plan(req).job_id, timeout=120).result_id
+            client.load(pid)
+            app = FabricConsole(client)
+            async with app.run_test(size=(120, 40)) as pilot:
+                view = app.screen.query_one(ToolpathView)
+                await until(pilot, lambda: view.toolpath is not None and app.station_state is not None
+                            and app.station_state.program_id == pid, 60.0, "the program's toolpath")
+                assert view.border_title == "layer 1/30" and HIT_GLYPH not in glyphs(view)
+                ok, text = (await command(pilot, "c", "collisions"))[1:]
+                assert ok and text.startswith(f"COLLISION at G-code line {line} (travel, layer 30): tool_"), text
+                await until(pilot, lambda: isinstance(app.screen, ReportDialog), 10.0, "collision report")
+                await pilot.press("escape")
+                await until(pilot, lambda: view.border_title == f"layer 30/30 · hit line {line}", 10.0,
+                            "the hit's layer")
+                hit = view.hit
+                assert hit.layer == 29 and hit.gcode_line == line and hit.kind == "travel"
+                assert glyphs(view)[HIT_GLYPH] == [cell_of(view, hit.xyz_mm[:2])]
+    asyncio.run(scenario())
 
 
 def test_switching_cells(console_cell):

@@ -10,6 +10,7 @@ from fabric import schemas as s
 from fabric.motion.program import MOVEL, PRINT, Program
 from fabric.samples import SAMPLES_DIR
 from fabric.tui.app import FabricConsole
+from fabric.tui.messages import CollisionChecked
 from fabric.tui.screens.submit import SubmitDialog
 from fabric.tui.toolpath import Toolpath
 
@@ -183,3 +184,26 @@ async def paused_print(pilot) -> None:
 def test_dialog_snapshot(snap_compare, name, size):
     before = {"job-record": job_record, "submit": submit_dialog, "help": help_dialog, "paused": paused_print}[name]
     assert snap_compare(frozen_console(), terminal_size=SIZES[size], run_before=before)
+
+
+async def collision_hit(pilot) -> None:
+    """Issue 18: the program loaded, not printing, a check found a travel through layer 2: the layer view shows
+    that layer, the hit marked where it is, its border title says where."""
+    await fill(pilot, "cell")
+    app = pilot.app
+    app.station_state = s.StationState(state="ready", reason="loaded 33 rows", program_id="p", total_s=1587.0,
+                                       remaining_s=1587.0, planned_mm3=6529.0, layers_total=4, rtf=10.0)
+    hit = s.CollisionHit(body_a="tool_nozzle", body_b="part", t_s=312.4, row=14, gcode_line=345, layer=1,
+                         move_r=0.4, kind="travel", xyz_mm=[100.0, 110.0, 1.6], distance_mm=-0.2, bead=9,
+                         bead_layer=1, bead_gcode_line=331,
+                         message="G-code line 345 (travel, layer 2): tool_nozzle hits the part (a bead of layer 2 "
+                                 "laid by G-code line 331) with the nozzle at (100.0, 110.0, 1.6) mm, t = 312.4 s")
+    report = s.CollisionReport(collision_free=False, checked_configs=1200, min_distance_mm=0.0, first_hit=hit)
+    app.post_message(CollisionChecked("cell1", "p", report))
+    app.show_reply("collisions", True, f"COLLISION at {hit.message}", "error")
+    await pilot.pause()
+
+
+@pytest.mark.parametrize("size", SIZES)
+def test_collision_hit_snapshot(snap_compare, size):
+    assert snap_compare(frozen_console(), terminal_size=SIZES[size], run_before=collision_hit)

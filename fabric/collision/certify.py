@@ -19,7 +19,10 @@ everything. The tip is checked against the plate, the table and every other
 bead: printing the first layer it is one layer height above the plate. For a
 live move the tip is laying nothing: it may only leave the beads of the last
 layer (and the one under) that it rests on where the move starts, within its
-radius and one layer height of the tip.
+radius and one layer height of the tip. The straight descent of a restart
+onto a layer's first point gets the print's exemption for that layer (the
+layer it goes on to lay, and the one under it, on which the tip lands): no
+more than the sweep of the program grants the rows that follow.
 
 How. The path is cut into stretches where the tip's layer changes (and
 where that layer's first bead is laid); as the sweep reaches each, the beads
@@ -112,34 +115,61 @@ class Certifier:
         return self._sweep(segs, solids, t0)
 
     def sweep_move(self, q_from: np.ndarray, q_to: np.ndarray, beads: BeadSolids | None = None,
-                   tip_layer: int = NO_LAYER, vel_r: float = 0.5, kind: str = "joint") -> SweepResult:
-        """Certify one joint move (as the twin times it, at ``vel_r``) against ``beads`` (all laid before).
+                   tip_layer: int = NO_LAYER, vel_r: float = 0.5, kind: str = "joint",
+                   q_down: np.ndarray | None = None, down_layer: int = NO_LAYER) -> SweepResult:
+        """Certify one joint move (as the twin times it, at ``vel_r``) against ``beads`` (all laid before), and
+        with ``q_down`` the straight descent after it, from ``q_to`` to ``q_down`` (a restart's way down).
 
         The tip was laying layer ``tip_layer`` where the move starts (an interrupted print): the beads of
         that layer and the one under it within the exemption zone around the tip there (the tip's radius
-        and one layer height) are what it rests on, and it may leave them. Every other bead counts."""
+        and one layer height) are what it rests on, and it may leave them. On the descent the tip may touch
+        the beads of ``down_layer`` and the layer under it, as when printing ``down_layer``. Every other
+        bead counts."""
         t0 = time.perf_counter()
         solids = beads if beads is not None else BeadSolids.empty()
-        if tip_layer != NO_LAYER and len(solids):
-            solids = self._resting(solids, np.asarray(q_from, dtype=float), tip_layer)
-            tip_layer = START_LAYER
-        segs = move_segments(self.cell.robot, q_from, q_to, vel_r, kind, tip_layer)
+        q_from = np.asarray(q_from, dtype=float)
+        down = NO_LAYER if q_down is None else down_layer
+        if len(solids) and (tip_layer != NO_LAYER or down != NO_LAYER):
+            solids, tip_layer, down = self._relabelled(solids, q_from, tip_layer, down)
+        segs = move_segments(self.cell.robot, q_from, q_to, vel_r, kind, tip_layer, q_down, down)
         return self._sweep(segs, solids, t0)
 
-    def _resting(self, beads: BeadSolids, q: np.ndarray, tip_layer: int) -> BeadSolids:
-        """``beads`` with those the tip rests on at ``q`` relabelled ``START_LAYER``: of layer ``tip_layer``
-        or the one under, within the tip's radius and one layer height of the tip."""
+    def _relabelled(self, beads: BeadSolids, q: np.ndarray, tip_layer: int, down_layer: int,
+                    ) -> tuple[BeadSolids, int, int]:
+        """The exemptions of a live move in the labels the sweep works with (the tip may touch the beads
+        labelled with its segment's tip layer ``L`` or with ``L - 1``): ``beads`` relabelled, and the tip
+        layers of the joint move and of the descent.
+
+        The joint move may leave what the tip rests on at ``q`` (:meth:`_resting`); the descent may touch the
+        beads of ``down_layer`` and of the layer under; a bead may be both. Three labels below every layer
+        say which: ``START_LAYER`` resting only, ``START_LAYER - 1`` both, ``START_LAYER - 2`` the descent's
+        only. The joint move's tip layer is then ``START_LAYER`` (it may touch the first two) and the
+        descent's ``START_LAYER - 1`` (the last two). Reports name beads by their own layers: they are
+        given the beads as laid, not these."""
+        resting = self._resting(beads, q, tip_layer) if tip_layer != NO_LAYER else np.zeros(len(beads), bool)
+        descent = np.zeros(len(beads), bool)
+        if down_layer != NO_LAYER:
+            descent = (beads.layer == down_layer) | (beads.layer == down_layer - 1)
+        joint_tip = START_LAYER if tip_layer != NO_LAYER else NO_LAYER
+        down_tip = START_LAYER - 1 if down_layer != NO_LAYER else NO_LAYER
+        if not (resting.any() or descent.any()):
+            return beads, joint_tip, down_tip
+        layer = beads.layer.copy()
+        layer[resting & ~descent] = START_LAYER
+        layer[resting & descent] = START_LAYER - 1
+        layer[~resting & descent] = START_LAYER - 2
+        out = BeadSolids(beads.centre, beads.axes, beads.half, layer, beads.row, beads.gcode_line)
+        out._objects = beads._objects
+        return out, joint_tip, down_tip
+
+    def _resting(self, beads: BeadSolids, q: np.ndarray, tip_layer: int) -> np.ndarray:
+        """Per bead: does the tip rest on it at ``q``? Of layer ``tip_layer`` or the one under, within the
+        tip's radius and one layer height of the tip."""
         tip = self.cell.robot.fk(q)[:3, 3]
         height = float(np.max(2.0 * beads.half[:, 2])) if len(beads) else 0.0
         reach = self.bodies.tip_radius_mm + height
         gap = np.linalg.norm(np.maximum(np.maximum(beads.lo - tip, tip - beads.hi), 0.0), axis=1)
-        resting = (gap <= reach) & ((beads.layer == tip_layer) | (beads.layer == tip_layer - 1))
-        if not resting.any():
-            return beads
-        layer = np.where(resting, START_LAYER, beads.layer)
-        out = BeadSolids(beads.centre, beads.axes, beads.half, layer, beads.row, beads.gcode_line)
-        out._objects = beads._objects
-        return out
+        return (gap <= reach) & ((beads.layer == tip_layer) | (beads.layer == tip_layer - 1))
 
     # --- the sweep ------------------------------------------------------------------------------
 

@@ -22,6 +22,11 @@ retract, home, joint) and the tip's layer: the layer whose beads (with the
 layer under it) the nozzle tip may touch: the row's own layer, or the layer
 the last extruding row laid when that is later (a lift off the last layer,
 the return home).
+
+A live move of the station is one joint move, and for a print restarted at a
+layer (start or recover from a layer) also the straight descent that follows
+it onto the layer's first point: a linear move, kind ``descent``, whose joints
+the twin interpolates linearly like any other linear move.
 """
 from __future__ import annotations
 
@@ -41,7 +46,7 @@ JOINT_PIECE_RAD = 0.05      # a joint move is cut into pieces of at most this mu
 LIVE_ROW = 1 << 62          # the row of a live move: after every bead the twin has laid
 NO_LAYER = -1               # a tip layer: the tip may touch nothing
 START_LAYER = -100          # a live move's tip layer: the beads the tip rests on where it starts (relabelled so)
-MOVE_KINDS = ("print", "travel", "approach", "retract", "home", "joint", "recover", "restart")
+MOVE_KINDS = ("print", "travel", "approach", "retract", "home", "joint", "recover", "restart", "descent")
 
 
 @dataclass
@@ -163,15 +168,30 @@ def _linear(parts: dict[str, list[np.ndarray]], rows: np.ndarray, prev: np.ndarr
 
 
 def move_segments(robot: Any, q_from: np.ndarray, q_to: np.ndarray, vel_r: float, kind: str = "joint",
-                  tip_layer: int = -1) -> Segments:
-    """One joint move the station is about to make (row ``LIVE_ROW``: after every bead laid so far)."""
+                  tip_layer: int = -1, q_down: np.ndarray | None = None, down_tip_layer: int = NO_LAYER) -> Segments:
+    """One joint move the station is about to make (row ``LIVE_ROW``: after every bead laid so far); with
+    ``q_down``, then a straight descent from ``q_to`` to ``q_down`` (one linear segment of kind ``descent``,
+    its tip's layer ``down_tip_layer``)."""
     q_from, q_to = np.asarray(q_from, dtype=float), np.asarray(q_to, dtype=float)
-    if np.all(q_from == q_to):
-        nq = len(q_from)
-        return Segments(np.zeros((0, nq)), np.zeros((0, nq)), np.zeros(0, np.int64), np.zeros(0), np.zeros(0),
-                        np.zeros(0, bool), np.zeros(0, np.int64), np.zeros(0, np.int64))
-    traj = joint_trajectory(robot, q_from, q_to, vel_r)
-    s, qs = _joint_pieces(traj, q_from, q_to)
-    n = len(s) - 1
-    return Segments(qs[:-1], qs[1:], np.full(n, LIVE_ROW, dtype=np.int64), s[:-1], s[1:], np.ones(n, bool),
-                    np.full(n, MOVE_KINDS.index(kind)), np.full(n, tip_layer, dtype=np.int64), {LIVE_ROW: traj})
+    nq = len(q_from)
+    parts: dict[str, list[np.ndarray]] = {k: [] for k in ("q0", "q1", "s0", "s1", "joint", "kind", "tip")}
+    trajectories: dict[int, Any] = {}
+
+    def add(q0: np.ndarray, q1: np.ndarray, s0: np.ndarray, s1: np.ndarray, joint: bool, move: str,
+            tip: int) -> None:
+        n = len(s0)
+        for name, val in (("q0", q0), ("q1", q1), ("s0", s0), ("s1", s1), ("joint", np.full(n, joint)),
+                          ("kind", np.full(n, MOVE_KINDS.index(move))), ("tip", np.full(n, tip))):
+            parts[name].append(val)
+
+    if not np.all(q_from == q_to):
+        traj = trajectories[LIVE_ROW] = joint_trajectory(robot, q_from, q_to, vel_r)
+        s, qs = _joint_pieces(traj, q_from, q_to)
+        add(qs[:-1], qs[1:], s[:-1], s[1:], True, kind, tip_layer)
+    if q_down is not None and not np.all(np.asarray(q_down, dtype=float) == q_to):
+        add(q_to[None], np.asarray(q_down, dtype=float)[None], np.zeros(1), np.ones(1), False, "descent",
+            down_tip_layer)
+    cat = {k: np.concatenate(v) if v else np.zeros((0, nq) if k in ("q0", "q1") else 0) for k, v in parts.items()}
+    return Segments(cat["q0"].reshape(-1, nq), cat["q1"].reshape(-1, nq), np.full(len(cat["s0"]), LIVE_ROW,
+                    dtype=np.int64), cat["s0"].astype(float), cat["s1"].astype(float), cat["joint"].astype(bool),
+                    cat["kind"].astype(np.int64), cat["tip"].astype(np.int64), trajectories)

@@ -2,7 +2,8 @@
 
 A program is certified against its own beads, each an obstacle from the row
 after it is laid (:class:`fabric.collision.certify.Certifier`). A live move
-(home, recover, a restart at a layer) is certified against the beads the
+(home, recover, a restart at a layer with its straight descent onto the
+part) is certified against the beads the
 twin has actually laid: with ``beads="station"`` the service asks
 ``station/beads`` for them, a page at a time, and keeps them, so a million
 beads cross the fabric once per part and each later check asks only for the
@@ -150,7 +151,8 @@ class CollisionService(Service):
         tip_layer = req.tip_layer
         if tip_layer == -2:                                # where the nozzle rests: the last bead's layer
             tip_layer = int(beads.layer[-1]) if len(beads) else -1
-        res = cert.sweep_move(q0, q1, beads, tip_layer, req.vel_r, req.kind)
+        q_down = self._joints("q_down_deg", req.q_down_deg) if req.q_down_deg is not None else None
+        res = cert.sweep_move(q0, q1, beads, tip_layer, req.vel_r, req.kind, q_down, req.down_layer)
         return collision_report(res, cert, beads, wobj)
 
     def _joints(self, name: str, deg: list[float]) -> np.ndarray:

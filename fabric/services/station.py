@@ -55,6 +55,7 @@ from fabric.services.readiness import ReadyFacts, print_temp_c, ready_report
 from fabric.services.station_messages import StationMessages
 from fabric.services.station_plate import PlateGuard
 from fabric.sim.deposition import Deposition
+from fabric.sim.moves import RestartPath
 from fabric.sim.twin import EVENT_KINDS, Twin
 from fabric.store.journal import DEFAULT_CHECKPOINT_PERIOD_S, StationJournal, StationMeta
 from fabric.store.station import StationStore
@@ -312,15 +313,25 @@ class StationService(Service):
             where = "" if layer is None else f" from layer {layer + 1} (heating, then the move above it)"
             return self._ack(f"printing{where} at {self._rtf_text()}")
 
-        def plan(layer: int) -> tuple[tuple[np.ndarray, np.ndarray], tuple]:
+        def plan(layer: int) -> tuple[RestartPath, tuple]:
             self.plate.refuse_start("start", layer)
-            return self.twin.layer_move(layer), self._stamp()
+            return self._restart_path(layer, "start"), self._stamp()
 
         stamp = None
         if layer is not None:
-            (q_from, q_to), stamp = self._step(lambda: plan(layer))
-            self._check_move(q_from, q_to, f"the move to layer {layer + 1}")
+            path, stamp = self._step(lambda: plan(layer))
+            self._check_move(path.q_from_rad, path.q_above_rad, f"the move to layer {layer + 1}",
+                             descent=(path.q_down_rad, layer))
         return self._step(act)
+
+    def _restart_path(self, layer: int, command: str) -> RestartPath:
+        """The motion a restart at ``layer`` makes before it prints, as the twin will queue it: the joint move
+        above the layer's first point and the straight descent onto it (a step of the writer). Refused when
+        nothing is loaded or the program has no such layer."""
+        if self.twin.program is None:
+            raise StateError("no program loaded", state=self.twin.state, command=command)
+        moves = self.twin.moves
+        return moves.restart_path(moves.layer_start_row(layer))
 
     def _set_rtf(self, rtf: float | None) -> None:
         """Take the request's real-time factor, if it gives one (nil keeps the current one)."""
@@ -330,15 +341,21 @@ class StationService(Service):
     def _rtf_text(self) -> str:
         return "max speed" if self.meta.rtf == 0 else f"{self.meta.rtf:g}x real time"
 
-    def _check_move(self, q_from: np.ndarray, q_to: np.ndarray, what: str) -> None:
+    def _check_move(self, q_from: np.ndarray, q_to: np.ndarray, what: str,
+                    descent: tuple[np.ndarray, int] | None = None) -> None:
         """A joint move the station is about to make, certified by the collision service against the beads
         the twin has actually laid (it asks ``station/beads`` for them, and keeps them between checks): a
         million beads cross once, not with every move. The nozzle tip may touch the last bead's layer and
-        the one under it (where an interrupted print left it). Raises CollisionError on a hit."""
+        the one under it (where an interrupted print left it). ``descent`` (joints, layer): a restart's
+        straight way down after the move, onto the first point of that layer, certified with it; on the
+        way down the tip may touch that layer's beads and the layer under's, as when printing it. Raises
+        CollisionError on a hit."""
         kind = "home" if "home" in what else "recover" if "back to" in what else "restart"
+        q_down, down_layer = descent if descent is not None else (None, -1)
         report = self.client.check(s.CollisionRequest(
             q_from_deg=np.degrees(q_from).tolist(), q_to_deg=np.degrees(q_to).tolist(), beads="station",
-            tip_layer=-2, vel_r=float(self.twin.config.home_vel_r), kind=kind))
+            tip_layer=-2, vel_r=float(self.twin.config.home_vel_r), kind=kind,
+            q_down_deg=np.degrees(q_down).tolist() if q_down is not None else None, down_layer=down_layer))
         hit = report.first_hit
         if hit is not None:
             raise CollisionError(f"{what} would collide: {hit.message or f'{hit.body_a} <-> {hit.body_b}'}",
@@ -363,12 +380,15 @@ class StationService(Service):
         layer = req.from_layer if req.from_layer >= 0 else None
         where = "the interrupted spot" if layer is None else f"layer {layer + 1}"
 
-        def plan() -> tuple[tuple[np.ndarray, np.ndarray], tuple]:
+        def plan() -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, int] | None, tuple]:
             move = self.twin.recovery_move(layer)
             if move is None:
                 raise StateError(f"nothing to recover while {self.twin.state}", state=self.twin.state,
                                  command="recover")
-            return move, self._stamp()
+            if layer is None:                          # back to the interrupted spot: one move
+                return move, None, self._stamp()
+            path = self._restart_path(layer, "recover")    # from a layer: the move above it, then down
+            return (path.q_from_rad, path.q_above_rad), (path.q_down_rad, layer), self._stamp()
 
         def act() -> s.Ack:
             self._still(stamp, f"the move back to {where}", "recover")
@@ -378,8 +398,8 @@ class StationService(Service):
             return self._ack(f"recovering: back to {where} (collision-checked), then going on at "
                              f"{self._rtf_text()}")
 
-        (q_from, q_to), stamp = self._step(plan)
-        self._check_move(q_from, q_to, f"the move back to {where}")
+        (q_from, q_to), descent, stamp = self._step(plan)
+        self._check_move(q_from, q_to, f"the move back to {where}", descent)
         return self._step(act)
 
     def on_stop(self, _: s.Empty) -> s.Ack:

@@ -13,6 +13,7 @@ set point changed is redone from now).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -29,7 +30,20 @@ from fabric.sim.state import ResumePoint, TwinState
 from fabric.sim.types import IK_ACCEPT
 from fabric.wire.errors import UnreachableError, ValidationError
 
-__all__ = ["MotionPlanner"]
+__all__ = ["MotionPlanner", "RestartPath"]
+
+
+@dataclass(frozen=True)
+class RestartPath:
+    """The motion of a restart at a layer before it prints: a joint move from ``q_from_rad`` (where the
+    robot rests) to ``q_above_rad``, ``xyz_above_mm`` (plate frame) above the point where the layer's first
+    row starts, then straight down to ``q_down_rad`` there. ``target`` is that point's pose."""
+
+    q_from_rad: np.ndarray
+    q_above_rad: np.ndarray
+    xyz_above_mm: np.ndarray
+    q_down_rad: np.ndarray
+    target: PoseSpec
 
 
 class MotionPlanner:
@@ -264,15 +278,30 @@ class MotionPlanner:
                                   layers=top + 1)
         return int(rows[0])
 
-    def restart_at(self, row: int, end_kind: str) -> None:
-        """Go on with the program from ``row`` as a print restarted at a layer does: the heaters to the set
-        points the program has there (waiting for them), a joint move to ``lift_mm`` above where ``row``
-        starts, straight down, then the program from ``row``. ``end_kind`` fires once down."""
+    def restart_path(self, row: int) -> RestartPath:
+        """Where a restart at ``row`` goes before printing (what :meth:`restart_at` queues, and what the
+        station has certified first): from where the queue ends, a joint move to ``lift_mm`` (at least 1 mm)
+        above where ``row`` starts, then straight down onto it."""
         st, cfg = self.state, self.config
         p = st.program
         assert p is not None, "no program loaded"
         start, wobj = self.queue_end()
         target = PoseSpec(p.q_rad[row - 1], p.xyz_mm[row - 1], p.quat_wxyz[row - 1])
+        above = np.asarray(target.xyz_mm, dtype=float) + [0.0, 0.0, max(cfg.lift_mm, 1.0)]
+        q_above = self._ik_one(wobj, above, target.quat_wxyz, target.q_rad)
+        return RestartPath(start.q_rad.copy(), q_above, above, np.asarray(target.q_rad, dtype=float).copy(), target)
+
+    def restart_at(self, row: int, end_kind: str) -> None:
+        """Go on with the program from ``row`` as a print restarted at a layer does: the heaters to the set
+        points the program has there (waiting for them), a joint move to ``lift_mm`` above where ``row``
+        starts, straight down, then the program from ``row`` (:meth:`restart_path`). ``end_kind`` fires
+        once down."""
+        st, cfg = self.state, self.config
+        p = st.program
+        assert p is not None, "no program loaded"
+        start, wobj = self.queue_end()
+        path = self.restart_path(row)
+        target = path.target
         rows: list[dict[str, Any]] = []
         here = {"q_rad": start.q_rad, "xyz_mm": start.xyz_mm, "quat_wxyz": start.quat_wxyz}
         for heater in (NOZZLE, BED):
@@ -282,11 +311,9 @@ class MotionPlanner:
                 rows.append({"op": SET_TEMP, "aux": heater, "value": value, **here})
                 if value > 0:
                     rows.append({"op": WAIT_TEMP, "aux": heater, "value": value, **here})
-        above = np.asarray(target.xyz_mm, dtype=float) + [0.0, 0.0, max(cfg.lift_mm, 1.0)]
-        q_above = self._ik_one(wobj, above, target.quat_wxyz, target.q_rad)
-        rows.append({"op": MOVEJ, "q_rad": q_above, "xyz_mm": above, "quat_wxyz": target.quat_wxyz,
-                     "vel_r": cfg.home_vel_r})
-        rows.append({"op": MOVEL, "q_rad": target.q_rad, "xyz_mm": target.xyz_mm, "quat_wxyz": target.quat_wxyz,
+        rows.append({"op": MOVEJ, "q_rad": path.q_above_rad, "xyz_mm": path.xyz_above_mm,
+                     "quat_wxyz": target.quat_wxyz, "vel_r": cfg.home_vel_r})
+        rows.append({"op": MOVEL, "q_rad": path.q_down_rad, "xyz_mm": target.xyz_mm, "quat_wxyz": target.quat_wxyz,
                      "speed_mm_s": cfg.resume_speed_mm_s})
         self.runner.enqueue(self.aux_leg(rows, start, wobj, [end_kind], heaters=True))
         self.runner.enqueue(Leg(ProgramLegSpec(row, target, 0.0, 0.0), True, ["finished"]))
@@ -294,13 +321,8 @@ class MotionPlanner:
 
     def restart_move(self, row: int) -> tuple[np.ndarray, np.ndarray]:
         """Joints where the robot rests and joints above where ``row`` starts (the restart's joint move)."""
-        st = self.state
-        p = st.program
-        assert p is not None, "no program loaded"
-        target = PoseSpec(p.q_rad[row - 1], p.xyz_mm[row - 1], p.quat_wxyz[row - 1])
-        above = np.asarray(target.xyz_mm, dtype=float) + [0.0, 0.0, max(self.config.lift_mm, 1.0)]
-        start, wobj = self.queue_end()
-        return start.q_rad.copy(), self._ik_one(wobj, above, target.quat_wxyz, target.q_rad)
+        path = self.restart_path(row)
+        return path.q_from_rad, path.q_above_rad
 
     # Overrides --------------------------------------------------------------------------
 

@@ -18,10 +18,11 @@ from textual.reactive import reactive
 from fabric import schemas as s
 from fabric.client import Client
 from fabric.extras import missing_extra
-from fabric.tui.commands import COMMANDS, PRESETS, Preset, describe, refusal
+from fabric.tui.commands import COMMANDS, PRESETS, Preset, describe, refusal, refused_hit
 from fabric.tui.link import CellLink
 from fabric.tui.messages import (
     CellsListed,
+    CollisionChecked,
     HealthReport,
     JobsListed,
     LimitsReady,
@@ -97,6 +98,7 @@ class FabricConsole(App):
     alive: reactive[dict] = reactive(dict, always_update=True)
     degraded: reactive[dict] = reactive(dict, always_update=True)   # service -> reasons ([] = ok)
     toolpath: reactive[Any] = reactive(None, always_update=True)
+    collision_hit: reactive[Any] = reactive(None, always_update=True)   # the loaded program's first hit
     limits: reactive[Any] = reactive(None, always_update=True)
     jobs: reactive[list] = reactive(list, always_update=True)
     reply: reactive[Any] = reactive(None, always_update=True)
@@ -114,7 +116,8 @@ class FabricConsole(App):
         self.wall_clock, self.monotonic_clock = wall_clock, monotonic_clock
         self.link: CellLink | None = None
         self.log_lines: deque[str] = deque(maxlen=LOG_LINES)
-        self._toolpath_id = ""
+        self._toolpath_id = ""          # the program the toolpath is of
+        self._hit_program_id = ""       # the program the collision hit is of
 
     # --- life ---------------------------------------------------------------------------
 
@@ -135,8 +138,8 @@ class FabricConsole(App):
         self.client = client
         self.cell = client.keys.cell
         self.sub_title = f"cell {self.cell}"
-        self.station_state = self.pose = self.extrusion = self.temps = self.toolpath = None
-        self.alive, self.degraded, self.jobs, self._toolpath_id = {}, {}, [], ""
+        self.station_state = self.pose = self.extrusion = self.temps = self.toolpath = self.collision_hit = None
+        self.alive, self.degraded, self.jobs, self._toolpath_id, self._hit_program_id = {}, {}, [], "", ""
         self.link = CellLink(client, self.post_message)
         self.link.open()
 
@@ -239,7 +242,20 @@ class FabricConsole(App):
 
     def on_program_ready(self, msg: ProgramReady) -> None:
         if msg.cell == self.cell:
-            self.toolpath = msg.toolpath
+            self.toolpath, self._toolpath_id = msg.toolpath, msg.program_id
+            if self.collision_hit is not None and msg.program_id != self._hit_program_id:
+                self.collision_hit = None          # a hit of the program loaded before
+
+    def on_collision_checked(self, msg: CollisionChecked) -> None:
+        """A collision report: its first hit is marked on the layer view, a collision-free one clears the mark.
+        A report on a program other than the one shown (it changed meanwhile) marks nothing."""
+        if msg.cell != self.cell:
+            return
+        if self._toolpath_id and msg.program_id and msg.program_id != self._toolpath_id:
+            return
+        hit = None if msg.report.collision_free else msg.report.first_hit
+        self._hit_program_id = msg.program_id or self._toolpath_id
+        self.collision_hit = hit
 
     def on_limits_ready(self, msg: LimitsReady) -> None:
         self.limits = (msg.lower_deg, msg.upper_deg)
@@ -312,11 +328,19 @@ class FabricConsole(App):
         if self.client is None:
             self.post_message(Reply(name, False, "not connected to a cell"))
             return
+        cell, st = self.client.keys.cell, self.station_state
+        program_id = st.program_id if st is not None else ""     # what a collision report will be of
         try:
             result = cmd.call(self.client, values)
         except FabricError as err:
             self.post_message(Reply(name, False, f"[{err.code}] {err.message}"))
+            hit = refused_hit(err)             # a live move refused by its check: marked like a report's hit
+            if hit is not None:
+                self.post_message(CollisionChecked(cell, program_id, s.CollisionReport(
+                    collision_free=False, checked_configs=0, min_distance_mm=0.0, first_hit=hit)))
             return
+        if isinstance(result, s.CollisionReport):
+            self.post_message(CollisionChecked(cell, program_id, result))
         line, report = describe(name, result)
         severity: SeverityLevel | Literal[""] = "error" if isinstance(result, s.CollisionReport) \
             and not result.collision_free else ""

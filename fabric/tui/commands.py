@@ -1,15 +1,17 @@
 """The console's commands: one table of what each key does, how it is confirmed and how its answer reads."""
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 from fabric import schemas as s
 from fabric.client import Client
+from fabric.wire.errors import FabricError
 
 __all__ = ["Command", "COMMANDS", "Bound", "OVERRIDE_BOUNDS", "RTF_BOUND", "LAYER_BOUND", "PRESETS", "Preset",
-           "describe", "refusal"]
+           "describe", "refusal", "refused_hit"]
 
 
 @dataclass(frozen=True)
@@ -145,3 +147,12 @@ def describe(name: str, result: Any) -> tuple[str, str]:
         return line, line
     text = getattr(result, "message", "") or "ok"
     return text, text
+
+
+def refused_hit(err: FabricError) -> s.CollisionHit | None:
+    """The first hit a refused live move names (a station's ``collision`` error carries it in its details:
+    home, recover, a restart at a layer and its descent), or None."""
+    if err.code != "collision" or "body_a" not in err.details or "body_b" not in err.details:
+        return None
+    names = {f.name for f in dataclasses.fields(s.CollisionHit)}
+    return s.CollisionHit(**{k: v for k, v in err.details.items() if k in names - {"message"}}, message=err.message)

@@ -6,7 +6,8 @@ from typing import Any, Literal
 from textual.message import Message
 from textual.notifications import SeverityLevel
 
-__all__ = ["Telemetry", "Liveliness", "Reply", "ProgramReady", "LimitsReady", "JobsListed", "CellsListed"]
+__all__ = ["Telemetry", "Liveliness", "Reply", "ProgramReady", "CollisionChecked", "LimitsReady", "JobsListed",
+           "CellsListed"]
 
 
 class Telemetry(Message):
@@ -49,6 +50,15 @@ class ProgramReady(Message):
     def __init__(self, cell: str, program_id: str, toolpath: Any) -> None:
         super().__init__()
         self.cell, self.program_id, self.toolpath = cell, program_id, toolpath
+
+
+class CollisionChecked(Message):
+    """The station's collision report on the program ``program_id`` of cell ``cell`` (the one loaded when the
+    check was asked for; "" when the console did not know it yet)."""
+
+    def __init__(self, cell: str, program_id: str, report: Any) -> None:
+        super().__init__()
+        self.cell, self.program_id, self.report = cell, program_id, report
 
 
 class LimitsReady(Message):

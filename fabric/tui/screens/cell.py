@@ -55,6 +55,7 @@ class CellScreen(Screen):
         self.watch(app, "alive", self._on_alive)
         self.watch(app, "degraded", self._on_degraded)
         self.watch(app, "toolpath", lambda tp: setattr(self.query_one(ToolpathView), "toolpath", tp))
+        self.watch(app, "collision_hit", lambda hit: setattr(self.query_one(ToolpathView), "hit", hit))
         self.watch(app, "limits", lambda lim: setattr(self.query_one(JointsPanel), "limits", lim))
         self.watch(app, "reply", self.query_one(ReplyLine).show)
         self.watch(app, "cell", lambda cell: setattr(self.query_one(TempsPanel), "cell", cell))
@@ -69,7 +70,9 @@ class CellScreen(Screen):
         self.query_one(JobProgress).state = st
         self.query_one(ExtruderPanel).state = st
         if st is not None:
-            self.query_one(ToolpathView).layer_index = st.layer
+            view = self.query_one(ToolpathView)
+            view.printing = st.state == "printing"       # a hit's layer is shown unless a print is followed
+            view.layer_index = st.layer
 
     def _on_pose(self, pose: Any) -> None:
         self.query_one(JointsPanel).pose = pose

@@ -1,4 +1,5 @@
-"""The current layer's toolpath drawn with braille dots, the nozzle's position on it, live."""
+"""The current layer's toolpath drawn with braille dots, the nozzle's position on it, live; and where a collision
+check found its first hit."""
 from __future__ import annotations
 
 from typing import Any
@@ -11,16 +12,26 @@ from textual.widgets import Static
 from fabric.tui.braille import BrailleCanvas
 
 DONE_STYLE, TODO_STYLE, TRAVEL_STYLE, NOZZLE_STYLE = "green1", "grey50", "grey30", "bold red1"
+NOZZLE_GLYPH = "◉"
+HIT_GLYPH, HIT_STYLE = "✖", "bold yellow1 on red3"     # a collision check's first hit: not the nozzle's mark
 
 
 class ToolpathView(Static):
     """Attributes: ``toolpath`` (Toolpath or None), ``layer_index`` (0-based), ``row_index`` (the program row the
-    station is at: segments ending before it are printed), ``nozzle_xyz_mm`` (plate frame)."""
+    station is at: segments ending before it are printed), ``nozzle_xyz_mm`` (plate frame), ``printing`` (the
+    station is printing: the view follows ``layer_index``) and ``hit`` (a collision check's first hit on the
+    loaded program, an ``s.CollisionHit``, or None).
+
+    With a hit and no print running, the view shows the hit's layer; while printing it keeps following the
+    print and marks the hit only when it is on the layer shown. A hit of no layer (-1: a station's own move,
+    home or recover) is marked on the layer shown. The border title says where the hit is."""
 
     toolpath: reactive[Any] = reactive(None, always_update=True)
     layer_index: reactive[int] = reactive(-1)
     row_index: reactive[int] = reactive(-1)
     nozzle_xyz_mm: reactive[Any] = reactive(None, always_update=True)
+    printing: reactive[bool] = reactive(False)
+    hit: reactive[Any] = reactive(None, always_update=True)
 
     def render(self) -> Text:
         tp = self.toolpath
@@ -41,12 +52,27 @@ class ToolpathView(Static):
             canvas.lines(x0[mask], y0[mask], x1[mask], y1[mask], style, rank)
         if self.nozzle_xyz_mm is not None:
             (nx,), (ny,) = to_px(np.asarray([self.nozzle_xyz_mm[:2]], dtype=float))
-            canvas.mark(nx, ny, "◉", NOZZLE_STYLE)
+            canvas.mark(nx, ny, NOZZLE_GLYPH, NOZZLE_STYLE)
+        xy = self._hit_xy_mm(layer)
+        if xy is not None:                           # drawn last: over the nozzle when they share a cell
+            (hx,), (hy,) = to_px(np.asarray([xy], dtype=float))
+            canvas.mark(hx, hy, HIT_GLYPH, HIT_STYLE)
         return canvas.render()
 
     def _shown_layer(self) -> int:
         tp = self.toolpath
-        return min(max(self.layer_index, 0), max(tp.layers_total - 1, 0)) if tp is not None else -1
+        if tp is None:
+            return -1
+        hit = self.hit
+        layer = hit.layer if hit is not None and hit.layer >= 0 and not self.printing else self.layer_index
+        return min(max(layer, 0), max(tp.layers_total - 1, 0))
+
+    def _hit_xy_mm(self, layer: int) -> list[float] | None:
+        """Where to mark the hit on ``layer`` (plate frame), or None: no hit, no position, another layer."""
+        hit = self.hit
+        if hit is None or hit.xyz_mm is None or hit.layer not in (-1, layer):
+            return None
+        return [float(hit.xyz_mm[0]), float(hit.xyz_mm[1])]
 
     def watch_layer_index(self) -> None:
         self._title()
@@ -54,9 +80,30 @@ class ToolpathView(Static):
     def watch_toolpath(self) -> None:
         self._title()
 
+    def watch_printing(self) -> None:
+        self._title()
+
+    def watch_hit(self) -> None:
+        self._title()
+
     def _title(self) -> None:
         tp = self.toolpath
-        self.border_title = f"layer {self._shown_layer() + 1}/{tp.layers_total}" if tp is not None else "layer"
+        if tp is None:
+            self.border_title = "layer"
+            return
+        shown = self._shown_layer()
+        title = f"layer {shown + 1}/{tp.layers_total}"
+        hit = self.hit
+        if hit is not None:
+            if hit.layer == -1:
+                title += f" · hit: {hit.kind or 'station'} move"
+            elif hit.layer != shown:
+                title += f" · hit on layer {hit.layer + 1}"
+            elif hit.gcode_line >= 0:
+                title += f" · hit line {hit.gcode_line}"
+            else:
+                title += " · hit here"
+        self.border_title = title
 
     @staticmethod
     def _scale(bounds_mm: tuple[float, float, float, float], size_px: tuple[int, int]):
