@@ -313,3 +313,45 @@ def test_console_without_a_hub_says_so_in_one_line():
     assert r.returncode == 2
     assert r.stderr.strip().splitlines() == [r.stderr.strip()] and "cannot reach the fabric hub" in r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_the_files_screen_prints_a_library_file_again(console_cell):
+    """Issue 24's file library in the console: 5 lists every submitted file with its last job; R asks, then
+    queues it again with that job's settings; del asks, then forgets it (its jobs stay)."""
+    from fabric.tui.screens.files import FilesScreen
+    cell, _ = console_cell
+    gcode = b"; filament_diameter = 1.75\nG21\nG90\nM83\nG1 Z0.4 F600\nG1 X100 Y100 F3000\nG1 X120 Y100 E1.0 F900\n"
+
+    async def scenario() -> None:
+        with Client.connect(replace(cell.settings, mode="client")) as client:
+            entry = client.file_add(gcode, "library-test.gcode")
+            jobs_before = client.jobs().total
+            app = FabricConsole(client)
+            async with app.run_test(size=(80, 24)) as pilot:
+                await pilot.press("5")
+                await until(pilot, lambda: isinstance(app.screen, FilesScreen), 10.0, "the files screen")
+                table = app.screen.query_one("#files")
+                await until(pilot, lambda: entry.file_id in table.rows, 30.0, "the file listed")
+                table.focus()
+                table.move_cursor(row=table.get_row_index(entry.file_id))
+                await pilot.press("R")
+                await dialog(pilot, ConfirmDialog, "#yes")
+                await pilot.press("y")
+                await until(pilot, lambda: app.reply[0] == "print again", 30.0, "the reprint's reply")
+                assert app.reply[1], app.reply
+                await until(pilot, lambda: client.file(entry.file_id).jobs == 1, 30.0, "the job counted")
+                rec = client.job(client.file(entry.file_id).last_job_id)
+                assert (rec.filename, rec.start) == ("library-test.gcode", True)
+                assert client.jobs().total == jobs_before + 1
+                await until(pilot, lambda: entry.file_id in table.rows, 30.0, "the list read again")
+                table.move_cursor(row=table.get_row_index(entry.file_id))
+                await pilot.press("delete")
+                await dialog(pilot, ConfirmDialog, "#yes")
+                await pilot.press("y")
+                await until(pilot, lambda: entry.file_id not in table.rows, 30.0, "the file forgotten")
+                assert client.files(name_contains="library-test").total == 0
+                assert client.job(rec.job_id).job_id == rec.job_id            # its job stays
+            settled = client.wait_print_job(rec.job_id, lambda r: r.prepared, timeout=120)
+            if settled.state not in s.ON_STATION_JOB_STATES:      # leave the shared cell's queue as it was
+                client.job_remove(rec.job_id)
+    asyncio.run(scenario())

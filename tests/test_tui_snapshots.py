@@ -71,6 +71,16 @@ JOBS = [
         reason="stopped by the operator at layer 4 of 40"),
     job("e5f6a1b2c3d4", "failed", "tower.stl", ended_s=NOW_S - 9500, reason="unreachable: G-code line 1234"),
 ]
+FILES = [
+    s.LibraryFile(file_id="8c1f0a9e7b52", name="sample_part.stl", source="model", size_bytes=68484,
+                  added_s=NOW_S - 86400, used_s=NOW_S - 7200, jobs=3, last_job_id="c3d4e5f6a1b2",
+                  last_state="finished", layers=40, extruded_mm3=6108.0, estimate_s=1587.2),
+    s.LibraryFile(file_id="0d4be97c21a5", name="bracket.gcode", source="gcode", size_bytes=1873402,
+                  added_s=NOW_S - 3600, used_s=NOW_S - 600, jobs=1, last_job_id="a1b2c3d4e5f6",
+                  last_state="printing", layers=58, extruded_mm3=6819.4, estimate_s=1520.4),
+    s.LibraryFile(file_id="5e7a90c3d1f4", name="gear.3mf", source="model", size_bytes=412003,
+                  added_s=NOW_S - 900),
+]
 EVENTS = [
     s.Event(seq=1, t_sim_s=2.7, kind="started", data={"rows": 11898, "estimate_s": 1587.2}),
     s.Event(seq=2, t_sim_s=5.8, kind="layer", layer=0, gcode_line=8, data={"z_mm": 0.5}),
@@ -125,11 +135,13 @@ async def fill(pilot, screen: str) -> None:
     await app.switch_mode(screen)
     if screen == "events":
         app.screen.show_events(None, EVENTS)
+    if screen == "files":
+        app.screen.show_files(s.FileList(files=FILES, total=len(FILES)))
     await pilot.pause()
 
 
 @pytest.mark.parametrize("size", SIZES)
-@pytest.mark.parametrize("screen", ["cell", "jobs", "events", "log"])
+@pytest.mark.parametrize("screen", ["cell", "jobs", "events", "log", "files"])
 def test_screen_snapshot(snap_compare, screen, size):
     async def run_before(pilot) -> None:
         await fill(pilot, screen)

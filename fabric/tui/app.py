@@ -35,6 +35,7 @@ from fabric.tui.screens.cell import CellScreen
 from fabric.tui.screens.cells import CellsDialog
 from fabric.tui.screens.confirm import ConfirmDialog
 from fabric.tui.screens.events import EventsScreen, event_data_text
+from fabric.tui.screens.files import FilesScreen
 from fabric.tui.screens.help import HelpDialog
 from fabric.tui.screens.jobs import JobsScreen
 from fabric.tui.screens.log import LogScreen
@@ -68,11 +69,12 @@ class FabricConsole(App):
     CSS_PATH = "console.tcss"
     ENABLE_COMMAND_PALETTE = False
     TITLE = "am-fabric"
-    MODES = {"cell": CellScreen, "jobs": JobsScreen, "events": EventsScreen, "log": LogScreen}
+    MODES = {"cell": CellScreen, "jobs": JobsScreen, "events": EventsScreen, "log": LogScreen, "files": FilesScreen}
     BINDINGS = [
         Binding("ctrl+c", "quit", "quit", show=False, priority=True),
         Binding("1", "switch_mode('cell')", "cell"), Binding("2", "switch_mode('jobs')", "jobs"),
         Binding("3", "switch_mode('events')", "events"), Binding("4", "switch_mode('log')", "log"),
+        Binding("5", "switch_mode('files')", "files", show=False),
         Binding("a", "submit", "submit"),
         Binding("s", "command('start')", "start"), Binding("p", "command('pause')", "pause"),
         Binding("r", "command('resume')", "resume"), Binding("x", "command('stop')", "stop"),

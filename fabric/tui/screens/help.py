@@ -8,7 +8,7 @@ from textual.screen import ModalScreen
 from textual.widgets import Label, Static
 
 KEYS = """\
-screens   1 cell  2 jobs  3 events  4 log   g other cells
+screens   1 cell  2 jobs  3 events  4 log  5 files  g other cells
           ? keys  q or ctrl+c quit
 start     a submit a file (the bundled samples are listed there)
           e preheat (PLA, PETG, ABS, TPU, cool down)
@@ -19,6 +19,7 @@ robot     h home*  k calibrate*
 ask       y ready?  c collisions  w position  t time
 jobs      n next job (plate clear?)*  del remove*  R print again
           [ ] move in the queue  enter the whole record
+files     R print again  del forget*  enter details  u refresh
 events    / search  pick a kind in the list
                                              * asks first"""
 
