@@ -1,4 +1,4 @@
-"""Cell files: the shipped cells, strict parsing, frames, URDF export, and the UR5 numeric path."""
+"""Cell files: the shipped cells, strict parsing, frames, URDF export, built-in names, and the UR5 path."""
 from __future__ import annotations
 
 import json
@@ -8,8 +8,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from fabric.robot.cell import CELLS_DIR, Cell
+from fabric.robot.cell import CELLS_DIR, Cell, builtin_cell_names
 from fabric.robot.kinematics import IK_OK
+from fabric.robot.numeric import NumericIK
 from fabric.robot.path_ik import solve_path
 from fabric.wire.errors import ConfigError, NotFound
 
@@ -38,9 +39,9 @@ def test_irb140_cell_is_the_papers_layout(irb: Cell) -> None:
     np.testing.assert_allclose(irb.robot.tool_T[:3, 3], [0, 0, 150])
 
 
-@pytest.mark.parametrize("name", ["irb140", "ur5"])
-def test_home_is_within_limits_clear_of_the_plate_and_collision_free(name: str, irb: Cell, ur5: Cell) -> None:
-    cell = irb if name == "irb140" else ur5
+@pytest.mark.parametrize("name", ["irb140", "ur5", "ur10", "kr6r700"])
+def test_home_is_within_limits_clear_of_the_plate_and_collision_free(name: str) -> None:
+    cell = Cell.builtin(name)
     r = cell.robot
     assert r.within_limits(cell.home_q_rad)[0]
     tcp = cell.home_tcp_T()
@@ -108,9 +109,9 @@ def test_true_offset_and_limit_overrides() -> None:
     assert not np.allclose(cell.true_wobj_T(), cell.wobj_T())
 
 
-@pytest.mark.parametrize("name", ["irb140", "ur5"])
-def test_exported_urdf_reloads_with_the_same_tcp(name: str, irb: Cell, ur5: Cell, tmp_path: Path) -> None:
-    cell = irb if name == "irb140" else ur5
+@pytest.mark.parametrize("name", ["irb140", "ur5", "ur10", "kr6r700"])
+def test_exported_urdf_reloads_with_the_same_tcp(name: str, tmp_path: Path) -> None:
+    cell = Cell.builtin(name)
     r = cell.robot
     path = tmp_path / f"{name}.urdf"
     r.export_urdf(path)
@@ -129,33 +130,42 @@ def test_exported_urdf_reloads_with_the_same_tcp(name: str, irb: Cell, ur5: Cell
         np.testing.assert_allclose(T, ours[i], atol=1e-9)
 
 
-def test_ur5_numeric_ik_round_trip(ur5: Cell) -> None:
+def test_ur5_closed_form_ik_round_trip_agrees_with_numeric_ik(ur5: Cell) -> None:
     r = ur5.robot
-    assert r.closed_form is None and r.flange_frame == "tool0"
+    assert r.ik_family == "ur" and r.closed_form is not None and r.flange_frame == "tool0"
     rng = np.random.default_rng(12)
     q = ur5.home_q_rad + np.cumsum(rng.normal(0.0, 0.02, (40, 6)), axis=0)   # a wandering joint path
     T = r.fk(q)
-    qs, st = r.ik(T, q[0])
-    assert np.all(st == IK_OK)
-    back = r.fk(qs)
-    np.testing.assert_allclose(back[:, :3, 3], T[:, :3, 3], atol=1e-3)        # mm (solver: 1e-7 m)
-    np.testing.assert_allclose(back[:, :3, :3], T[:, :3, :3], atol=1e-6)
-    np.testing.assert_allclose(qs, q, atol=1e-4)                               # warm start keeps the branch
+    for solver in (r.solver, NumericIK(r.pin_model, r.lower_rad, r.upper_rad, r.tcp_frame_id)):
+        qs, st = solver.solve(T, q[0])
+        assert np.all(st == IK_OK)
+        back = r.fk(qs)
+        np.testing.assert_allclose(back[:, :3, 3], T[:, :3, 3], atol=1e-3)    # mm (numeric solver: 1e-7 m)
+        np.testing.assert_allclose(back[:, :3, :3], T[:, :3, :3], atol=1e-6)
+        np.testing.assert_allclose(qs, q, atol=1e-4)                           # continuity keeps the branch
     far = T[:1].copy()
     far[0, :3, 3] = [3000.0, 0.0, 0.0]
     assert r.ik(far, q[0])[1][0] != IK_OK
 
 
-def test_ur5_plate_is_reachable_with_a_vertical_nozzle(ur5: Cell) -> None:
-    W = ur5.wobj_T()
-    u = np.linspace(0.0, 250.0, 5)
+@pytest.mark.parametrize("name", ["irb140", "ur5", "ur10", "kr6r700"])
+def test_plate_and_200_mm_above_are_reachable_with_a_vertical_nozzle(name: str) -> None:
+    cell = Cell.builtin(name)
+    W = cell.wobj_T()
+    u = np.linspace(0.0, 250.0, 11)
     X, Y = np.meshgrid(u, u)
     X[1::2] = X[1::2, ::-1]
-    pts = np.concatenate([np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, z)]) for z in (0.3, 200.0)])
-    xyz = pts @ W[:3, :3].T + W[:3, 3]
-    res = solve_path(ur5.robot, xyz, [0.0, 0.0, -1.0], ur5.home_q_rad)
-    assert res.feasible_r == 1.0, res.status
-    np.testing.assert_allclose(ur5.robot.fk(res.q_rad)[:, :3, 3], xyz, atol=1e-3)
+    for z in (0.3, 100.0, 200.0):                                   # one serpentine layer per height
+        pts = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, z)])
+        xyz = pts @ W[:3, :3].T + W[:3, 3]
+        res = solve_path(cell.robot, xyz, [0.0, 0.0, -1.0], cell.home_q_rad)
+        assert res.feasible_r == 1.0, (z, res.status)
+        np.testing.assert_allclose(cell.robot.fk(res.q_rad)[:, :3, 3], xyz, atol=1e-6)
+    sx, sy, _ = cell.plate_size_mm                                  # the plate lies on the table
+    corners = cell.plate_T[:3, 3][:2] + np.array([[-sx, -sy], [sx, sy]]) / 2.0
+    lo = cell.table_T[:3, 3][:2] - cell.table_size_mm[:2] / 2.0
+    hi = cell.table_T[:3, 3][:2] + cell.table_size_mm[:2] / 2.0
+    assert np.all(corners >= lo) and np.all(corners <= hi)
 
 
 def test_load_or_builtin_reads_the_cell_config_option(irb: Cell, tmp_path: Path) -> None:
@@ -164,6 +174,29 @@ def test_load_or_builtin_reads_the_cell_config_option(irb: Cell, tmp_path: Path)
     assert Cell.load_or_builtin(CELLS_DIR / "ur5.toml").robot.name == "ur5"
     with pytest.raises(NotFound):
         Cell.load_or_builtin(tmp_path / "missing.toml")
+    for name, family in (("irb140", "opw"), ("ur5", "ur"), ("ur10", "ur"), ("kr6r700", "opw")):
+        cell = Cell.load_or_builtin(name)                                      # a built-in by name
+        assert cell.name == name and cell.robot.ik_family == family and cell.robot.nq == 6
+        assert cell.to_dict()["robot"]["ik_family"] == family
+    assert builtin_cell_names() == ["irb140", "kr6r700", "ur10", "ur5"]
+    with pytest.raises(NotFound) as exc:
+        Cell.load_or_builtin("kuka")
+    assert exc.value.details["known"] == builtin_cell_names()
+    (tmp_path / "ur5").write_text((CELLS_DIR / "irb140.toml").read_text())
+    assert Cell.load_or_builtin(tmp_path / "ur5").robot.name == "irb140"      # an existing file wins
+
+
+def test_cell_list_prints_the_builtin_cells(capsys: pytest.CaptureFixture[str]) -> None:
+    from fabric.cli.main import main
+    assert main(["cell", "list", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [(r["cell"], r["robot"], r["joints"], r["ik_family"]) for r in rows] == [
+        ("irb140", "irb140", 6, "opw"), ("kr6r700", "kr6r700", 6, "opw"), ("ur10", "ur10", 6, "ur"),
+        ("ur5", "ur5", 6, "ur")]
+    assert [r["default"] for r in rows] == [True, False, False, False]
+    assert main(["cell", "list"]) == 0
+    assert capsys.readouterr().out.splitlines()[0].split() == ["irb140", "irb140", "6", "joints", "IK", "opw",
+                                                               "(default)"]
 
 
 @pytest.mark.parametrize("service", ["station", "slicer", "planner", "collision"])

@@ -174,10 +174,22 @@ def test_two_ik_solvers_one_interface(robot: RobotModel) -> None:
 
 
 def test_limits_change_rebuilds_the_numeric_solver() -> None:
-    r = RobotModel.from_example_robot_data("ur5")
+    r = RobotModel.from_example_robot_data("panda")          # 7 axes + fingers: no closed-form family
     from fabric.robot.numeric import NumericIK
-    assert isinstance(r.solver, NumericIK) and r.closed_form is None
+    assert isinstance(r.solver, NumericIK) and r.closed_form is None and r.ik_family == "numeric"
+    assert r.family_choice.refused["opw"] == "needs 6 joints, the URDF has 9"
     upper = r.upper_rad.copy()
     upper[0] = 0.5
     r.with_limits(upper_rad=upper)
     np.testing.assert_allclose(r.solver.upper_rad, upper)
+
+
+def test_limits_change_rebuilds_the_closed_form_solver() -> None:
+    r = RobotModel.from_example_robot_data("ur5")
+    from fabric.robot.closed_form import ClosedFormIK
+    assert isinstance(r.solver, ClosedFormIK) and r.ik_family == "ur"
+    upper = r.upper_rad.copy()
+    upper[0] = 0.5
+    r.with_limits(upper_rad=upper)
+    assert r.solver is r.closed_form and r.closed_form is not None
+    np.testing.assert_allclose(r.closed_form.upper_rad, upper)

@@ -43,11 +43,16 @@ if sys.version_info >= (3, 11):
 else:
     import tomli as tomllib
 
-__all__ = ["Cell", "CELLS_DIR", "PACKAGE_DIR", "DEFAULT_CELL"]
+__all__ = ["Cell", "CELLS_DIR", "PACKAGE_DIR", "DEFAULT_CELL", "builtin_cell_names"]
 
 PACKAGE_DIR = Path(__file__).resolve().parent.parent
 CELLS_DIR = PACKAGE_DIR / "cells"
 DEFAULT_CELL = "irb140"          # the built-in cell a service uses when given no cell file
+
+
+def builtin_cell_names() -> list[str]:
+    """The cells shipped in ``fabric/cells/`` by name (``irb140``, ``kr6r700``, ``ur10``, ``ur5``)."""
+    return sorted(p.stem for p in CELLS_DIR.glob("*.toml"))
 
 # section -> allowed keys (a trailing "." marks a sub-table)
 _SCHEMA: dict[str, set[str]] = {
@@ -174,15 +179,25 @@ class Cell:
 
     @classmethod
     def load_or_builtin(cls, path: str | Path | None) -> Cell:
-        """The cell file ``path`` (a ``--cell-config`` option), or the built-in ``DEFAULT_CELL`` when None or empty."""
-        return cls.load(path) if path else cls.builtin(DEFAULT_CELL)
+        """The cell a ``--cell-config NAME|FILE`` option names.
+
+        A file that exists is read; otherwise a bare name (no folder, no
+        ``.toml``) is a built-in cell (``builtin_cell_names()``); None or empty
+        is the built-in ``DEFAULT_CELL``. Anything else is ``NotFound``.
+        """
+        if not path:
+            return cls.builtin(DEFAULT_CELL)
+        p = Path(path)
+        if p.is_file() or p.suffix or len(p.parts) > 1:
+            return cls.load(p)
+        return cls.builtin(str(path))
 
     @classmethod
     def builtin(cls, name: str = DEFAULT_CELL) -> Cell:
-        """One of the cells shipped in ``fabric/cells/`` (``irb140``, ``ur5``)."""
+        """One of the cells shipped in ``fabric/cells/`` by name (``builtin_cell_names()``)."""
         path = CELLS_DIR / f"{name}.toml"
         if not path.is_file():
-            known = sorted(p.stem for p in CELLS_DIR.glob("*.toml"))
+            known = builtin_cell_names()
             raise NotFound(f"no built-in cell {name!r} (have: {', '.join(known)})", cell=name, known=known)
         return cls.load(path)
 
@@ -265,6 +280,7 @@ class Cell:
             "source_path": self.source_path,
             "robot": {"name": r.name, "source": self.robot_source, "flange_frame": r.flange_frame, "nq": r.nq,
                       "joint_names": list(r.joint_names), "closed_form_ik": r.closed_form is not None,
+                      "ik_family": r.ik_family, "ik_parameters": r.family_choice.parameters(),
                       "lower_deg": deg(r.lower_rad), "upper_deg": deg(r.upper_rad),
                       "vel_deg_s": deg(r.vel_limit_rad_s), "acc_deg_s2": deg(r.acc_limit_rad_s2),
                       "jerk_deg_s3": deg(r.jerk_limit_rad_s3), "base": _xyzrpy(self.base_T)},

@@ -1,15 +1,20 @@
-"""Branch selection and the closed-form IK solver built on :class:`~fabric.robot.kinematics.SphericalWristArm`.
+"""Branch selection and the closed-form IK solver over any closed-form arm family (``arm_family.ClosedFormArm``).
 
-See ``fabric/sim/kinematics.py`` for the geometry, the branch-selection argument
-and the singularity tests; this module holds the solver that applies them to
+See ``fabric/robot/kinematics.py`` for the branch-selection argument and the
+singularity holds, and ``opw.py`` / ``ur.py`` / ``kinematics.py`` for the
+geometry of each family; this module holds the solver that applies them to
 (N, 4, 4) TCP poses within joint limits, with joint continuity along the rows.
-Internally a pose is the nine numbers the IK reads (flange position, z and y
-axes, ``pose_cols``) and joints are per-joint rows (6, N): contiguous arrays.
+Internally a pose is the nine numbers the IK reads (the arm's end-frame
+position, z and y axes, ``pose_cols``) and joints are per-joint rows (6, N):
+contiguous arrays. The end frame is the flange for the IRB 140 reference model;
+other families map it to the URDF flange with ``arm.flange_T``, folded into
+the TCP -> end-frame transform :attr:`ClosedFormIK.tool_inv_T`.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from fabric.robot.arm_family import ClosedFormArm
 from fabric.robot.kinematics import (
     _LIMIT_TOL_RAD,
     _PI,
@@ -18,12 +23,10 @@ from fabric.robot.kinematics import (
     IK_OK,
     IK_OUT_OF_REACH,
     IK_SINGULAR,
-    SphericalWristArm,
     _wrap,
     _wrap_diff,
     multi_turn_mask,
     pose_cols,
-    wrist_q6,
 )
 
 __all__ = ["ClosedFormIK", "select_branches"]
@@ -71,21 +74,22 @@ def select_branches(qb: np.ndarray, allowed: np.ndarray, q_seed: np.ndarray,
 
 
 class ClosedFormIK:
-    """Closed-form IK of a :class:`SphericalWristArm` within joint limits, on flange poses (mm)."""
+    """Closed-form IK of a ``ClosedFormArm`` (OPW, UR, the IRB 140 reference) within joint limits (mm)."""
 
     max_rows = 65536          # bound on rows per vectorised step (memory: max_rows x 8 x 6 floats)
     tracking = True           # False: always the full 8-branch method (reference for tests)
 
-    def __init__(self, arm: SphericalWristArm, lower_rad: np.ndarray, upper_rad: np.ndarray,
+    def __init__(self, arm: ClosedFormArm, lower_rad: np.ndarray, upper_rad: np.ndarray,
                  tool_T: np.ndarray | None = None) -> None:
         self.arm = arm
+        self.family = arm.family
         self.lower_rad = np.asarray(lower_rad, dtype=float)
         self.upper_rad = np.asarray(upper_rad, dtype=float)
         self.multi = multi_turn_mask(self.lower_rad, self.upper_rad)
         self.tool_T = np.eye(4) if tool_T is None else np.asarray(tool_T, dtype=float)
-        R = self.tool_T[:3, :3].T
-        self._tool_inv = np.eye(4)
-        self._tool_inv[:3, :3], self._tool_inv[:3, 3] = R, -R @ self.tool_T[:3, 3]
+        F = np.asarray(arm.flange_T, dtype=float)
+        self._end_inv = None if np.array_equal(F, np.eye(4)) else _inv_T(F)     # flange -> end frame
+        self._tool_inv = _inv_T(F @ self.tool_T)
 
     def fk_flange(self, q_rad: np.ndarray) -> np.ndarray:
         """Flange poses for joints (N, 6) or (6,)."""
@@ -93,7 +97,7 @@ class ClosedFormIK:
 
     @property
     def tool_inv_T(self) -> np.ndarray:
-        """TCP -> flange transform (the inverse of ``tool_T``)."""
+        """TCP -> arm end frame (``inv(flange_T @ tool_T)``; TCP -> flange when the end frame is the flange)."""
         return self._tool_inv
 
     def canon(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -120,18 +124,18 @@ class ClosedFormIK:
     def branches(self, T_flange: np.ndarray, q1_hold: np.ndarray | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The 8 branches in limit representation: ``q (N, 8, 6), ok, reach, singular`` (N, 8)."""
-        return self.branches_cols(pose_cols(T_flange), q1_hold)
+        return self.branches_cols(pose_cols(T_flange, self._end_inv), q1_hold)
 
     def branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`branches` of flange poses given as columns (9, N) (``fabric.robot.kinematics.pose_cols``)."""
+        """:meth:`branches` of end-frame poses given as columns (9, N) (``fabric.robot.kinematics.pose_cols``)."""
         qb, reach, sing = self.arm.ik_branches_cols(C, q1_hold)
         qb, inlim = self.canon(qb)
         return qb, reach & inlim, reach, sing
 
     def ik_flange(self, T_flange: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Joints (N, 6) and status (N,) uint8 for flange poses (N, 4, 4), continuous from ``q_seed``."""
-        return self.ik_cols(pose_cols(T_flange), q_seed)
+        return self.ik_cols(pose_cols(T_flange, self._end_inv), q_seed)
 
     def solve(self, T_tcp_mm: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """As :meth:`ik_flange` for TCP poses (``tool_T`` removed while gathering the columns).
@@ -140,7 +144,7 @@ class ClosedFormIK:
         return self.ik_cols(pose_cols(T_tcp_mm, self._tool_inv), q_seed)
 
     def ik_cols(self, C: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """As :meth:`ik_flange` for flange poses given as columns ``C`` (9, N): position, z, y axes.
+        """As :meth:`ik_flange` for end-frame poses given as columns ``C`` (9, N): position, z, y axes.
 
         Everything runs on contiguous per-joint rows (6, N); the result is
         transposed to (N, 6) once at the end.
@@ -148,20 +152,16 @@ class ClosedFormIK:
         seed = np.asarray(q_seed, dtype=float).reshape(6)
         C = np.asarray(C, dtype=float)
         n = C.shape[1]
-        d6 = self.arm.d6_mm
-        wx, wy = C[0] - d6 * C[3], C[1] - d6 * C[4]        # wrist centre: only what the A1 hold needs
-        degen = wx * wx + wy * wy < 1e-12                  # wrist centre on A1: hold A1
-        hold = _forward_fill(np.arctan2(wy, wx), ~degen, seed[0]) if degen.any() else None
+        q1, degen = self.arm.q1_free(C)                    # A1 undefined (wrist centre on its axis): hold it
+        hold = _forward_fill(q1, ~degen, seed[0]) if degen.any() else None
         q = np.empty((6, n))
         row_ok, reach_any, sing = (np.empty(n, dtype=bool) for _ in range(3))
         self._track(C, hold, seed, q, row_ok, reach_any, sing)
-        wdeg = reach_any & (np.abs(np.sin(q[4])) < 1e-9)   # q5 == 0: hold A4, solve A6
+        wdeg = reach_any & self.arm.wrist_degenerate(q)     # one wrist angle free: hold it, solve the rest
         if wdeg.any():
             sel = np.flatnonzero(wdeg)
-            q4 = _forward_fill(q[3], ~wdeg, seed[3])[sel]
-            R36 = self._r36(C[:, sel], q[:, sel])
-            q[3, sel] = q4
-            q[5, sel] = wrist_q6(R36[:, 0, 1], R36[:, 1, 1], R36[:, 2, 1], q4, q[4, sel])
+            held = np.stack([_forward_fill(q[j], ~wdeg, seed[j])[sel] for j in range(6)])
+            q[:, sel] = self.arm.resolve_wrist(C[:, sel], q[:, sel], held)
         if not reach_any.all():                           # unreachable rows hold the previous joints
             for j in range(6):
                 q[j] = _forward_fill(q[j], reach_any, seed[j])
@@ -231,35 +231,37 @@ class ClosedFormIK:
                 block = min(self.max_rows, block * 2)
 
     def _quiet(self, qb: np.ndarray, allowed: np.ndarray) -> np.ndarray:
-        """Rows where every allowed branch's nearest successor is itself (module docstring)."""
+        """Rows where every allowed branch's nearest successor is itself (module docstring).
+
+        The separation between branches is bounded below by pi (the wrist flip
+        turns A4 of a spherical wrist, A6 of a UR arm, by pi), the A3 distance between
+        the two elbows of a shoulder, and the A1 distance between the two
+        shoulders (pi for the IRB 140, less for an OPW arm with b != 0 or a UR arm).
+        """
         n = len(qb)
         quiet = np.zeros(n, dtype=bool)
         if n < 2:
             return quiet
         same = np.all(allowed[1:] == allowed[:-1], axis=1)
-        # step of each shoulder/elbow pair (the wrist flip moves by exactly the same amount)
-        step2 = _sq_dist(qb[1:, ::2, :], qb[:-1, ::2, :])
+        if self.family != "ur":          # spherical wrists: the wrist flip moves by exactly its partner's step
+            step2 = _sq_dist(qb[1:, ::2, :], qb[:-1, ::2, :])
+            step_allowed = allowed[1:, ::2] | allowed[1:, 1::2]
+        else:
+            step2 = _sq_dist(qb[1:], qb[:-1])
+            step_allowed = allowed[1:]
+        max_step2 = np.max(np.where(step_allowed, step2, 0.0), axis=1)
         pair_allowed = allowed[1:, ::2] | allowed[1:, 1::2]
-        max_step2 = np.max(np.where(pair_allowed, step2, 0.0), axis=1)
         sep = np.full(n - 1, _PI)
         for s in range(2):
             gap = np.abs(_wrap_diff(qb[1:, 4 * s, 2] - qb[1:, 4 * s + 2, 2]))
             both = pair_allowed[:, 2 * s] & pair_allowed[:, 2 * s + 1]
             sep = np.where(both, np.minimum(sep, gap), sep)
+        if self.family != "abb-spherical-wrist":         # the reference model's shoulders are pi apart
+            gap = np.abs(_wrap_diff(qb[1:, 0, 0] - qb[1:, 4, 0]))
+            both = (pair_allowed[:, 0] | pair_allowed[:, 1]) & (pair_allowed[:, 2] | pair_allowed[:, 3])
+            sep = np.where(both, np.minimum(sep, gap), sep)
         quiet[1:] = same & (4.0 * max_step2 < sep * sep)
         return quiet
-
-    def _r36(self, C: np.ndarray, q: np.ndarray) -> np.ndarray:
-        """Wrist rotation ``R03^T R06`` (M, 3, 3) for flange columns C (9, M) and joints q (6, M)."""
-        z, y = C[3:6].T, C[6:9].T
-        R06 = np.stack([z, y, -np.cross(y, z)], axis=-1)
-        c1, s1 = np.cos(q[0]), np.sin(q[0])
-        c, s = np.cos(q[1] + q[2]), np.sin(q[1] + q[2])
-        R03 = np.zeros((q.shape[1], 3, 3))
-        R03[:, 0, 0], R03[:, 0, 1], R03[:, 0, 2] = c1 * c, -s1, c1 * s
-        R03[:, 1, 0], R03[:, 1, 1], R03[:, 1, 2] = s1 * c, c1, s1 * s
-        R03[:, 2, 0], R03[:, 2, 2] = -s, c
-        return np.swapaxes(R03, 1, 2) @ R06
 
     def _place_multi_turn(self, q: np.ndarray, seed: np.ndarray) -> None:
         """Unwrap multi-turn joints (rows of q (6, N)) from the seed on, then shift any wind-up back into limits.
@@ -288,6 +290,14 @@ class ClosedFormIK:
                 turns += np.where(under, np.ceil((lo - col) / _TWO_PI), 0.0)
             if turns is not None:
                 q[j] = raw + _TWO_PI * turns
+
+
+def _inv_T(T: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid transform (4, 4)."""
+    R = T[:3, :3].T
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = R, -R @ T[:3, 3]
+    return out
 
 
 def _forward_fill(values: np.ndarray, valid: np.ndarray, first: float) -> np.ndarray:

@@ -102,7 +102,12 @@ def multi_turn_mask(lower_rad: np.ndarray, upper_rad: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class SphericalWristArm:
-    """Link lengths (mm) of an ABB-style 6R arm with a spherical wrist (see module docstring)."""
+    """Link lengths (mm) of an ABB-style 6R arm with a spherical wrist (see module docstring).
+
+    The reference the OPW family (``fabric/robot/opw.py``) is tested against; it
+    has the ``ClosedFormArm`` interface of ``fabric/robot/arm_family.py`` with
+    its flange as the end frame.
+    """
 
     d1_mm: float
     a1_mm: float
@@ -110,6 +115,37 @@ class SphericalWristArm:
     a3_mm: float
     d4_mm: float
     d6_mm: float
+    family = "abb-spherical-wrist"
+
+    @property
+    def flange_T(self) -> np.ndarray:
+        """End frame -> flange: the identity (this model's end frame is the flange)."""
+        return np.eye(4)
+
+    def q1_free(self, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A1 facing the wrist centre, and the rows where the centre is on the A1 axis."""
+        wx, wy = C[0] - self.d6_mm * C[3], C[1] - self.d6_mm * C[4]
+        return np.arctan2(wy, wx), wx * wx + wy * wy < 1e-12
+
+    def wrist_degenerate(self, q: np.ndarray) -> np.ndarray:
+        """Rows of joints (6, N) with q5 exactly 0 (only q4 + q6 is defined)."""
+        return np.abs(np.sin(q[4])) < 1e-9
+
+    def resolve_wrist(self, C: np.ndarray, q: np.ndarray, held: np.ndarray) -> np.ndarray:
+        """Hold A4 at ``held[3]`` and solve A6 exactly from ``R36 = R03^T R06``."""
+        z, y = C[3:6].T, C[6:9].T
+        R06 = np.stack([z, y, -np.cross(y, z)], axis=-1)
+        c1, s1 = np.cos(q[0]), np.sin(q[0])
+        c, s = np.cos(q[1] + q[2]), np.sin(q[1] + q[2])
+        R03 = np.zeros((q.shape[1], 3, 3))
+        R03[:, 0, 0], R03[:, 0, 1], R03[:, 0, 2] = c1 * c, -s1, c1 * s
+        R03[:, 1, 0], R03[:, 1, 1], R03[:, 1, 2] = s1 * c, c1, s1 * s
+        R03[:, 2, 0], R03[:, 2, 2] = -s, c
+        R36 = np.swapaxes(R03, 1, 2) @ R06
+        out = q.copy()
+        out[3] = held[3]
+        out[5] = wrist_q6(R36[:, 0, 1], R36[:, 1, 1], R36[:, 2, 1], held[3], q[4])
+        return out
 
     def fk_flange(self, q_rad: np.ndarray) -> np.ndarray:
         """Flange poses (N, 4, 4) in mm for joints (N, 6); (4, 4) for (6,)."""

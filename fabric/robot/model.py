@@ -9,12 +9,15 @@ and ``tcp`` (the nozzle tip; its +z points out of the nozzle). The combined
 URDF is what Pinocchio loads, so :meth:`RobotModel.urdf_text` re-exports
 exactly the model in use.
 
-Kinematics: when the arm matches the closed-form IRB 140 geometry (checked
-numerically at load time against Pinocchio) FK and IK are the vectorised
-closed form of ``kinematics.py``; otherwise FK loops over Pinocchio and IK is
-the damped-least-squares solver of ``numeric.py``. The two solvers share one
-interface (``solve(T_tcp_mm, q_seed) -> (q, status)``) and the status codes of
-``kinematics.py``; :attr:`RobotModel.solver` is the one in use.
+Kinematics: the arm's IK family is detected from its URDF at load time
+(``ik_family.py``: OPW arms such as the IRB 140 and the KUKA KR6 R700,
+UR-type arms; each derived model checked against Pinocchio). For a
+closed-form family FK and IK are its vectorised closed form; otherwise FK
+loops over Pinocchio and IK is the damped-least-squares solver of
+``numeric.py``. The solvers share one interface (``solve(T_tcp_mm, q_seed) ->
+(q, status)``) and the status codes of ``kinematics.py``;
+:attr:`RobotModel.solver` is the one in use, :attr:`RobotModel.ik_family`
+names the family.
 
 Acceleration and jerk limits are not published for the IRB 140 (nor in URDFs):
 they default to ``ACC_PER_S`` = 4 x the velocity limit per second (a joint
@@ -32,7 +35,7 @@ import pinocchio as pin
 
 from fabric.robot import frames
 from fabric.robot.closed_form import ClosedFormIK
-from fabric.robot.kinematics import IRB140_ARM
+from fabric.robot.ik_family import FamilyChoice, detect_ik_family
 from fabric.robot.numeric import NumericIK
 from fabric.wire.errors import ConfigError, NotFound, ValidationError
 
@@ -169,7 +172,8 @@ class RobotModel:
         self.acc_limit_rad_s2 = ACC_PER_S * self.vel_limit_rad_s
         self.jerk_limit_rad_s3 = JERK_PER_S2 * self.vel_limit_rad_s
         self._tool_inv = frames.inv_T(self.tool_T)
-        self._is_irb140 = self.nq == 6 and self._matches_irb140()
+        self.family_choice: FamilyChoice = detect_ik_family(self.pin_model, self.flange_frame_id,
+                                                            self.lower_rad, self.upper_rad)
         self.closed_form: ClosedFormIK | None = None
         self.solver: ClosedFormIK | NumericIK
         self._build_solver()
@@ -285,20 +289,20 @@ class RobotModel:
         Path(path).write_text(self._urdf)
 
     # Internals ---------------------------------------------------------
+    @property
+    def ik_family(self) -> str:
+        """The IK family detected from the URDF: ``"opw"``, ``"ur"`` or ``"numeric"``."""
+        return self.family_choice.family
+
     def _build_solver(self) -> None:
-        """The IK solver for the current limits: the closed form for the IRB 140 geometry, else numeric."""
-        if self._is_irb140:
-            self.closed_form = ClosedFormIK(IRB140_ARM, self.lower_rad, self.upper_rad, self.tool_T)
+        """The IK solver for the current limits: the detected family's closed form, else numeric."""
+        arm = self.family_choice.arm
+        if arm is not None:
+            self.closed_form = ClosedFormIK(arm, self.lower_rad, self.upper_rad, self.tool_T)
             self.solver = self.closed_form
         else:
+            self.closed_form = None
             self.solver = NumericIK(self.pin_model, self.lower_rad, self.upper_rad, self.tcp_frame_id)
-
-    def _matches_irb140(self) -> bool:
-        """True if the closed-form IRB 140 reproduces Pinocchio's flange poses (1e-6 mm)."""
-        rng = np.random.default_rng(1)
-        q = rng.uniform(np.maximum(self.lower_rad, -3.0), np.minimum(self.upper_rad, 3.0), (8, 6))
-        ref = self.frame_poses(q, self.flange_frame_id)
-        return bool(np.abs(IRB140_ARM.fk_flange(q) - ref).max() < 1e-6)
 
     def _add_collision_pairs(self) -> None:
         """All pairs of geometries except those on the same or on parent/child joints."""

@@ -1,0 +1,83 @@
+"""What a closed-form arm family provides to the solver, and the error raised when a URDF is not of a family.
+
+A family (``opw.py``: parallel base axes and a spherical wrist; ``ur.py``:
+three parallel axes and an offset wrist; ``kinematics.py``: the ABB-convention
+spherical-wrist arm kept as the reference of the tests) is a class with the
+methods of :class:`ClosedFormArm`. :class:`~fabric.robot.closed_form.ClosedFormIK`
+uses only these, so branch choice, joint limits, continuity, multi-turn joints
+and the singular holds are written once for every family.
+
+Poses enter the family as *columns* ``C`` (9, N): position, z axis and y axis
+of the arm's **end frame** in the robot base frame (``pose_cols``). The end
+frame is the family's own flange convention; ``flange_T`` maps it to the URDF
+flange (``T_flange = T_end @ flange_T``), so the solver gathers end-frame
+columns from TCP poses with one post-multiplication by
+``inv(flange_T @ tool_T)``.
+
+Branches are numbered ``b = 4 * shoulder + 2 * elbow + wrist`` in every family.
+"""
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+import numpy as np
+
+from fabric.wire.errors import ConfigError
+
+__all__ = ["ClosedFormArm", "IKFamilyMismatch", "ANG_TOL", "DIST_TOL_MM", "FK_TOL_MM", "FK_TOL_ROT"]
+
+ANG_TOL = 1e-7            # |cos| for "perpendicular", |sin| for "parallel" axes
+DIST_TOL_MM = 1e-6        # "the axes meet"
+FK_TOL_MM = 1e-6          # the derived model must reproduce Pinocchio's flange to this (position) ...
+FK_TOL_ROT = 1e-9         # ... and this (rotation matrix entries)
+
+
+class IKFamilyMismatch(ConfigError):
+    """A URDF is not of the closed-form family it was given to.
+
+    ``details``: ``family`` ("opw", "ur"), ``condition`` (the first condition
+    that failed, in words) and, where measured, ``value`` (the number that broke it).
+    """
+
+    def __init__(self, family: str, condition: str, value: float | None = None, **details: Any) -> None:
+        shown = "" if value is None else f" ({value:.6g})"
+        article = "an" if family.upper()[0] in "AEFHILMNORSX" else "a"
+        super().__init__(f"not {article} {family.upper()}-type arm: {condition}{shown}", family=family,
+                         condition=condition, value=value, **details)
+
+
+class ClosedFormArm(Protocol):
+    """The closed-form kinematics of one arm: all 8 IK branches of end-frame columns, vectorised."""
+
+    family: str                 # "opw", "ur", ...
+    flange_T: np.ndarray        # end frame -> URDF flange (4, 4) mm
+
+    def fk_flange(self, q_rad: np.ndarray) -> np.ndarray:
+        """URDF flange poses (N, 4, 4) mm for joints (N, 6); (4, 4) for (6,)."""
+        ...
+
+    def q1_free(self, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A1 of branch 0 per row (N,) and the rows where it is undefined (N,) bool (held by the solver)."""
+        ...
+
+    def ik_branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """All 8 branches: ``q`` (N, 8, 6) in [-pi, pi], ``reach`` (N, 8), ``singular`` (N, 8)."""
+        ...
+
+    def ik_branch_cols(self, C: np.ndarray, branch: int, q1_hold: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One branch: ``q`` (6, N), ``reach``, ``singular`` and ``gap_rad`` (N,).
+
+        ``gap_rad`` is a lower bound on the joint-space distance (angles
+        modulo 2*pi) from this branch to every other branch of the row, at most pi.
+        """
+        ...
+
+    def wrist_degenerate(self, q: np.ndarray) -> np.ndarray:
+        """Rows of joints (6, N) exactly at the wrist singularity, where one wrist angle is free."""
+        ...
+
+    def resolve_wrist(self, C: np.ndarray, q: np.ndarray, held: np.ndarray) -> np.ndarray:
+        """Joints (6, M) of wrist-degenerate rows with the free angle taken from ``held`` (6, M), still exact."""
+        ...
