@@ -261,6 +261,12 @@ def test_real_replies_and_publications_validate_against_the_description(cell_in_
         since = client.events(limit=1).last_seq + 1
         raw.ask("station", "home")
         _wait_event(client, since, "home")
+        since = client.events(limit=1).last_seq + 1
+        raw.ask("station", "jog", s.JogRequest(dxyz_mm=[0.0, 0.0, 10.0]))
+        _wait_event(client, since, "jogged")
+        since = client.events(limit=1).last_seq + 1        # this program heats nothing: a material extruded cold
+        raw.ask("station", "extrude", s.ExtrudeRequest(length_mm=5.0, speed_mm_s=20.0))
+        assert _wait_event(client, since, "extruded").data["filament_mm"] == 5.0
         # slicing a small model, sent in one piece (and a piece uploaded)
         import trimesh
         stl = trimesh.creation.box((20.0, 20.0, 4.0)).export(file_type="stl")

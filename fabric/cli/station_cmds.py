@@ -198,6 +198,15 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.set_defaults(run=cmd_cells)
     simple("position", lambda c, a: c.position(), _pose_text, "TCP pose and joints of the twin now")
     simple("home", lambda c, a: c.home(), _ack_text, "collision-checked joint move to home")
+    p = simple("jog", lambda c, a: c.jog(a.x, a.y, a.z, a.speed), _ack_text,
+               "move the nozzle by hand: a straight, collision-checked move in the plate frame (not while printing)")
+    for axis in "xyz":
+        p.add_argument(f"--{axis}", type=float, default=0.0, metavar="MM", help=f"distance along the plate's {axis}")
+    p.add_argument("--speed", type=float, default=20.0, metavar="MM_S", help="the move's speed (default 20 mm/s)")
+    p = simple("extrude", lambda c, a: c.extrude(a.length, a.speed), _ack_text,
+               "push filament by hand (a negative length pulls it back); the nozzle must be hot")
+    p.add_argument("length", type=float, metavar="MM", help="filament length (e.g. 20 to purge, -5 to retract)")
+    p.add_argument("--speed", type=float, default=2.0, metavar="MM_S", help="feed rate (default 2 mm/s)")
     p = simple("start", lambda c, a: c.start(rtf=a.rtf, from_layer=_layer_index(a.layer)), _ack_text,
                "start printing the loaded program (again, or from a layer of the part on the plate)")
     p.add_argument("--layer", type=int, default=None, metavar="N", help="start at layer N (1 = the first)")

@@ -263,6 +263,12 @@ class Client:
 
     def position(self) -> s.Pose: return self.call("station", "position")
     def home(self) -> s.Ack: return self.call("station", "home")
+    def jog(self, dx_mm: float = 0.0, dy_mm: float = 0.0, dz_mm: float = 0.0, speed_mm_s: float = 20.0) -> s.Ack:
+        """A straight move of the nozzle by hand (plate frame), certified against the part first."""
+        return self.call("station", "jog", s.JogRequest(dxyz_mm=[dx_mm, dy_mm, dz_mm], speed_mm_s=speed_mm_s))
+    def extrude(self, length_mm: float, speed_mm_s: float = 2.0) -> s.Ack:
+        """Push (> 0) or pull back (< 0) filament by hand, the robot still (a hot nozzle)."""
+        return self.call("station", "extrude", s.ExtrudeRequest(length_mm=length_mm, speed_mm_s=speed_mm_s))
     def load(self, program_id: str, job_id: str = "") -> s.TimeInfo:
         return self.call("station", "load", s.LoadRequest(program_id=program_id, job_id=job_id))
     def start(self, rtf: float | None = None, from_layer: int = -1) -> s.Ack:

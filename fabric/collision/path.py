@@ -46,7 +46,7 @@ JOINT_PIECE_RAD = 0.05      # a joint move is cut into pieces of at most this mu
 LIVE_ROW = 1 << 62          # the row of a live move: after every bead the twin has laid
 NO_LAYER = -1               # a tip layer: the tip may touch nothing
 START_LAYER = -100          # a live move's tip layer: the beads the tip rests on where it starts (relabelled so)
-MOVE_KINDS = ("print", "travel", "approach", "retract", "home", "joint", "recover", "restart", "descent")
+MOVE_KINDS = ("print", "travel", "approach", "retract", "home", "joint", "recover", "restart", "descent", "jog")
 
 
 @dataclass
@@ -171,7 +171,7 @@ def move_segments(robot: Any, q_from: np.ndarray, q_to: np.ndarray, vel_r: float
                   tip_layer: int = -1, q_down: np.ndarray | None = None, down_tip_layer: int = NO_LAYER) -> Segments:
     """One joint move the station is about to make (row ``LIVE_ROW``: after every bead laid so far); with
     ``q_down``, then a straight descent from ``q_to`` to ``q_down`` (one linear segment of kind ``descent``,
-    its tip's layer ``down_tip_layer``)."""
+    its tip's layer ``down_tip_layer``; of kind ``jog`` when ``kind`` is: a jog is that straight move alone)."""
     q_from, q_to = np.asarray(q_from, dtype=float), np.asarray(q_to, dtype=float)
     nq = len(q_from)
     parts: dict[str, list[np.ndarray]] = {k: [] for k in ("q0", "q1", "s0", "s1", "joint", "kind", "tip")}
@@ -189,8 +189,8 @@ def move_segments(robot: Any, q_from: np.ndarray, q_to: np.ndarray, vel_r: float
         s, qs = _joint_pieces(traj, q_from, q_to)
         add(qs[:-1], qs[1:], s[:-1], s[1:], True, kind, tip_layer)
     if q_down is not None and not np.all(np.asarray(q_down, dtype=float) == q_to):
-        add(q_to[None], np.asarray(q_down, dtype=float)[None], np.zeros(1), np.ones(1), False, "descent",
-            down_tip_layer)
+        add(q_to[None], np.asarray(q_down, dtype=float)[None], np.zeros(1), np.ones(1), False,
+            "jog" if kind == "jog" else "descent", down_tip_layer)
     cat = {k: np.concatenate(v) if v else np.zeros((0, nq) if k in ("q0", "q1") else 0) for k, v in parts.items()}
     return Segments(cat["q0"].reshape(-1, nq), cat["q1"].reshape(-1, nq), np.full(len(cat["s0"]), LIVE_ROW,
                     dtype=np.int64), cat["s0"].astype(float), cat["s1"].astype(float), cat["joint"].astype(bool),

@@ -98,4 +98,10 @@ EVENTS: dict[str, EventKind] = {
         "The operator said the part is off the plate (``station/clear_plate``, or ``supervisor/job_next``).",
         {"job_id": ("string", "the job whose part it was (\"\" when printed by hand)."),
          "plate_mm3": ("number", "the part's volume.")}),
+    "jogged": EventKind(
+        "A jog (``station/jog``: a straight move by hand, collision-checked) has ended.",
+        {"xyz_mm": ("array", "where the nozzle tip is now: plate frame x, y, z.")}),
+    "extruded": EventKind(
+        "Filament was pushed or pulled by hand (``station/extrude``), the robot still; not a bead of the part.",
+        {"filament_mm": ("number", "the filament length moved (negative: pulled back).")}),
 }

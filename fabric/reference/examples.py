@@ -66,6 +66,10 @@ def _ack(message: str, state: str) -> s.Ack:
 COMMAND_EXAMPLES: dict[tuple[str, str], Example] = {
     ("station", "position"): (s.Empty(), POSE),
     ("station", "home"): (s.Empty(), _ack("moving home (collision-checked)", "idle")),
+    ("station", "jog"): (s.JogRequest(dxyz_mm=[0.0, 0.0, 20.0], speed_mm_s=20.0),
+                         _ack("jogging by (0, 0, 20) mm at 20 mm/s (collision-checked)", "idle")),
+    ("station", "extrude"): (s.ExtrudeRequest(length_mm=20.0, speed_mm_s=2.0),
+                             _ack("extruding 20 mm of filament at 2 mm/s", "idle")),
     ("station", "load"): (s.LoadRequest(program_id=PROGRAM_ID, job_id=JOB),
                           s.TimeInfo(elapsed_s=0.0, total_s=1520.4, remaining_s=1520.4, estimate_s=1520.4,
                                      state="ready")),

@@ -50,7 +50,9 @@ from fabric.schemas.station import (
                                    Event,
                                    EventList,
                                    EventsQuery,
+                                   ExtrudeRequest,
                                    Extrusion,
+                                   JogRequest,
                                    LoadRequest,
                                    MeshRequest,
                                    Overrides,
@@ -76,6 +78,7 @@ __all__ = [
     "SliceRequest", "SliceResult", "SlowedMove", "UnreachableTarget",
     "ExportChunk", "ExportChunkRequest", "UploadChunk", "UploadStatus",
     "MAX_FILES_PAGE", "FileAdd", "FileList", "FileQuery", "FilesQuery", "LibraryFile",
-    "CalibrationReport", "Check", "Event", "EventList", "EventsQuery", "Extrusion", "LoadRequest",
+    "CalibrationReport", "Check", "Event", "EventList", "EventsQuery", "ExtrudeRequest", "Extrusion", "JogRequest",
+    "LoadRequest",
     "MeshRequest", "Overrides", "Pose", "ReadyReport", "StartRequest", "StationState", "Temps", "TimeInfo",
 ]

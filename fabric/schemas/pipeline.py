@@ -37,7 +37,7 @@ class SliceRequest:
     upload_id: str = f(default="", max_len=64)      # a model sent in chunks to slicer/upload (``model`` is empty)
 
 
-@schema("slicer.SliceResult")
+@schema("slicer.SliceResult", version=2)
 class SliceResult:
     """What slicing produced: the G-code (an artifact at the slicer) and its numbers."""
     gcode_id: str                   # the G-code's artifact id (``am/<cell>/slicer/artifact/<gcode_id>``)
@@ -49,6 +49,9 @@ class SliceResult:
     faces: int                      # triangles of the model
     elapsed_s: float                # wall-clock time slicing took
     warnings: list[str] = f(factory=list)   # what the slicer warned about (may be empty)
+    retractions: int = f(default=0, ge=0)   # retractions in the G-code (each one a stop of the nozzle)
+    travel_mm: float = f(default=0.0, ge=0.0)    # XY length of the moves that do not extrude
+    bridge_area_mm2: float = f(default=0.0, ge=0.0)  # area printed as bridges, summed over layers
 
 
 @schema("slicer.Backends")
@@ -183,7 +186,8 @@ class ExportRequest:
 # --- collision ---------------------------------------------------------------
 
 COLLISION_BEADS = ("none", "station")             # a single move: no part, or the part the twin has laid
-MOVE_KINDS = ("print", "travel", "approach", "retract", "home", "joint", "recover", "restart", "descent")
+MOVE_KINDS = ("print", "travel", "approach", "retract", "home", "joint", "recover", "restart", "descent",
+              "jog")
 MAX_BEADS_PAGE = 65536                            # beads per station/beads reply (about 4.5 MB)
 
 
@@ -225,7 +229,9 @@ class CollisionHit:
     layer: int = -1                            # the layer of that row (0-based; -1: none)
     move_r: float = f(default=0.0, ge=0.0, le=1.0)     # where along the move (0 = start, 1 = end)
     kind: str = f(default="", choices=("",) + MOVE_KINDS)   # the move: print, travel, approach, retract, home,
-                                               # joint (a program's joint move, or a station move), recover, restart
+                                               # joint (a program's joint move, or a station move), recover,
+                                               # restart, descent (a restart's straight way down onto the part),
+                                               # jog (an operator's straight move by hand)
     xyz_mm: list[float] | None = f(default=None, shape=(3,))   # the nozzle tip there (plate frame)
     distance_mm: float = 0.0                   # the distance found there (<= the tolerance; < 0: overlapping)
     bead: int = -1                             # the bead touched, in print order (-1: not a bead)

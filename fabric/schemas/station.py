@@ -149,6 +149,23 @@ class StartRequest:
                                                               # interrupted spot (recover); ignored by resume and rtf
 
 
+@schema("station.JogRequest")
+class JogRequest:
+    """Jog the nozzle: a straight move by ``dxyz_mm`` in the plate frame, the nozzle's orientation kept,
+    collision-checked against the part on the plate. Only while the station is not printing (idle, ready,
+    stopped, fault) and not moving."""
+    dxyz_mm: list[float] = f(shape=(3,))                      # x, y, z in the plate frame (mm)
+    speed_mm_s: float = f(default=20.0, ge=0.1, le=200.0)     # the move's speed
+
+
+@schema("station.ExtrudeRequest")
+class ExtrudeRequest:
+    """Push (``length_mm`` > 0) or pull back (< 0) filament by hand, the robot still: a purge, a load, an
+    unload. Refused with the nozzle below the material's minimum extrusion temperature, as printing is."""
+    length_mm: float = f(ge=-100.0, le=500.0)                # filament length (not zero)
+    speed_mm_s: float = f(default=2.0, ge=0.05, le=50.0)     # filament feed rate
+
+
 @schema("station.Overrides")
 class Overrides:
     """Live overrides; a nil field is left as it is. Speed and flow take effect from the next program row."""

@@ -51,6 +51,7 @@ from fabric.server.disk import require_room
 from fabric.server.health import Backoff
 from fabric.server.service import Service
 from fabric.server.writer import Stale, Writer
+from fabric.services import station_manual as manual_commands
 from fabric.services.readiness import ReadyFacts, print_temp_c, ready_report
 from fabric.services.station_messages import StationMessages
 from fabric.services.station_plate import PlateGuard
@@ -342,7 +343,7 @@ class StationService(Service):
         return "max speed" if self.meta.rtf == 0 else f"{self.meta.rtf:g}x real time"
 
     def _check_move(self, q_from: np.ndarray, q_to: np.ndarray, what: str,
-                    descent: tuple[np.ndarray, int] | None = None) -> None:
+                    descent: tuple[np.ndarray, int] | None = None, kind: str = "") -> None:
         """A joint move the station is about to make, certified by the collision service against the beads
         the twin has actually laid (it asks ``station/beads`` for them, and keeps them between checks): a
         million beads cross once, not with every move. The nozzle tip may touch the last bead's layer and
@@ -350,7 +351,7 @@ class StationService(Service):
         straight way down after the move, onto the first point of that layer, certified with it; on the
         way down the tip may touch that layer's beads and the layer under's, as when printing it. Raises
         CollisionError on a hit."""
-        kind = "home" if "home" in what else "recover" if "back to" in what else "restart"
+        kind = kind or ("home" if "home" in what else "recover" if "back to" in what else "restart")
         q_down, down_layer = descent if descent is not None else (None, -1)
         report = self.client.check(s.CollisionRequest(
             q_from_deg=np.degrees(q_from).tolist(), q_to_deg=np.degrees(q_to).tolist(), beads="station",
@@ -360,6 +361,12 @@ class StationService(Service):
         if hit is not None:
             raise CollisionError(f"{what} would collide: {hit.message or f'{hit.body_a} <-> {hit.body_b}'}",
                                  **{k: v for k, v in s.to_plain(hit).items() if k != "message"})
+
+    def on_jog(self, req: s.JogRequest) -> s.Ack:
+        return manual_commands.jog(self, req)
+
+    def on_extrude(self, req: s.ExtrudeRequest) -> s.Ack:
+        return manual_commands.extrude(self, req)
 
     def on_pause(self, _: s.Empty) -> s.Ack:
         def act() -> s.Ack:

@@ -101,6 +101,11 @@ class MotionPlanner:
             rows.append({"op": WAIT, "value": 0.0, **here})
         return self.aux_leg(rows, start, wobj, [end_kind])
 
+    def ik_one(self, wobj: np.ndarray, xyz: np.ndarray, quat: np.ndarray, seed: np.ndarray) -> np.ndarray:
+        """Joints putting the TCP at ``xyz`` / ``quat`` (plate frame ``wobj``) nearest ``seed``
+        (UnreachableError, saying why, when none)."""
+        return self._ik_one(wobj, xyz, quat, seed)
+
     def _ik_one(self, wobj: np.ndarray, xyz: np.ndarray, quat: np.ndarray, seed: np.ndarray) -> np.ndarray:
         T = wobj @ make_T(R_from_quat(quat), xyz)
         q, status = self.robot.ik(T[None], np.asarray(seed, dtype=float))

@@ -220,6 +220,14 @@ class LegRunner:
             if st.state not in ("printing", "paused"):
                 st.reason = "at home"
             self.emit(events, t, kind)
+        elif kind == "jogged":
+            st.reason = kind
+            xyz = (inv_T(st.work_T) @ st.rest_T)[:3, 3]
+            self.emit(events, t, kind, {"xyz_mm": [float(v) for v in xyz]})
+        elif kind.startswith("extruded"):
+            length_mm = float(kind.partition(":")[2] or 0.0)
+            st.reason = f"{'extruded' if length_mm > 0 else 'retracted'} {abs(length_mm):g} mm"
+            self.emit(events, t, "extruded", {"filament_mm": length_mm})
         elif kind == "paused":          # why: the operator, or the cold-extrusion interlock (its reason)
             at = job.resume_at
             where = {} if at is None else {"resume_row": at.row, "resume_s_mm": at.s_mm,

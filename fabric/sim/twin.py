@@ -29,6 +29,7 @@ from fabric.motion.thermal import Thermal
 from fabric.motion.validate import validate_program
 from fabric.robot.frames import make_T, rot_x
 from fabric.robot.kinematics import ik_reason
+from fabric.sim import manual
 from fabric.sim.builder import LegBuilder
 from fabric.sim.calibration import CalibrationResult, calibrate_plate
 from fabric.sim.config import TwinConfig
@@ -290,6 +291,38 @@ class Twin:
         self.runner.enqueue(self.moves.home_leg())
         self.readout.forget()
         self.s.reason = "homing"
+
+    def jog_move(self, dxyz_mm: list[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(joints now, joints at the end) of a jog by ``dxyz_mm`` (plate frame), for the collision check
+        before it is made; refused as :meth:`jog` would be."""
+        self._refuse("jog", manual.MANUAL_STATES)
+        self._busy("jog")
+        plan = manual.jog_plan(self.moves, dxyz_mm)
+        return np.asarray(plan.start.q_rad, dtype=float), plan.q_rad
+
+    def jog(self, dxyz_mm: list[float] | np.ndarray, speed_mm_s: float) -> None:
+        """A straight move by ``dxyz_mm`` in the plate frame at ``speed_mm_s``, the nozzle's orientation kept
+        (while not printing; the station has certified it against the part first)."""
+        self._refuse("jog", manual.MANUAL_STATES)
+        self._busy("jog")
+        self.runner.enqueue(manual.jog_leg(self.moves, manual.jog_plan(self.moves, dxyz_mm), speed_mm_s))
+        self.readout.forget()
+        self.s.reason = "jogging"
+
+    def extrude(self, length_mm: float, feed_mm_s: float) -> None:
+        """Push (> 0) or pull back (< 0) ``length_mm`` of filament at ``feed_mm_s``, the robot still; refused
+        with the nozzle below the minimum extrusion temperature (the loaded material's, else firmware's)."""
+        self._refuse("extrude", manual.MANUAL_STATES)
+        self._busy("extrude")
+        min_c = self.runner.min_extrude_c() if self.s.program is not None else manual.FIRMWARE_MIN_EXTRUDE_C
+        nozzle_c = self.s.thermal.temp_at(0, self.s.t_sim_s)
+        if min_c is not None and nozzle_c < min_c:
+            raise StateError(f"cannot extrude: the nozzle is at {nozzle_c:.0f} C, below the minimum extrusion "
+                             f"temperature {min_c:.0f} C: heat it first (preheat, or overrides --nozzle)",
+                             state=self.s.state, command="extrude", nozzle_c=nozzle_c, min_c=min_c)
+        self.runner.enqueue(manual.extrude_leg(self.moves, length_mm, feed_mm_s, self.config.retract_speed_mm_s))
+        self.readout.forget()
+        self.s.reason = "extruding" if length_mm > 0 else "retracting"
 
     def interrupt(self, reason: str) -> None:
         """The controller died at the current instant (a crashed station, restored from its checkpoint

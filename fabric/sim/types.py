@@ -13,7 +13,7 @@ __all__ = ["EVENT_KINDS", "IK_ACCEPT", "STATES", "Event", "ExtrusionState", "Pos
 STATES = ("idle", "ready", "printing", "paused", "stopped", "fault", "interrupted")
 EVENT_KINDS = ("started", "layer", "paused", "resumed", "stopped", "finished",
                "fault", "temp_reached", "home", "interrupted", "recovered", "stall", "at_layer",
-               "override", "calibrated", "interlock", "plate_cleared")
+               "override", "calibrated", "interlock", "plate_cleared", "jogged", "extruded")
 IK_ACCEPT = (IK_OK, IK_SINGULAR)   # a solution is returned
 
 

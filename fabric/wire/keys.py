@@ -62,6 +62,8 @@ _TABLE = [
     # station: the paper's commands
     _ep("station", "position", s.Empty, s.Pose, doc="TCP pose and joints now"),
     _ep("station", "home", s.Empty, s.Ack, 30.0, "collision-checked joint move to home"),
+    _ep("station", "jog", s.JogRequest, s.Ack, 30.0, "collision-checked straight move of the nozzle by hand"),
+    _ep("station", "extrude", s.ExtrudeRequest, s.Ack, doc="push or pull filament by hand (a hot nozzle)"),
     _ep("station", "load", s.LoadRequest, s.TimeInfo, 60.0, "load a planned program by id"),
     _ep("station", "start", s.StartRequest, s.Ack, doc="run the loaded program"),
     _ep("station", "pause", s.Empty, s.Ack, doc="controlled pause: extruder off, retract, lift"),
