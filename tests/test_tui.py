@@ -147,6 +147,30 @@ def test_every_command_from_the_console(console_cell):
                 await until(pilot, lambda: app.station_state.rtf == 50.0, what="rtf in the state")
                 # the last reply stays on screen until the next
                 assert "rtf 50" in str(app.screen.query_one("#reply").render())
+                # jog by hand (j): up 10 mm, collision-checked, once the robot is still
+                z0 = client.position().xyz_mm[2]
+                ok, text = False, ""
+                for _ in range(50):                       # the calibration's moves may still be ending
+                    await pilot.press("j")
+                    await fill(pilot, ValuesDialog, {"dz_mm": "10"})
+                    before = app.reply
+                    await pilot.press("enter")
+                    await until(pilot, lambda b=before: app.reply is not b, what="jog reply")
+                    ok, text = app.reply[1:]
+                    if ok or "moving" not in text:
+                        break
+                    await pilot.pause(0.2)
+                assert ok and "jogging by (0, 0, 10) mm" in text, text
+                await until(pilot, lambda: abs(client.position().xyz_mm[2] - z0 - 10.0) < 1e-6, what="jogged up")
+                # extrude by hand (E): the filament length is required; the station decides (a cold nozzle:
+                # refused with why, when the material needs heat)
+                await pilot.press("E")
+                await fill(pilot, ValuesDialog, {"length_mm": "5"})
+                before = app.reply
+                await pilot.press("enter")
+                await until(pilot, lambda: app.reply is not before, what="extrude reply")
+                assert app.reply[0] == "extrude"
+                assert app.reply[1] or "minimum extrusion temperature" in app.reply[2], app.reply
     asyncio.run(scenario())
 
 

@@ -84,6 +84,7 @@ class FabricConsole(App):
         Binding("q", "quit", "quit", show=False), Binding("f", "command('rtf')", "sim speed", show=False),
         Binding("v", "command('recover')", "recover", show=False),
         Binding("h", "command('home')", "home", show=False),
+        Binding("j", "command('jog')", "jog", show=False), Binding("E", "command('extrude')", "extrude", show=False),
         Binding("k", "command('calibrate')", "calibrate", show=False),
         Binding("y", "command('ready')", "ready?", show=False),
         Binding("c", "command('collisions')", "collisions", show=False),

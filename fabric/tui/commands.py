@@ -10,8 +10,8 @@ from fabric import schemas as s
 from fabric.client import Client
 from fabric.wire.errors import FabricError
 
-__all__ = ["Command", "COMMANDS", "Bound", "OVERRIDE_BOUNDS", "RTF_BOUND", "LAYER_BOUND", "PRESETS", "Preset",
-           "describe", "refusal", "refused_hit"]
+__all__ = ["Command", "COMMANDS", "Bound", "OVERRIDE_BOUNDS", "RTF_BOUND", "LAYER_BOUND", "JOG_BOUNDS",
+           "EXTRUDE_BOUNDS", "PRESETS", "Preset", "describe", "refusal", "refused_hit"]
 
 
 @dataclass(frozen=True)
@@ -33,6 +33,11 @@ OVERRIDE_BOUNDS = (Bound("speed_r", "speed", 0.05, 4.0, "x"), Bound("flow_r", "f
 RTF_BOUND = Bound("rtf", "sim speed", 0.0, 1e6, "x real time, 0 = max")
 LAYER_BOUND = Bound("layer", "from layer", 1, 1_000_000, "1 = first", integer=True)
 STILL = ("idle", "ready", "stopped", "fault")           # station states in which the robot may be moved
+# Jog and manual extrude (fabric.schemas.station: JogRequest, ExtrudeRequest); empty = 0 / the default
+JOG_BOUNDS = (Bound("dx_mm", "x", -200.0, 200.0, "mm"), Bound("dy_mm", "y", -200.0, 200.0, "mm"),
+              Bound("dz_mm", "z", -200.0, 200.0, "mm"), Bound("speed_mm_s", "speed", 0.1, 200.0, "mm/s, 20"))
+EXTRUDE_BOUNDS = (Bound("length_mm", "filament", -100.0, 500.0, "mm, < 0 pulls", optional=False),
+                  Bound("speed_mm_s", "feed", 0.05, 50.0, "mm/s, 2"))
 
 
 @dataclass(frozen=True)
@@ -76,6 +81,11 @@ COMMANDS: dict[str, Command] = {c.name: c for c in (
     Command("calibrate", "calibrate", lambda c, v: c.calibrate(), states=STILL,
             confirm="Probe the plate and replace the work object? A loaded program is unloaded (plan it again).",
             report=True),
+    Command("jog", "jog", lambda c, v: c.jog(v.get("dx_mm") or 0.0, v.get("dy_mm") or 0.0, v.get("dz_mm") or 0.0,
+                                              speed_mm_s=v.get("speed_mm_s") or 20.0),
+            asks=JOG_BOUNDS, states=STILL),
+    Command("extrude", "extrude", lambda c, v: c.extrude(v["length_mm"], speed_mm_s=v.get("speed_mm_s") or 2.0),
+            asks=EXTRUDE_BOUNDS, states=STILL),
     Command("overrides", "overrides", lambda c, v: c.overrides(**v), asks=OVERRIDE_BOUNDS),
     Command("rtf", "sim speed", lambda c, v: c.set_rtf(v["rtf"]),
             asks=(Bound("rtf", RTF_BOUND.label, RTF_BOUND.lo, RTF_BOUND.hi, "x", optional=False),)),

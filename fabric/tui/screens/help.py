@@ -15,7 +15,7 @@ start     a submit a file (the bundled samples are listed there)
 print     s start (a layer, sim speed)  p pause  r resume
           x stop*  v recover (after a crash)
           o overrides (speed, flow, nozzle, bed)  f sim speed
-robot     h home*  k calibrate*
+robot     h home*  k calibrate*  j jog  E extrude by hand (hot nozzle)
 ask       y ready?  c collisions  w position  t time
 jobs      n next job (plate clear?)*  del remove*  R print again
           [ ] move in the queue  enter the whole record
