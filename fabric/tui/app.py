@@ -19,6 +19,7 @@ from fabric import schemas as s
 from fabric.client import Client
 from fabric.extras import missing_extra
 from fabric.tui.commands import COMMANDS, PRESETS, Preset, describe, refusal, refused_hit
+from fabric.tui.joblist import console_jobs
 from fabric.tui.link import CellLink
 from fabric.tui.messages import (
     CellsListed,
@@ -389,7 +390,7 @@ class FabricConsole(App):
         if client is None:
             return
         try:
-            self.post_message(JobsListed(client.keys.cell, client.jobs().jobs))
+            self.post_message(JobsListed(client.keys.cell, console_jobs(client)))
         except FabricError as err:
             self.post_message(Reply("jobs", False, f"[{err.code}] {err.message}"))
 
