@@ -191,10 +191,22 @@ async def paused_print(pilot) -> None:
     await pilot.pause()
 
 
+async def next_job_question(pilot) -> None:
+    """A confirmation whose question is longer than a line (it was cut to one line at 80x24)."""
+    await fill(pilot, "jobs")
+    app = pilot.app
+    app.station_state = s.StationState(state="idle", reason="finished", plate_clear=False, plate_mm3=10355.0,
+                                       plate_job_id="ffdd71c51965", rtf=10.0)
+    await pilot.pause()
+    await pilot.press("n")
+    await pilot.pause()
+
+
 @pytest.mark.parametrize("size", SIZES)
-@pytest.mark.parametrize("name", ["job-record", "submit", "help", "paused"])
+@pytest.mark.parametrize("name", ["job-record", "submit", "help", "paused", "confirm"])
 def test_dialog_snapshot(snap_compare, name, size):
-    before = {"job-record": job_record, "submit": submit_dialog, "help": help_dialog, "paused": paused_print}[name]
+    before = {"job-record": job_record, "submit": submit_dialog, "help": help_dialog, "paused": paused_print,
+              "confirm": next_job_question}[name]
     assert snap_compare(frozen_console(), terminal_size=SIZES[size], run_before=before)
 
 

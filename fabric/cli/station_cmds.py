@@ -159,8 +159,14 @@ def cmd_mesh(c: Client, a: argparse.Namespace) -> int:
 def _events_text(evs: s.EventList) -> str:
     if not evs.events:
         return "no events"
-    return "\n".join(f"#{e.seq:<6} {e.t_sim_s:9.2f}s  {e.kind:<12} layer {e.layer + 1:<4} line {e.gcode_line:<7} "
-                     f"{_data_text(e.data)}".rstrip() for e in evs.events)
+    return "\n".join(f"#{e.seq:<6} {e.t_sim_s:9.2f}s  {e.kind:<12} layer {_or_dash(e.layer + 1, e.layer):<4} "
+                     f"line {_or_dash(e.gcode_line, e.gcode_line):<7} {_data_text(e.data)}".rstrip()
+                     for e in evs.events)
+
+
+def _or_dash(shown: int, raw: int) -> str:
+    """A layer or line number, or "-" when the event has none (``raw`` -1)."""
+    return "-" if raw < 0 else str(shown)
 
 
 def _data_text(data: dict) -> str:

@@ -223,7 +223,7 @@ class LegRunner:
         elif kind == "jogged":
             st.reason = kind
             xyz = (inv_T(st.work_T) @ st.rest_T)[:3, 3]
-            self.emit(events, t, kind, {"xyz_mm": [float(v) for v in xyz]})
+            self.emit(events, t, kind, {"xyz_mm": [round(float(v), 6) for v in xyz]})
         elif kind.startswith("extruded"):
             length_mm = float(kind.partition(":")[2] or 0.0)
             st.reason = f"{'extruded' if length_mm > 0 else 'retracted'} {abs(length_mm):g} mm"

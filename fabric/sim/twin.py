@@ -318,7 +318,8 @@ class Twin:
         nozzle_c = self.s.thermal.temp_at(0, self.s.t_sim_s)
         if min_c is not None and nozzle_c < min_c:
             raise StateError(f"cannot extrude: the nozzle is at {nozzle_c:.0f} C, below the minimum extrusion "
-                             f"temperature {min_c:.0f} C: heat it first (preheat, or overrides --nozzle)",
+                             f"temperature {min_c:.0f} C: heat it first (fabric-cli override --nozzle 210, or e "
+                             f"to preheat in the console)",
                              state=self.s.state, command="extrude", nozzle_c=nozzle_c, min_c=min_c)
         self.runner.enqueue(manual.extrude_leg(self.moves, length_mm, feed_mm_s, self.config.retract_speed_mm_s))
         self.readout.forget()
