@@ -267,7 +267,8 @@ class SupervisorService(Service):
             return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} was removed meanwhile",
                          state="")
         hint = "" if head.start else " (submitted without start: start it with fabric-cli start once loaded)"
-        return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} ({head.filename}) {head.state}{hint}",
+        now = "loaded and started" if head.start and head.state == "loaded" else head.state   # its start was sent
+        return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} ({head.filename}) {now}{hint}",
                      state=head.state)
 
     # --- preparing and loading ------------------------------------------------------
