@@ -82,10 +82,10 @@ def test_status_wait_waits_for_a_secured_hub_still_starting(tmp_path) -> None:
     booted, as in the deployment guide): it waits for the hub, is admitted with the operator's password
     (a hub that does not answer yet is not "refused the password"), then waits for the services (this cell has none)."""
     creds = Credentials.init(tmp_path / "creds", hub=f"tls/127.0.0.1:{free_port()}")
-    status = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "status", "--json", "--wait", "8",
+    status = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "status", "--json", "--wait", "5",
                                "--config", str(creds.config("operator")), "--cell", "nosuchcell"],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(4.0)                                    # longer than a plain command's connect window
+    time.sleep(3.5)                                    # longer than a plain command's connect window (3 s)
     hub = start_hub(creds)
     try:
         out, err = status.communicate(timeout=60)
@@ -94,4 +94,4 @@ def test_status_wait_waits_for_a_secured_hub_still_starting(tmp_path) -> None:
         hub.wait()
     said = out + err
     assert "refused" not in said and "cannot reach" not in said, said
-    assert json.loads(out)["error"]["message"].startswith("not alive after 8 s"), said   # admitted; no service
+    assert json.loads(out)["error"]["message"].startswith("not alive after 5 s"), said   # admitted; no service
