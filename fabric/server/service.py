@@ -94,6 +94,7 @@ class Service:
         self.health = Health(self.name)
         self.started_s = time.time()
         self._handlers: dict[str, tuple[Endpoint, Handler]] = {}
+        self._handler_workers: dict[str, int] = {}          # command -> worker threads taking its queries
         self._snapshots: dict[str, tuple[Endpoint, Callable[[], bytes]]] = {}
         self._publishers: list[Publisher] = []
         self._queryables: list[Any] = []
@@ -115,10 +116,12 @@ class Service:
 
     # --- declaration -------------------------------------------------------
 
-    def handle(self, command: str, fn: Handler) -> None:
-        """Serve endpoint ``(self.name, command)`` with ``fn(request) -> reply``."""
+    def handle(self, command: str, fn: Handler, workers: int = 1) -> None:
+        """Serve endpoint ``(self.name, command)`` with ``fn(request) -> reply``; ``workers`` threads take its
+        queries from one channel (more than one: ``fn`` runs concurrently, and must be safe to)."""
         ep = ENDPOINTS[(self.name, command)]
         self._handlers[command] = (ep, fn)
+        self._handler_workers[command] = max(1, int(workers))
 
     def handle_snapshot(self, command: str, current: Callable[[], bytes]) -> None:
         """Serve read-only endpoint ``(self.name, command)`` from a reply the service keeps encoded and
@@ -170,7 +173,7 @@ class Service:
             raise StateError(f"a {self.name} is already serving cell {self.keys.cell!r}: stop it first, or run this "
                              f"one with another --cell", state="running", command="start", service=self.name)
         for command, (ep, fn) in self._handlers.items():
-            self._serve(self.keys.cmd(self.name, command), self._answerer(ep, fn))
+            self._serve(self.keys.cmd(self.name, command), self._answerer(ep, fn), self._handler_workers[command])
         for command, (ep, current) in self._snapshots.items():
             answer = lambda q, ep=ep, current=current: self._answer_snapshot(q, ep, current)  # noqa: E731
             self._queryables.append(self.session.declare_queryable(self.keys.cmd(self.name, command), answer))
@@ -193,12 +196,13 @@ class Service:
                             f"{sorted(declared)} (missing {sorted(missing)}, unknown {sorted(extra)}, "
                             f"twice {sorted(twice)})")
 
-    def _serve(self, key: str, answer: Callable[[zenoh.Query], None]) -> None:
+    def _serve(self, key: str, answer: Callable[[zenoh.Query], None], workers: int = 1) -> None:
         q = self.session.declare_queryable(key, handler=zenoh.handlers.FifoChannel(1024))
         self._queryables.append(q)
-        t = threading.Thread(target=self._worker, args=(q, answer), name=f"{self.name}:{key}", daemon=True)
-        t.start()
-        self._threads.append(t)
+        for k in range(workers):
+            t = threading.Thread(target=self._worker, args=(q, answer), name=f"{self.name}:{key}:{k}", daemon=True)
+            t.start()
+            self._threads.append(t)
 
     def _worker(self, q: Any, answer: Callable[[zenoh.Query], None]) -> None:
         for query in q:  # ends when the queryable is undeclared

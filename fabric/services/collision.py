@@ -99,18 +99,20 @@ class CollisionService(Service):
         super().__init__(session, cell_id, data_dir)
         self.cell = cell
         self.client = Client(session, cell_id)
-        self._certifiers: dict[float, Certifier] = {}
-        self._certifier(0.01)                              # built now: the first check does not wait for it
+        self._certifiers: dict[tuple[str, float], Certifier] = {}
+        self._certifier("move", 0.01)                      # built now: the first check does not wait for it
         self._cache: dict[str, tuple[Program, BeadSolids]] = {}
         self._times: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self.station_beads = StationBeads(self.client)
-        self._check_lock = threading.Lock()
-        self.handle("check", self.on_check)
+        # Programs and live moves are checked apart: the station's home or jog (milliseconds) does not wait
+        # behind a program of a million moves (tens of seconds). Each side has its own certifiers.
+        self._locks = {"program": threading.Lock(), "move": threading.Lock()}
+        self.handle("check", self.on_check, workers=3)     # a program being checked leaves two for live moves
 
-    def _certifier(self, tolerance_mm: float) -> Certifier:
-        key = round(float(tolerance_mm), 6)
+    def _certifier(self, side: str, tolerance_mm: float) -> Certifier:
+        key = (side, round(float(tolerance_mm), 6))
         if key not in self._certifiers:
-            self._certifiers[key] = Certifier(self.cell, key)
+            self._certifiers[key] = Certifier(self.cell, key[1])
         return self._certifiers[key]
 
     def _program(self, program_id: str) -> tuple[Program, BeadSolids]:
@@ -127,8 +129,9 @@ class CollisionService(Service):
         return self._times[program_id]
 
     def on_check(self, req: s.CollisionRequest) -> s.CollisionReport:
-        with self._check_lock:
-            cert = self._certifier(req.tolerance_mm)
+        side = "program" if req.program_id else "move"
+        with self._locks[side]:
+            cert = self._certifier(side, req.tolerance_mm)
             if req.program_id:
                 return self._check_program(req, cert)
             return self._check_move(req, cert)
