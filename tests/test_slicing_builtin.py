@@ -120,11 +120,13 @@ def test_gcode_conventions(box_result) -> None:
 
 def test_top_and_bottom_layers_are_solid_the_middle_sparse(box_result) -> None:
     layers = _layers(box_result.gcode)
-    solid = ["Solid infill" in lay or "Top solid infill" in lay for lay in layers]
+    solid = ["Solid infill" in lay or "Top solid infill" in lay or "Bridge infill" in lay for lay in layers]
     sparse = ["Internal infill" in lay for lay in layers]
     assert solid[:3] == [True] * 3 and solid[-4:] == [True] * 4          # 3 bottom, 4 top layers
     assert not any(solid[3:-4]) and all(sparse[3:-4]) and not any(sparse[:3] + sparse[-4:])
     assert "Top solid infill" in layers[-1]
+    # the first solid layer over the sparse infill bridges it (PrusaSlicer's internal bridge); only that one
+    assert ["Bridge infill" in lay for lay in layers] == [i == len(layers) - 4 for i in range(len(layers))]
 
 
 def test_full_infill_fills_the_model_and_density_orders_volume() -> None:

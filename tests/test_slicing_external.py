@@ -30,7 +30,9 @@ def test_prusaslicer_ini_matches_the_builtin_conventions() -> None:
     assert ini["bed_shape"] == "0x0,250x0,250x200,0x200" and ini["max_print_height"] == "180"
     assert ini["use_relative_e_distances"] == "1" and ini["perimeter_generator"] == "classic"
     assert ini["fill_density"] == "30%" and ini["infill_overlap"] == "25%"
-    assert ini["gap_fill_enabled"] == ini["thin_walls"] == ini["infill_anchor_max"] == "0"
+    assert ini["thin_walls"] == ini["infill_anchor_max"] == "0"
+    assert ini["gap_fill_enabled"] == ini["avoid_crossing_perimeters"] == "1"      # as the built-in slicer does
+    assert ini["only_retract_when_crossing_perimeters"] == "1" and ini["retract_layer_change"] == "0"
     assert {ini[k] for k in ini if k.endswith("extrusion_width")} == {"0.42"}
     assert "G28" not in ini["start_gcode"] and "\\nM140 S60\\nM104 S205" in ini["start_gcode"]
     assert ini["start_gcode"].startswith("; filament_diameter = 2.85\\n; filament_type = PLA\\n")
@@ -40,7 +42,7 @@ def test_prusaslicer_ini_matches_the_builtin_conventions() -> None:
 def test_slic3r_ini_adds_layer_markers_and_move_comments() -> None:
     ini = external.slic3r_ini(TAZ, (250.0, 250.0), 250.0)
     assert ini["before_layer_gcode"] == ";LAYER_CHANGE\\n;Z:[layer_z]\\n"
-    assert ini["gcode_comments"] == "1" and ini["fill_gaps"] == "0"
+    assert ini["gcode_comments"] == "1" and ini["fill_gaps"] == "1"
 
 
 def test_slic3r_comments_become_type_markers() -> None:
@@ -64,6 +66,17 @@ def test_gcode_stats_reads_relative_and_absolute_e_alike() -> None:
         assert st.layers == 2 and st.layer_z_mm == [0.3, 0.55]
         assert st.extruded_filament_mm == pytest.approx(1.0) and st.net_filament_mm == pytest.approx(1.0)
         assert st.volume_by_type_mm3 == pytest.approx({"Perimeter": 0.75 * area, "Solid infill": 0.25 * area})
+
+
+def test_gcode_stats_counts_retractions_and_travel_alike_for_relative_and_absolute_e() -> None:
+    relative = ("M83\nG1 X0 Y0 F9000\nG1 X3 Y0 E0.5\nG1 E-1 F1500\nG1 X3 Y4 F9000\nG1 X0 Y4\nG1 E1 F1500\n"
+                "G1 X0 Y5 E0.1\nG1 Z0.6 F9000\nG1 X0 Y7 F9000\nG1 X1 Y7 E0.1\n")
+    absolute = ("M82\nG92 E0\nG1 X0 Y0 F9000\nG1 X3 Y0 E0.5\nG1 E-0.5 F1500\nG1 X3 Y4 F9000\nG1 X0 Y4\n"
+                "G1 E0.5 F1500\nG1 X0 Y5 E0.6\nG1 Z0.6 F9000\nG1 X0 Y7 F9000\nG1 X1 Y7 E0.7\n")
+    for text in (relative, absolute):
+        st = gcode_stats(text, 2.85)
+        assert st.retractions == 1                       # the E-only pull-back; the push back is not one
+        assert st.travel_mm == pytest.approx(4.0 + 3.0 + 2.0)     # two travel legs, one unretracted hop
 
 
 def test_unknown_or_missing_backend_is_not_found(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -7,9 +7,13 @@ makes both produce the fabric's conventions: relative E (M83) in mm of
 filament, a start that only sets temperatures (no G28), ``;LAYER_CHANGE`` /
 ``;Z:`` markers and ``;TYPE:`` features. Features that differ between
 slicers are switched off or matched to the built-in slicer (classic
-perimeters, no gap fill / thin walls / ironing / extra perimeters, no infill
-anchors, rectilinear top and bottom, same widths everywhere, same overlap),
-so volumes are comparable.
+perimeters, gap fill on and thin walls / ironing / extra perimeters off, no
+infill anchors, rectilinear top and bottom, same widths everywhere, same
+overlap, thin bridges with the profile's bridge flow and speed), so volumes
+are comparable. Travel follows the built-in slicer's rule too: avoid
+crossing perimeters, retract only when a travel crosses them, no retraction
+just for a layer change (PrusaSlicer has no limit on an inside travel's
+length, so ``retract_inside_max_mm`` has no counterpart there).
 
 Slic3r 1.3 has no ``;TYPE:`` comments; with ``gcode_comments`` it tags each
 move (``; perimeter``, ``; infill``, ``; skirt``), which is turned into
@@ -76,16 +80,17 @@ def _common(p: Profile, plate_size_mm: tuple[float, float]) -> dict[str, str]:
         "small_perimeter_speed": f"{p.perimeter_speed_mm_s:g}",
         "infill_speed": f"{p.infill_speed_mm_s:g}", "solid_infill_speed": f"{p.solid_infill_speed_mm_s:g}",
         "top_solid_infill_speed": f"{p.solid_infill_speed_mm_s:g}",
-        "bridge_speed": f"{p.solid_infill_speed_mm_s:g}", "gap_fill_speed": f"{p.solid_infill_speed_mm_s:g}",
+        "bridge_speed": f"{p.bridge_speed_mm_s:g}", "gap_fill_speed": f"{p.solid_infill_speed_mm_s:g}",
         "first_layer_speed": f"{p.first_layer_speed_mm_s:g}", "travel_speed": f"{p.travel_speed_mm_s:g}",
         "retract_length": f"{p.retract_length_mm:g}", "retract_speed": f"{p.retract_speed_mm_s:g}",
         "retract_lift": f"{p.retract_lift_mm:g}", "retract_before_travel": f"{p.retract_min_travel_mm:g}",
-        "retract_layer_change": "1", "wipe": "0",
+        "retract_layer_change": "0", "wipe": "0",
         "temperature": f"{p.nozzle_temp_c:g}", "first_layer_temperature": f"{p.nozzle_temp_c:g}",
         "bed_temperature": f"{p.bed_temp_c:g}", "first_layer_bed_temperature": f"{p.bed_temp_c:g}",
         "cooling": "0", "fan_always_on": "0", "use_relative_e_distances": "1",
         "start_gcode": start, "end_gcode": end, "complete_objects": "0",
-        "avoid_crossing_perimeters": "0", "xy_size_compensation": "0", "bridge_flow_ratio": "1",
+        "avoid_crossing_perimeters": "1", "only_retract_when_crossing_perimeters": "1", "xy_size_compensation": "0",
+        "bridge_flow_ratio": f"{p.bridge_flow_r:g}",
     }
 
 
@@ -95,7 +100,8 @@ def prusaslicer_ini(p: Profile, plate_size_mm: tuple[float, float], build_height
     out.update({
         "max_print_height": f"{build_height_mm:g}", "perimeter_generator": "classic",
         "top_fill_pattern": "rectilinear", "bottom_fill_pattern": "rectilinear",
-        "infill_anchor": "0", "infill_anchor_max": "0", "gap_fill_enabled": "0",
+        "infill_anchor": "0", "infill_anchor_max": "0", "gap_fill_enabled": "1",
+        "avoid_crossing_perimeters_max_detour": "0",
         "ensure_vertical_shell_thickness": "0", "thick_bridges": "0", "overhangs": "0",
         "ironing": "0", "elefant_foot_compensation": "0", "top_solid_min_thickness": "0",
         "bottom_solid_min_thickness": "0", "gcode_comments": "0", "gcode_label_objects": "0",
@@ -109,7 +115,7 @@ def slic3r_ini(p: Profile, plate_size_mm: tuple[float, float], build_height_mm: 
     out = _common(p, plate_size_mm)
     out.update({
         "top_infill_pattern": "rectilinear", "bottom_infill_pattern": "rectilinear",
-        "fill_gaps": "0", "gcode_comments": "1", "support_material": "0", "raft_layers": "0",
+        "fill_gaps": "1", "gcode_comments": "1", "support_material": "0", "raft_layers": "0",
         "before_layer_gcode": ";LAYER_CHANGE\\n;Z:[layer_z]\\n",
     })
     return out

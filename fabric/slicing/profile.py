@@ -38,7 +38,12 @@ class Profile:
     Widths and heights describe the bead: ``extrusion_width_mm`` is the bead's
     width, every layer but the first is ``layer_height_mm`` thick. Speeds are
     TCP speeds along the path. ``infill_density_r`` is the sparse infill's
-    volume fraction (0..1); solid layers are always 100 %. The material
+    volume fraction (0..1); solid layers are always 100 %. Bridges (solid
+    infill over air or over sparse infill) print at ``bridge_speed_mm_s`` with
+    ``bridge_flow_r`` times the normal flow. A travel retracts when it is longer
+    than ``retract_min_travel_mm`` and leaves the part (crosses a perimeter into
+    open air), or when its route inside the part is longer than
+    ``retract_inside_max_mm``. The material
     (``filament_diameter_mm``, ``material``, ``density_g_cm3``,
     ``min_extrude_temp_c``) is written into the G-code's header, from where the
     planner and the twin read it.
@@ -64,6 +69,8 @@ class Profile:
     perimeter_speed_mm_s: float = 40.0
     infill_speed_mm_s: float = 60.0
     solid_infill_speed_mm_s: float = 40.0
+    bridge_speed_mm_s: float = 25.0
+    bridge_flow_r: float = 1.0
     travel_speed_mm_s: float = 150.0
     first_layer_speed_mm_s: float = 20.0
     nozzle_temp_c: float = 205.0
@@ -72,6 +79,7 @@ class Profile:
     retract_speed_mm_s: float = 25.0
     retract_lift_mm: float = 0.0
     retract_min_travel_mm: float = 2.0
+    retract_inside_max_mm: float = 50.0
     seam: str = "aligned"
     skirt_loops: int = 0
     skirt_distance_mm: float = 6.0
@@ -106,6 +114,7 @@ _RANGES: dict[str, tuple[float | None, float | None]] = {
     "infill_overlap_r": (0.0, 1.0),
     "perimeter_speed_mm_s": (0.1, 1000.0), "infill_speed_mm_s": (0.1, 1000.0),
     "solid_infill_speed_mm_s": (0.1, 1000.0), "travel_speed_mm_s": (0.1, 2000.0),
+    "bridge_speed_mm_s": (0.1, 1000.0), "bridge_flow_r": (0.1, 3.0), "retract_inside_max_mm": (0.0, 10000.0),
     "first_layer_speed_mm_s": (0.1, 1000.0),
     "nozzle_temp_c": (0.0, 500.0), "bed_temp_c": (0.0, 200.0),
     "retract_length_mm": (0.0, 50.0), "retract_speed_mm_s": (0.1, 500.0),

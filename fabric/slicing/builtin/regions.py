@@ -7,6 +7,16 @@ Clipper in PrusaSlicer). The infill area is what remains inside the last
 loop, less half a spacing, plus the configured overlap with the perimeters;
 an opening of 0.6 spacing drops slivers too narrow for a bead.
 
+Gaps follow PrusaSlicer's classic perimeter generator: after each inner
+loop (and one more trial loop past the last) the band between the previous
+region shrunk by half a step and the new one grown by half a step is a
+*gap*, somewhere the next loop did not fit; its parts between a fifth of a
+bead and two spacings wide are printed as gap fill (:mod:`.gapfill`) and
+kept out of the infill. When a loop, or the trial loop, does not fit at
+all, the island has no infill: what is left is at most gap fill. Each
+island also carries its *travel region* (:mod:`.travel`): the outline
+shrunk to just outside its external perimeter.
+
 Solid layers (PrusaSlicer's horizontal shells): a layer's *top shell* is the
 part of its slice with no material in the layer above (slivers of sloped
 walls dropped), plus its own exposed infill grown by ``EXTERNAL_MARGIN_MM``
@@ -24,47 +34,19 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
+from fabric.slicing.builtin.gapfill import GapPath, gap_fill_paths
+from fabric.slicing.builtin.geom import clean, offset
+from fabric.slicing.builtin.travel import INSIDE_MARGIN_MM
 from fabric.slicing.flow import bead_spacing_mm
 
 __all__ = ["Loop", "Island", "FillSplit", "island_perimeters", "classify_fill", "offset", "clean",
            "EXTERNAL_MARGIN_MM"]
 
 EXTERNAL_MARGIN_MM = 3.0
-MITRE = {"join_style": "mitre", "mitre_limit": 3.0}
 _OPENING_R = 0.6            # drop infill areas narrower than 0.6 bead spacing
-_REPEAT_MM = 1e-5           # vertices closer than this are merged
 _NARROW_BEADS = 3.0         # solid shells narrower than 2 x this many beads get widened
-
-
-def clean(geom: shapely.Geometry) -> shapely.Geometry:
-    """Merge (near-)repeated vertices that boolean operations leave behind.
-
-    GEOS's mitred buffer can return an empty result for a valid polygon with
-    vertices 1e-14 mm apart, so every geometry that feeds an offset goes
-    through here first.
-    """
-    try:
-        return shapely.remove_repeated_points(geom, _REPEAT_MM)
-    except shapely.errors.GEOSException:
-        # a sliver collapsed to a 2-point ring: snapping to the grid drops it cleanly
-        return shapely.set_precision(geom, _REPEAT_MM)
-
-
-def offset(geom: shapely.Geometry, distance_mm: float) -> shapely.Geometry:
-    """Mitred offset (Clipper-like, limit 3), with a guard against GEOS losing a shape.
-
-    An inward offset by ``d`` can only make a shape vanish if its area is at
-    most ``d`` times its perimeter (area = integral of the perimeters of its
-    inner parallel sets); an empty result otherwise is a numerical failure,
-    retried on a slightly simplified copy.
-    """
-    # GEOS leaves harmless floating-point flags (division by zero in degenerate joins) that
-    # numpy would report as warnings after the ufunc returns.
-    with np.errstate(divide="ignore", invalid="ignore"):
-        out = shapely.buffer(geom, distance_mm, **MITRE)
-        if distance_mm < 0 and out.is_empty and geom.area > -distance_mm * geom.length * 1.01:
-            out = shapely.buffer(shapely.simplify(geom, 1e-3), distance_mm, **MITRE)
-    return out
+_GAP_SAFETY_MM = 1e-5       # PrusaSlicer's 10 scaled units of safety offset
+_GAP_MIN_R = 0.2 * (1.0 - 0.4)      # narrowest gap filled: a fifth of a bead less the inset overlap tolerance
 
 
 @dataclass
@@ -74,6 +56,7 @@ class Loop:
     xy: np.ndarray
     depth: int
     hole: bool
+    notch: np.ndarray | None = field(default=None, repr=False, compare=False)   # seam bonus weights, once
 
 
 @dataclass
@@ -83,6 +66,8 @@ class Island:
     outline: shapely.Geometry
     loops: list[Loop] = field(default_factory=list)
     fill: shapely.Geometry = field(default_factory=shapely.Polygon)
+    gaps: list[GapPath] = field(default_factory=list)
+    travel: shapely.Geometry = field(default_factory=shapely.Polygon)
 
 
 def _rings(geom: shapely.Geometry, depth: int) -> list[Loop]:
@@ -99,27 +84,45 @@ def _rings(geom: shapely.Geometry, depth: int) -> list[Loop]:
 
 
 def island_perimeters(outline: shapely.Geometry, perimeters: int, width_mm: float, height_mm: float,
-                      overlap_r: float) -> Island:
-    """Loops and infill area of one island at a layer of ``height_mm``."""
+                      overlap_r: float, gap_fill: bool = True) -> Island:
+    """Loops, gap fill and infill area of one island at a layer of ``height_mm``."""
     spacing = bead_spacing_mm(width_mm, height_mm)
     island = Island(outline)
+    island.travel = clean(offset(outline, -(width_mm / 2.0 - INSIDE_MARGIN_MM)))
     last = outline
+    gaps: list[shapely.Geometry] = []
     if perimeters > 0:
-        for k in range(perimeters):
+        for k in range(perimeters + 1):             # pass ``perimeters`` is the trial loop
+            if k == perimeters and not gap_fill:
+                break
             step = width_mm / 2.0 if k == 0 else spacing
             nxt = offset(last, -step)
+            if k > 0 and gap_fill:
+                gap = shapely.difference(offset(last, -step / 2.0), offset(nxt, step / 2.0 + _GAP_SAFETY_MM))
+                if not gap.is_empty:
+                    gaps.append(gap)
             if nxt.is_empty:
+                last = shapely.Polygon()            # no room for this loop: no infill either
+                break
+            if k == perimeters:
                 break
             island.loops.extend(_rings(nxt, k))
             last = nxt
         if not island.loops:
+            return island
+        if gaps:
+            island.gaps, covered = gap_fill_paths(clean(shapely.union_all(gaps)), _GAP_MIN_R * width_mm,
+                                                  2.0 * spacing, height_mm)
+            if island.gaps and not last.is_empty:
+                last = shapely.difference(last, covered)
+        if last.is_empty:
             return island
         # fill boundary: half a spacing inside the last loop, minus the overlap.
         inset = spacing / 2.0 - overlap_r * spacing
     else:
         inset = 0.0
     opening = _OPENING_R * spacing / 2.0
-    inner = offset(last, -(inset + opening))
+    inner = offset(clean(last), -(inset + opening))
     island.fill = clean(offset(inner, opening)) if not inner.is_empty else inner
     return island
 

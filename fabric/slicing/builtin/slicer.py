@@ -3,11 +3,13 @@
 Stages: layer heights and the section of all layers at once
 (:mod:`.layers`); perimeters and infill areas per island (:mod:`.regions`,
 memoised on the island's exact geometry and layer height, so a prismatic part
-computes each distinct cross-section once); the solid / sparse split; line
-infill (:mod:`.infill`, memoised on region, angle and spacing); ordering and
-G-code (:mod:`.toolpath`, :mod:`.writer`). Infill direction alternates by
+computes each distinct cross-section once), with their gap fill
+(:mod:`.gapfill`) and travel regions; the solid / sparse split; bridges
+(:mod:`.bridges`); line infill (:mod:`.infill`, memoised on region, angle
+and spacing); ordering, seams and travel routes (:mod:`.toolpath`,
+:mod:`.travel`) and G-code (:mod:`.writer`). Infill direction alternates by
 90 degrees from layer to layer; ``grid`` lays both directions on every layer
-at half the density each.
+at half the density each; bridges take their own direction.
 """
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ import numpy as np
 import shapely
 import trimesh
 
+from fabric.slicing.builtin.bridges import Bridge, find_bridges
 from fabric.slicing.builtin.infill import chain_segments, extend_to, scan_segments
 from fabric.slicing.builtin.layers import (
     layer_heights,
@@ -39,9 +42,12 @@ from fabric.slicing.builtin.regions import (
 from fabric.slicing.builtin.toolpath import (
     LOOP_CLIP_R,
     loop_path,
+    order_gaps,
     order_islands,
     order_loops,
+    seam_point,
 )
+from fabric.slicing.builtin.travel import OUTLINE_MARGIN_MM, TravelPiece, TravelPlanner, travel_pieces
 from fabric.slicing.builtin.writer import GcodeWriter
 from fabric.slicing.flow import bead_spacing_mm, width_for_spacing_mm
 from fabric.slicing.profile import Profile
@@ -67,6 +73,9 @@ class BuiltinOutput:
     volume_by_type_mm3: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     timings_s: dict[str, float] = field(default_factory=dict)
+    retractions: int = 0
+    travel_mm: float = 0.0
+    bridge_area_mm2: float = 0.0          # summed over layers
 
 
 def slice_mesh(mesh: trimesh.Trimesh, profile: Profile,
@@ -122,6 +131,13 @@ def slice_mesh(mesh: trimesh.Trimesh, profile: Profile,
         fills = [_union([isl.fill for isl in layer]) for layer in islands]
         splits = classify_fill(fills, slices, keys, p.top_solid_layers, p.bottom_solid_layers,
                                p.infill_density_r, bead_mm=p.extrusion_width_mm, pool=pool)
+
+        def bridges_of(i: int) -> list[Bridge]:
+            if i == 0 or splits[i].solid.is_empty:
+                return []
+            return find_bridges(splits[i].solid, slices[i], slices[i - 1], splits[i - 1].sparse,
+                                bead_spacing_mm(p.extrusion_width_mm, float(thick[i])))
+        bridges = list(pool.map(bridges_of, range(len(slices))))
     timings["classify"] = time.perf_counter() - t0 - sum(timings.values())
     report(0.5)
 
@@ -131,26 +147,42 @@ def slice_mesh(mesh: trimesh.Trimesh, profile: Profile,
                   f"extrusion_width = {p.extrusion_width_mm}", *p.material_header(),
                   "E is relative (M83), mm of filament"])
     lo, hi = mesh.bounds
-    seam_ref = (float(hi[0]) + 1000.0, float(hi[1]) + 1000.0)
     centre_xy = (float(lo[0] + hi[0]) / 2.0, float(lo[1] + hi[1]) / 2.0)
     fill_cache: dict[tuple, list[tuple[np.ndarray, float]]] = {}
+    piece_cache: dict[int, tuple[list[TravelPiece], list[TravelPiece]]] = {}
+    routes: dict[tuple, np.ndarray | None] = {}
+    bridge_area = 0.0
     for i in range(len(slices)):
         h = float(thick[i])
         writer.layer(float(tops[i]), h)
+        for isl in islands[i]:
+            if id(isl) not in piece_cache:
+                piece_cache[id(isl)] = (travel_pieces(isl.travel),
+                                        travel_pieces(clean(offset(isl.outline, -OUTLINE_MARGIN_MM))))
+        pieces = [pc for isl in islands[i] for pc in piece_cache[id(isl)][0]]
+        outline_pieces = [pc for isl in islands[i] for pc in piece_cache[id(isl)][1]]
+        writer.router = TravelPlanner(pieces, p.retract_min_travel_mm, p.retract_inside_max_mm, routes,
+                                      outline_pieces).plan
         first = i == 0
         speed = {k: (p.first_layer_speed_mm_s if first else v) for k, v in (
             ("peri", p.perimeter_speed_mm_s), ("solid", p.solid_infill_speed_mm_s),
-            ("sparse", p.infill_speed_mm_s))}
+            ("sparse", p.infill_speed_mm_s), ("bridge", p.bridge_speed_mm_s))}
         if first and p.skirt_loops > 0:
             _skirt(writer, slices[0], p, h)
         split = splits[i]
-        for island in order_islands(islands[i], (writer.x, writer.y) if not math.isnan(writer.x) else (0, 0)):
-            for loop in order_loops(island):
-                seam = seam_ref if p.seam == "aligned" else (writer.x, writer.y)
+        bridge_area += sum(b.region.area for b in bridges[i])
+        here = (writer.x, writer.y) if not math.isnan(writer.x) else centre_xy
+        for island in order_islands(islands[i], here, p.seam):
+            for loop in order_loops(island, (writer.x, writer.y)):
+                seam = seam_point(loop, p.seam, (writer.x, writer.y))
                 path = loop_path(loop, seam, LOOP_CLIP_R * p.nozzle_diameter_mm)
                 writer.extrude(path, "External perimeter" if loop.depth == 0 else "Perimeter",
                                p.extrusion_width_mm, h, speed["peri"])
-            _infill(writer, island, split, i, h, p, speed, fill_cache, len(islands[i]) > 1, centre_xy)
+            for gap in order_gaps(island.gaps, (writer.x, writer.y)):
+                writer.extrude(gap.xy, "Gap fill", float(np.mean(gap.widths_mm)), h, speed["solid"],
+                               widths_mm=gap.widths_mm)
+            _infill(writer, island, split, bridges[i], i, h, p, speed, fill_cache, len(islands[i]) > 1,
+                    centre_xy)
         if i % 8 == 0:
             report(0.5 + 0.5 * i / len(slices))
     writer.end()
@@ -162,7 +194,8 @@ def slice_mesh(mesh: trimesh.Trimesh, profile: Profile,
     gcode = writer.text()
     return BuiltinOutput(gcode=gcode, layers=len(slices), extruded_mm3=writer.filament_mm * p.filament_area_mm2,
                          filament_mm=writer.filament_mm, volume_by_type_mm3=dict(writer.by_type),
-                         warnings=warnings, timings_s=timings)
+                         warnings=warnings, timings_s=timings, retractions=writer.retractions,
+                         travel_mm=writer.travel_mm, bridge_area_mm2=bridge_area)
 
 
 def _union(parts: list[shapely.Geometry]) -> shapely.Geometry:
@@ -172,10 +205,10 @@ def _union(parts: list[shapely.Geometry]) -> shapely.Geometry:
     return parts[0] if len(parts) == 1 else shapely.union_all(parts)
 
 
-def _infill(writer: GcodeWriter, island: Island, split: FillSplit, layer: int, h: float, p: Profile,
-            speed: dict[str, float], cache: dict[tuple, list[tuple[np.ndarray, float]]], clip_to_island: bool,
-            centre_xy: tuple[float, float]) -> None:
-    """Solid (top-surface part marked) then sparse infill of one island.
+def _infill(writer: GcodeWriter, island: Island, split: FillSplit, bridges: list[Bridge], layer: int, h: float,
+            p: Profile, speed: dict[str, float], cache: dict[tuple, list[tuple[np.ndarray, float]]],
+            clip_to_island: bool, centre_xy: tuple[float, float]) -> None:
+    """Bridges, solid (top-surface part marked) then sparse infill of one island.
 
     Offsets follow PrusaSlicer's rectilinear fill: solid lines end half a
     spacing inside the infill area, where the links between them run;
@@ -189,31 +222,43 @@ def _infill(writer: GcodeWriter, island: Island, split: FillSplit, layer: int, h
     spacing = bead_spacing_mm(p.extrusion_width_mm, h)
     base = math.radians(p.infill_angle_deg) - math.pi / 2.0    # scan lines run at 90 deg to the rotation
     angle = base + (math.pi / 2.0 if layer % 2 else 0.0)
-    jobs = []
+    jobs: list[tuple[str, shapely.Geometry, str, float]] = []
     solid, top, sparse = split.solid, split.top, split.sparse
     if not solid.is_empty:
         if clip_to_island:
             solid = clean(shapely.intersection(solid, island.fill))
-        if not top.is_empty:
+        for bridge in bridges:
+            if solid.is_empty:
+                break
+            region = clean(shapely.intersection(bridge.region, solid))
+            if region.is_empty or region.area < 1e-4:
+                continue
+            jobs.append(("Bridge infill", region, "bridge", bridge.angle_rad - math.pi / 2.0))
+            solid = clean(shapely.difference(solid, region))
+        if solid.is_empty:
+            pass
+        elif not top.is_empty:
             top = clean(shapely.intersection(top, solid))
-            jobs += [("Solid infill", clean(shapely.difference(solid, top)), "solid"),
-                     ("Top solid infill", top, "solid")]
+            jobs += [("Solid infill", clean(shapely.difference(solid, top)), "solid", angle),
+                     ("Top solid infill", top, "solid", angle)]
         else:
-            jobs.append(("Solid infill", solid, "solid"))
+            jobs.append(("Solid infill", solid, "solid", angle))
     if not sparse.is_empty and p.infill_density_r > 0:
         if clip_to_island:
             sparse = clean(shapely.intersection(sparse, island.fill))
-        jobs.append(("Internal infill", sparse, p.infill_pattern))
-    for kind, region, how in jobs:
+        jobs.append(("Internal infill", sparse, p.infill_pattern, angle))
+    for kind, region, how, ang in jobs:
         if region.is_empty or region.area < 1e-4:
             continue
         start = (round(writer.x, 3), round(writer.y, 3))
-        key = (shapely.to_wkb(region), how, angle, h, start)
+        key = (shapely.to_wkb(region), how, ang, h, start)
         if key not in cache:
-            cache[key] = _fill_region(region, how, angle, base, spacing, h, p, start, centre_xy)
-        sp = speed["solid"] if how == "solid" else speed["sparse"]
+            cache[key] = _fill_region(region, "solid" if how == "bridge" else how, ang, base, spacing, h, p, start,
+                                      centre_xy)
+        sp = speed["solid"] if how == "solid" else speed["bridge"] if how == "bridge" else speed["sparse"]
+        flow = p.bridge_flow_r if how == "bridge" else 1.0
         for line, width in cache[key]:
-            writer.extrude(line, kind, width, h, sp)
+            writer.extrude(line, kind, width, h, sp, flow_r=flow)
 
 
 def _fill_region(region: shapely.Geometry, how: str, angle: float, base: float, spacing: float, h: float,

@@ -2,24 +2,32 @@
 
 Every extruding move carries ``E = length * bead_area * multiplier /
 filament_area`` (mm of filament), with the bead area of
-:mod:`fabric.slicing.flow`. Travels longer than ``retract_min_travel_mm``
-retract (and lift by ``retract_lift_mm`` when set) and de-retract before the
-next bead. Layers start with ``;LAYER_CHANGE``, ``;Z:``, ``;HEIGHT:`` and
+:mod:`fabric.slicing.flow` (times ``flow_r`` for bridges; a gap fill gives
+each segment its own width). A travel follows the path and the retraction
+decision of the layer's router (:mod:`.travel`); without one, travels longer
+than ``retract_min_travel_mm`` retract. A retraction also lifts by
+``retract_lift_mm`` when set; the next bead de-retracts first. The writer
+counts retractions and travel length as it writes them. Layers start with ``;LAYER_CHANGE``, ``;Z:``, ``;HEIGHT:`` and
 features with ``;TYPE:`` (``External perimeter``, ``Perimeter``, ``Solid
-infill``, ``Top solid infill``, ``Internal infill``, ``Skirt/Brim``), so one
+infill``, ``Top solid infill``, ``Internal infill``, ``Bridge infill``, ``Gap fill``,
+``Skirt/Brim``), so one
 planner reads this and PrusaSlicer / Slic3r output alike. The start has no
 homing: temperatures, then M83 and G92 E0.
 """
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
 from fabric.slicing.flow import bead_area_mm2
 from fabric.slicing.profile import Profile
 
-__all__ = ["GcodeWriter"]
+__all__ = ["GcodeWriter", "Router"]
+
+# (start, end) -> (travel path from start to end, retract before it?)
+Router = Callable[[tuple[float, float], tuple[float, float]], tuple[np.ndarray, bool]]
 
 
 class GcodeWriter:
@@ -38,6 +46,9 @@ class GcodeWriter:
         self.filament_mm = 0.0          # E on extruding moves
         self.net_filament_mm = 0.0      # including retractions
         self.by_type: dict[str, float] = {}
+        self.retractions = 0
+        self.travel_mm = 0.0
+        self.router: Router | None = None    # set per layer by the slicer
         self._travel_f = profile.travel_speed_mm_s * 60.0
         self._retract_f = profile.retract_speed_mm_s * 60.0
         self._e_cache: dict[tuple[float, float], float] = {}
@@ -70,6 +81,7 @@ class GcodeWriter:
         self.out.append(f"G1 E{-self.p.retract_length_mm:.5f} F{self._retract_f:.0f}")
         self.net_filament_mm -= self.p.retract_length_mm
         self.retracted = True
+        self.retractions += 1
 
     def _unretract(self) -> None:
         if not self.retracted:
@@ -79,16 +91,27 @@ class GcodeWriter:
         self.retracted = False
 
     def travel(self, x: float, y: float) -> None:
-        """Move to (x, y) without extruding; retract (and lift) when the move is long."""
+        """Move to (x, y) without extruding, along the router's path; retract (and lift) when it says so."""
         if x == self.x and y == self.y:
             return
-        dist = math.hypot(x - self.x, y - self.y) if not math.isnan(self.x) else math.inf
+        if math.isnan(self.x):
+            path, retract = np.asarray([[x, y]]), True
+        elif self.router is not None:
+            path, retract = self.router((self.x, self.y), (x, y))
+            path = path[1:]
+        else:
+            path = np.asarray([[x, y]])
+            retract = math.hypot(x - self.x, y - self.y) > self.p.retract_min_travel_mm
         lift = 0.0
-        if dist > self.p.retract_min_travel_mm:
+        if retract:
             self._retract()
             lift = self.p.retract_lift_mm if self.retracted else 0.0
         if lift:
             self.out.append(f"G1 Z{self.z + lift:.3f} F{self._travel_f:.0f}")
+        if not math.isnan(self.x):
+            self.travel_mm += float(np.hypot(*np.diff(np.vstack([[self.x, self.y], path]), axis=0).T).sum())
+        for px, py in path[:-1].tolist():
+            self.out.append(f"G1 X{px:.3f} Y{py:.3f} F{self._travel_f:.0f}")
         self.out.append(f"G1 X{x:.3f} Y{y:.3f} F{self._travel_f:.0f}")
         if lift:
             self.out.append(f"G1 Z{self.z:.3f} F{self._travel_f:.0f}")
@@ -96,8 +119,13 @@ class GcodeWriter:
         self.feed = self._travel_f
 
     def extrude(self, path: np.ndarray, kind: str, width_mm: float, height_mm: float,
-                speed_mm_s: float) -> None:
-        """Extrude along a polyline ``path`` (m, 2) as a bead of the given width and height."""
+                speed_mm_s: float, flow_r: float = 1.0, widths_mm: np.ndarray | None = None) -> None:
+        """Extrude along a polyline ``path`` (m, 2) as a bead of the given width and height.
+
+        ``flow_r`` scales the filament (bridge flow); ``widths_mm`` (m - 1), when
+        given, is each segment's own bead width (gap fill), ``width_mm`` then
+        only the one stated in the ``;WIDTH:`` comment.
+        """
         if len(path) < 2:
             return
         self.travel(float(path[0, 0]), float(path[0, 1]))
@@ -113,7 +141,12 @@ class GcodeWriter:
             self.out.append(f"G1 F{feed:.0f}")
             self.feed = feed
         d = path[1:] - path[:-1]
-        e_mm = np.round(np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) * self._e_per_mm(width_mm, height_mm), 5)
+        if widths_mm is None:
+            per_mm: float | np.ndarray = self._e_per_mm(width_mm, height_mm) * flow_r
+        else:
+            area = height_mm * (widths_mm - height_mm * (1.0 - math.pi / 4.0))     # bead_area_mm2, per segment
+            per_mm = area * self.p.extrusion_multiplier_r * flow_r / self.p.filament_area_mm2
+        e_mm = np.round(np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) * per_mm, 5)
         if len(e_mm) == 1:                                   # a lone line: skip the array machinery
             de = float(e_mm[0])
             if de > 0:
