@@ -126,13 +126,14 @@ class Client:
 
     def _nobody(self, what: str, key: str, service: str, waited: float, timeout: float) -> ServiceUnavailable:
         """Nothing serves ``key``: an unknown cell or a service that is not running, told apart by the liveliness
-        of every cell (one query, answered by the hub; bounded by what is left of ``timeout``, at least 0.2 s).
+        of every cell (one query, answered by the hub; bounded by what is left of ``timeout``, at least 0.5 s: a
+        busy hub answers late, and a late answer would name the wrong cause).
         ``details['reason']``: ``no_cell`` (``details['cells']``: every cell present and its services),
         ``service_down`` (``details['alive']``: the cell's services alive), or ``no_queryable``."""
         head = f"no {what} on the fabric (asked for {waited:.2g} s{relay_named(self._relay)})"
         cell = self.keys.cell
         try:
-            cells = self.cells(timeout=max(0.2, min(1.0, timeout - waited)), attempts=ALIVE_ATTEMPTS,
+            cells = self.cells(timeout=max(0.5, min(1.0, timeout - waited)), attempts=ALIVE_ATTEMPTS,
                                enough=lambda found: service in found.get(cell, ()))
         except zenoh.ZError:                     # the session closed meanwhile: say what is known
             return ServiceUnavailable(f"{head}: is the service running and is the cell name right?", key=key,
