@@ -8,7 +8,7 @@ from typing import cast
 import numpy as np
 
 from fabric import schemas as s
-from fabric.motion.program import COLUMNS, Program
+from fabric.motion.program import COLUMNS, JOINTS, Program, column_spec
 from fabric.motion.program_file import column_pieces
 from fabric.wire import codec
 from fabric.wire.errors import DecodeError, ValidationError
@@ -37,7 +37,9 @@ def program_from_msg(msg: s.ProgramMsg) -> Program:
         raise ValidationError(f"unknown program column '{unknown[0]}'", field=f"columns.{unknown[0]}")
     cols = {}
     n = len(msg.columns["op"])
-    for name, (dtype, shape) in COLUMNS.items():
+    q = msg.columns[JOINTS]
+    nq = int(q.shape[1]) if q.ndim == 2 and 1 <= q.shape[1] <= 32 else 6     # any arm: 1..32 joints a row
+    for name, (dtype, shape) in column_spec(nq).items():
         arr = msg.columns[name]
         if arr.dtype != np.dtype(dtype) or arr.shape != (n, *shape):
             raise ValidationError(f"program column '{name}' has dtype {arr.dtype} shape {arr.shape}, "

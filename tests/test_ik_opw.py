@@ -90,10 +90,10 @@ def test_an_offset_wrist_is_refused(irb: RobotModel) -> None:
 
 
 def test_a_seven_axis_arm_is_refused() -> None:
-    panda = RobotModel.from_example_robot_data("panda")
+    panda = RobotModel.from_example_robot_data("panda")         # the hand's finger joints are dropped: 7 axes
     choice = detect_ik_family(panda.pin_model, panda.flange_frame_id, panda.lower_rad, panda.upper_rad)
     assert choice.family == "numeric" and choice.arm is None
-    assert choice.refused == {"opw": "needs 6 joints, the URDF has 9", "ur": "needs 6 joints, the URDF has 9"}
+    assert choice.refused == {"opw": "needs 6 joints, the URDF has 7", "ur": "needs 6 joints, the URDF has 7"}
 
 
 def test_base_and_flange_frames_other_than_the_models_are_absorbed(irb: RobotModel) -> None:

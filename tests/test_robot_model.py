@@ -174,10 +174,11 @@ def test_two_ik_solvers_one_interface(robot: RobotModel) -> None:
 
 
 def test_limits_change_rebuilds_the_numeric_solver() -> None:
-    r = RobotModel.from_example_robot_data("panda")          # 7 axes + fingers: no closed-form family
-    from fabric.robot.numeric import NumericIK
-    assert isinstance(r.solver, NumericIK) and r.closed_form is None and r.ik_family == "numeric"
-    assert r.family_choice.refused["opw"] == "needs 6 joints, the URDF has 9"
+    r = RobotModel.from_example_robot_data("panda")          # 7 axes (fingers dropped): no closed-form family
+    from fabric.robot.batch_dls import BatchDLSIK
+    assert isinstance(r.solver, BatchDLSIK) and r.closed_form is None and r.ik_family == "numeric"
+    assert r.family_choice.refused["opw"] == "needs 6 joints, the URDF has 7"
+    assert r.joint_names == [f"panda_joint{j}" for j in range(1, 8)]
     upper = r.upper_rad.copy()
     upper[0] = 0.5
     r.with_limits(upper_rad=upper)

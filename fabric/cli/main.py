@@ -83,7 +83,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = csub.add_parser("show", parents=[common], help="print the cell (robot, frames, plate, home)")
     add_cell_argument(p)
     p.set_defaults(local=_cmd_cell_show)
-    p = csub.add_parser("list", parents=[common], help="the built-in cells: robot, joints, detected IK family")
+    p = csub.add_parser("list", parents=[common],
+                        help="the built-in cells: robot, joints, detected IK family, native export")
     p.set_defaults(local=_cmd_cell_list)
     p = csub.add_parser("export-urdf", parents=[common], help="write robot + tool as one URDF (TCP frame 'tcp')")
     p.add_argument("output")
@@ -208,11 +209,12 @@ def _cmd_cell_list(a: argparse.Namespace) -> int:
     from fabric.robot.cell import DEFAULT_CELL, Cell, builtin_cell_names
     rows = []
     for name in builtin_cell_names():
-        r = Cell.builtin(name).robot
+        cell = Cell.builtin(name)
+        r = cell.robot
         rows.append({"cell": name, "robot": r.name, "joints": r.nq, "ik_family": r.ik_family,
-                     "default": name == DEFAULT_CELL})
+                     "export": cell.native_export, "default": name == DEFAULT_CELL})
     emit(rows, a.json, lambda rs: "\n".join(
-        (f"{x['cell']:<10} {x['robot']:<10} {x['joints']} joints  IK {x['ik_family']:<8}"
+        (f"{x['cell']:<10} {x['robot']:<10} {x['joints']} joints  IK {x['ik_family']:<8} export {x['export']:<8}"
          + ("  (default)" if x["default"] else "")).rstrip() for x in rs))
     return 0
 

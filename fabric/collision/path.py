@@ -91,7 +91,7 @@ class Segments:
 def joint_trajectory(robot: Any, q_from: np.ndarray, q_to: np.ndarray, vel_r: float) -> Any:
     """The Ruckig trajectory the twin runs for a joint move (timed by ``time_program`` on a one-row
     program starting at rest at ``q_from``)."""
-    prog = Program.empty(1)
+    prog = Program.empty(1, nq=len(q_to))
     prog.op[0], prog.q_rad[0], prog.vel_r[0] = MOVEJ, q_to, vel_r
     tl = time_program(prog, robot, start_state=StartState(np.asarray(q_from, float), np.zeros(3),
                                                           np.array([1.0, 0.0, 0.0, 0.0])))

@@ -13,6 +13,11 @@ previous row's joints and TCP so that every row has a well-defined pose.
 Frames: ``xyz_mm`` and ``quat_wxyz`` are the TCP in the *plate frame* (the work
 object); ``q_rad`` are the joints solved for the work object recorded in
 ``wobj`` (4x4, plate frame in the robot base frame, metres-free: mm).
+
+Joints: ``q_rad`` has one column per joint of the arm (``nq``: 6 for the
+IRB 140, KR 6 and UR arms, 7 for the Panda). ``COLUMNS`` lists it with the
+6-axis shape; :func:`column_spec` gives the spec of any ``nq``, and a program
+checks that every row has the same number of joints.
 """
 from __future__ import annotations
 
@@ -33,6 +38,9 @@ SECTION_NAMES = {APPROACH: "Approach", PRINT: "Print", RETURN_HOME: "ReturnHome"
 # Heater ids (``aux`` column of SET_TEMP / WAIT_TEMP rows).
 NOZZLE, BED = 0, 1
 
+JOINTS = "q_rad"                   # the one column whose width is the arm's number of joints
+DEFAULT_NQ = 6
+
 COLUMNS: dict[str, tuple[str, tuple[int, ...]]] = {
     # name: (dtype, trailing shape)
     "op": ("u1", ()),
@@ -49,6 +57,13 @@ COLUMNS: dict[str, tuple[str, tuple[int, ...]]] = {
     "gcode_line": ("i8", ()),     # source line, -1 when none
     "layer": ("i4", ()),          # layer index, -1 outside the print
 }
+
+
+def column_spec(nq: int = DEFAULT_NQ) -> dict[str, tuple[str, tuple[int, ...]]]:
+    """The program columns of an arm with ``nq`` joints (``COLUMNS`` with ``q_rad`` (nq,))."""
+    if not 1 <= int(nq) <= 32:
+        raise ValueError(f"an arm has 1..32 joints, not {nq}")
+    return {**COLUMNS, JOINTS: ("f8", (int(nq),))}
 
 
 @dataclass
@@ -75,7 +90,9 @@ class Program:
 
     def __post_init__(self) -> None:
         n = len(self.op)
-        for name, (dtype, shape) in COLUMNS.items():
+        q = np.asarray(self.q_rad)
+        spec = column_spec(q.shape[1] if q.ndim == 2 and q.shape[1] >= 1 else DEFAULT_NQ)
+        for name, (dtype, shape) in spec.items():
             arr = np.ascontiguousarray(getattr(self, name), dtype=dtype)
             if arr.shape != (n, *shape):
                 raise ValueError(f"program column {name}: shape {arr.shape}, expected {(n, *shape)}")
@@ -85,6 +102,11 @@ class Program:
     def __len__(self) -> int:
         return len(self.op)
 
+    @property
+    def nq(self) -> int:
+        """The number of joints per row (the width of ``q_rad``)."""
+        return int(self.q_rad.shape[1])
+
     def release_pages(self, start: int = 0, stop: int | None = None) -> None:
         """Done with rows ``[start, stop)`` for now: a program mapped from files gives their pages back to the
         OS (they stay readable, from the page cache); a program in memory does nothing. Code that walks a
@@ -93,9 +115,9 @@ class Program:
             self.pager.release(start, stop)
 
     @classmethod
-    def empty(cls, n: int, **meta: Any) -> Program:
-        """A program of ``n`` zeroed rows (quaternions identity, lines/layers -1)."""
-        cols = {name: np.zeros((n, *shape), dtype=dtype) for name, (dtype, shape) in COLUMNS.items()}
+    def empty(cls, n: int, nq: int = DEFAULT_NQ, **meta: Any) -> Program:
+        """A program of ``n`` zeroed rows of ``nq`` joints (quaternions identity, lines/layers -1)."""
+        cols = {name: np.zeros((n, *shape), dtype=dtype) for name, (dtype, shape) in column_spec(nq).items()}
         cols["quat_wxyz"][:, 0] = 1.0
         cols["gcode_line"][:] = -1
         cols["layer"][:] = -1
@@ -154,10 +176,12 @@ class Program:
         return float(np.sum(self.flow_mm3_mm * self.path_length_mm() * (self.op == MOVEL)))
 
 
-def mini_program(rows: list[dict[str, Any]], wobj: np.ndarray) -> Program:
+def mini_program(rows: list[dict[str, Any]], wobj: np.ndarray, nq: int | None = None) -> Program:
     """A small program from explicit rows (column name -> value; others as ``Program.empty``):
     the twin's own moves (lift, lower, retract, home) are timed by the same model."""
-    p = Program.empty(len(rows))
+    if nq is None:                   # the arm's joints: from the first row that has them
+        nq = next((len(np.atleast_1d(r[JOINTS])) for r in rows if JOINTS in r), DEFAULT_NQ)
+    p = Program.empty(len(rows), nq=nq)
     p.wobj = np.asarray(wobj, dtype=float).reshape(4, 4)
     for i, row in enumerate(rows):
         for name, val in row.items():

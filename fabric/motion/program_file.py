@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from fabric.gcode.toolpath import RowColumns
-from fabric.motion.program import COLUMNS, Program
+from fabric.motion.program import COLUMNS, DEFAULT_NQ, Program, column_spec
 
 __all__ = ["MemorySink", "FileSink", "ColumnPager", "ProgramSink", "column_pieces", "PIECE_BYTES"]
 
@@ -107,8 +107,9 @@ def _mapping(arr: np.ndarray) -> tuple[mmap.mmap, int] | None:
 class MemorySink:
     """Program rows appended in blocks to columns in memory."""
 
-    def __init__(self, rows_hint: int = 0, extra: Mapping[str, tuple[str, tuple[int, ...]]] | None = None) -> None:
-        self.spec = {**COLUMNS, **(extra or {})}
+    def __init__(self, rows_hint: int = 0, extra: Mapping[str, tuple[str, tuple[int, ...]]] | None = None,
+                 nq: int = DEFAULT_NQ) -> None:
+        self.spec = {**column_spec(nq), **(extra or {})}
         self._cols = RowColumns(self.spec, rows_hint)
 
     @property
@@ -133,10 +134,10 @@ class FileSink:
     """Program rows appended in blocks to one file per column in ``directory`` (created; see the module doc)."""
 
     def __init__(self, directory: str | os.PathLike[str],
-                 extra: Mapping[str, tuple[str, tuple[int, ...]]] | None = None) -> None:
+                 extra: Mapping[str, tuple[str, tuple[int, ...]]] | None = None, nq: int = DEFAULT_NQ) -> None:
         self.dir = Path(directory)
         self.dir.mkdir(parents=True, exist_ok=True)
-        self.spec = {**COLUMNS, **(extra or {})}
+        self.spec = {**column_spec(nq), **(extra or {})}
         self._files = {k: open(self.dir / f"{k}.col", "wb") for k in self.spec}  # noqa: SIM115  (closed in finish)
         self._n = 0
         self.pager = ColumnPager()

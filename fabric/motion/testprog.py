@@ -63,7 +63,8 @@ def square_program(cell: Any, size_mm: float = 20.0, layers: int = 3, layer_heig
                  "section": RETURN_HOME})
     rows.append({"op": MOVEJ, "home": True, "vel_r": vel_r, "section": RETURN_HOME})
 
-    p = Program.empty(len(rows), bead_width_mm=bead_width_mm, layer_height_mm=layer_height_mm, source="square")
+    p = Program.empty(len(rows), nq=cell.robot.nq, bead_width_mm=bead_width_mm, layer_height_mm=layer_height_mm,
+                      source="square")
     p.wobj = np.asarray(cell.wobj_T(), dtype=float)
     R_tool = rot_x(np.pi)                       # nozzle (TCP +z) pointing down the plate normal
     quat = quat_from_R(R_tool)

@@ -87,9 +87,9 @@ def plan_gcode(text: str | bytes | os.PathLike[str], cell: Any, options: PlanOpt
     chunks = ToolpathChunks(text, chunk_rows=opt.ik_block_rows, chord_tol_mm=opt.chord_tol_mm)
     meta = {"filename": Path(filename).name, "name": program_name(Path(filename).stem)} if filename else {}
     if program_dir is not None:
-        sink: ProgramSink = FileSink(program_dir, extra=_EXTRA)
+        sink: ProgramSink = FileSink(program_dir, extra=_EXTRA, nq=cell.robot.nq)
     else:
-        sink = MemorySink(rows_hint=chunks.size // 12 + 64, extra=_EXTRA)
+        sink = MemorySink(rows_hint=chunks.size // 12 + 64, extra=_EXTRA, nq=cell.robot.nq)
     return _plan_chunks(chunks, cell, opt, progress, meta=meta, on_program=on_program, sink=sink, on_times=on_times)
 
 
@@ -319,8 +319,9 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
     ``meta`` is added to the program's; ``on_program`` gets the program once it is final (see :func:`plan_gcode`).
     """
     opt = options or PlanOptions()
+    sink = MemorySink(rows_hint=2 * len(tp) + 64, extra=_EXTRA, nq=cell.robot.nq)
     return _plan_chunks(_Whole(tp), cell, opt, progress, meta=meta or {}, on_program=on_program,
-                        sink=MemorySink(rows_hint=2 * len(tp) + 64, extra=_EXTRA), parse_s=parse_s)
+                        sink=sink, parse_s=parse_s)
 
 
 # per-row columns kept beside the program: its reach

@@ -74,6 +74,10 @@ class ClosedFormArm(Protocol):
         """
         ...
 
+    def wrist_sin(self, q: np.ndarray) -> np.ndarray:
+        """Distance from the wrist singularity of joints (6, N) as ``|sin|`` of the wrist bend (N,), 0 there."""
+        ...
+
     def wrist_degenerate(self, q: np.ndarray) -> np.ndarray:
         """Rows of joints (6, N) exactly at the wrist singularity, where one wrist angle is free."""
         ...

@@ -43,11 +43,13 @@ if sys.version_info >= (3, 11):
 else:
     import tomli as tomllib
 
-__all__ = ["Cell", "CELLS_DIR", "PACKAGE_DIR", "DEFAULT_CELL", "builtin_cell_names"]
+__all__ = ["Cell", "CELLS_DIR", "PACKAGE_DIR", "DEFAULT_CELL", "NATIVE_EXPORTS", "builtin_cell_names"]
 
 PACKAGE_DIR = Path(__file__).resolve().parent.parent
 CELLS_DIR = PACKAGE_DIR / "cells"
 DEFAULT_CELL = "irb140"          # the built-in cell a service uses when given no cell file
+# robot brand ([robot] brand) -> the export its controller runs; a cell naming no brand exports CSV
+NATIVE_EXPORTS: dict[str, str] = {"abb": "rapid", "kuka": "krl", "ur": "urscript", "franka": "csv", "": "csv"}
 
 
 def builtin_cell_names() -> list[str]:
@@ -57,7 +59,8 @@ def builtin_cell_names() -> list[str]:
 # section -> allowed keys (a trailing "." marks a sub-table)
 _SCHEMA: dict[str, set[str]] = {
     "cell": {"name", "description"},
-    "robot": {"urdf", "example_robot_data", "flange_frame", "name", "base_xyz_mm", "base_rpy_deg"},
+    "robot": {"urdf", "example_robot_data", "flange_frame", "name", "brand", "redundancy_joint", "base_xyz_mm",
+              "base_rpy_deg"},
     "tool": {"tcp_xyz_mm", "tcp_rpy_deg", "body_diameter_mm", "body_length_mm", "nozzle_diameter_mm",
              "nozzle_length_mm", "nozzle_clearance_mm"},
     "table": {"size_mm", "xyz_mm", "rpy_deg"},
@@ -166,6 +169,7 @@ class Cell:
     source_path: str | None = None
     robot_source: str = ""
     description: str = ""
+    brand: str = ""                  # the robot's maker (``NATIVE_EXPORTS``): which export its controller runs
     raw: dict[str, Any] = field(default_factory=dict, repr=False)
 
     # Loading -----------------------------------------------------------
@@ -230,12 +234,24 @@ class Cell:
                               f"[{np.degrees(robot.lower_rad[j]):.1f}, {np.degrees(robot.upper_rad[j]):.1f}]",
                               file=source, key="home.joints_deg", joint=robot.joint_names[j])
         rb, tb, pl = sec["robot"], sec["table"], sec["plate"]
+        hold = rb.text("redundancy_joint") if rb.has("redundancy_joint") else None
+        try:
+            robot.set_posture(home, hold)            # a redundant arm's IK holds this joint at its home value
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: robot.redundancy_joint: {exc}", file=source,
+                              key="robot.redundancy_joint", value=hold) from exc
+        brand = rb.text("brand", default="").lower()
+        if brand not in NATIVE_EXPORTS:
+            known = sorted(b for b in NATIVE_EXPORTS if b)
+            raise ConfigError(f"{source}: robot.brand: {brand!r} is not one of {', '.join(known)}",
+                              file=source, key="robot.brand", value=brand)
         plate_T = _pose(pl.vec("xyz_mm", lo=-5000, hi=5000), pl.vec("rpy_deg", default=[0, 0, 0], lo=-360, hi=360))
         return cls(
             name=c.text("name"),
             description=c.text("description", default=""),
             robot=robot,
             robot_source=robot_source,
+            brand=brand,
             base_T=_pose(rb.vec("base_xyz_mm", default=[0, 0, 0], lo=-1e4, hi=1e4),
                          rb.vec("base_rpy_deg", default=[0, 0, 0], lo=-360, hi=360)),
             table_size_mm=tb.vec("size_mm", lo=1.0, hi=1e4),
@@ -251,6 +267,11 @@ class Cell:
             source_path=None if source == "<cell>" else source,
             raw=doc,
         )
+
+    @property
+    def native_export(self) -> str:
+        """The export format the robot's own controller runs: RAPID (ABB), KRL (KUKA), URScript (UR), else CSV."""
+        return NATIVE_EXPORTS[self.brand]
 
     # Frames --------------------------------------------------------------
     def wobj_T(self) -> np.ndarray:
@@ -278,9 +299,12 @@ class Cell:
             "name": self.name,
             "description": self.description,
             "source_path": self.source_path,
+            "brand": self.brand,
+            "native_export": self.native_export,
             "robot": {"name": r.name, "source": self.robot_source, "flange_frame": r.flange_frame, "nq": r.nq,
                       "joint_names": list(r.joint_names), "closed_form_ik": r.closed_form is not None,
                       "ik_family": r.ik_family, "ik_parameters": r.family_choice.parameters(),
+                      "redundancy_joint": None if r.hold_joint is None else r.joint_names[r.hold_joint],
                       "lower_deg": deg(r.lower_rad), "upper_deg": deg(r.upper_rad),
                       "vel_deg_s": deg(r.vel_limit_rad_s), "acc_deg_s2": deg(r.acc_limit_rad_s2),
                       "jerk_deg_s3": deg(r.jerk_limit_rad_s3), "base": _xyzrpy(self.base_T)},

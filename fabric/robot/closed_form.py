@@ -100,6 +100,10 @@ class ClosedFormIK:
         """TCP -> arm end frame (``inv(flange_T @ tool_T)``; TCP -> flange when the end frame is the flange)."""
         return self._tool_inv
 
+    def wrist_sin(self, q_rad: np.ndarray) -> np.ndarray:
+        """The family's distance from its wrist singularity (``|sin|`` of the wrist bend) for joints (N, 6)."""
+        return self.arm.wrist_sin(np.asarray(q_rad, dtype=float).T)
+
     def canon(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Put single-turn joints of q (..., 6), angles in [-pi, pi], in ``[lower, lower + 2*pi)``.
 

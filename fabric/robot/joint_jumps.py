@@ -39,6 +39,10 @@ class _Nearest(NamedTuple):
 def _nearest_solution(robot: RobotModel, T: np.ndarray, q_prev: np.ndarray) -> _Nearest:
     """Per row, the IK solution of T (M, 4, 4) nearest ``q_prev`` (M, nq), and whether it is valid."""
     cf = robot.closed_form
+    rows_solver = getattr(robot.solver, "solve_rows", None)
+    if cf is None and rows_solver is not None:          # batched DLS: every row from its own previous joints
+        q, status = rows_solver(T, q_prev)
+        return _Nearest(q, status == IK_OK)
     if cf is None:
         out = np.empty_like(q_prev)
         ok = np.empty(len(T), dtype=bool)

@@ -127,6 +127,10 @@ class SphericalWristArm:
         wx, wy = C[0] - self.d6_mm * C[3], C[1] - self.d6_mm * C[4]
         return np.arctan2(wy, wx), wx * wx + wy * wy < 1e-12
 
+    def wrist_sin(self, q: np.ndarray) -> np.ndarray:
+        """``|sin q5|`` of joints (6, N): 0 at the wrist singularity."""
+        return np.abs(np.sin(q[4]))
+
     def wrist_degenerate(self, q: np.ndarray) -> np.ndarray:
         """Rows of joints (6, N) with q5 exactly 0 (only q4 + q6 is defined)."""
         return np.abs(np.sin(q[4])) < 1e-9

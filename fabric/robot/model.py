@@ -12,10 +12,13 @@ exactly the model in use.
 Kinematics: the arm's IK family is detected from its URDF at load time
 (``ik_family.py``: OPW arms such as the IRB 140 and the KUKA KR6 R700,
 UR-type arms; each derived model checked against Pinocchio). For a
-closed-form family FK and IK are its vectorised closed form; otherwise FK
-loops over Pinocchio and IK is the damped-least-squares solver of
-``numeric.py``. The solvers share one interface (``solve(T_tcp_mm, q_seed) ->
-(q, status)``) and the status codes of ``kinematics.py``;
+closed-form family FK and IK are its vectorised closed form; any other arm of
+revolute joints (the 7-axis Panda) gets the batched damped least squares of
+``batch_dls.py`` (FK and IK on every target at once, the redundancy fixed by
+holding one joint at the cell's home, :meth:`RobotModel.set_posture`); an arm
+with other joints gets the per-target Pinocchio solver of ``numeric.py``. The
+solvers share one interface (``solve(T_tcp_mm, q_seed) -> (q, status)``) and
+the status codes of ``kinematics.py``;
 :attr:`RobotModel.solver` is the one in use, :attr:`RobotModel.ik_family`
 names the family.
 
@@ -34,8 +37,10 @@ import numpy as np
 import pinocchio as pin
 
 from fabric.robot import frames
+from fabric.robot.batch_dls import BatchDLSIK
 from fabric.robot.closed_form import ClosedFormIK
 from fabric.robot.ik_family import FamilyChoice, detect_ik_family
+from fabric.robot.joint_axes import joint_axes
 from fabric.robot.numeric import NumericIK
 from fabric.wire.errors import ConfigError, NotFound, ValidationError
 
@@ -72,6 +77,65 @@ class ToolGeometry:
 
 def _f(v: float) -> str:
     return f"{float(v):.12g}"
+
+
+def _arm_urdf(robot_urdf: str, flange_frame: str) -> str:
+    """The robot URDF cut to the arm: the chain from the root to ``flange_frame``.
+
+    Whatever hangs below the flange (a gripper: the Panda's hand and its two
+    finger joints) is dropped, links and joints, because the extruder takes
+    its place; a movable joint anywhere else off the chain is made fixed, so
+    the printing robot's joints are exactly the arm's. A URDF that is only an
+    arm comes back unchanged.
+    """
+    try:
+        root = ET.fromstring(robot_urdf)
+    except ET.ParseError as exc:
+        raise ConfigError(f"robot URDF is not valid XML: {exc}", field="robot.urdf") from exc
+    joints = root.findall("joint")
+    parent_of: dict[str, ET.Element] = {}
+    for j in joints:
+        child = j.find("child")
+        if child is not None and child.get("link"):
+            parent_of[str(child.get("link"))] = j
+    chain: set[str] = set()
+    link: str | None = flange_frame
+    while link is not None and link in parent_of:
+        j = parent_of[link]
+        chain.add(str(j.get("name")))
+        par = j.find("parent")
+        link = None if par is None else par.get("link")
+    below: set[str] = set()
+    frontier = [flange_frame]
+    while frontier:
+        cur = frontier.pop()
+        for j in joints:
+            par, child = j.find("parent"), j.find("child")
+            if par is not None and child is not None and par.get("link") == cur:
+                below.add(str(child.get("link")))
+                frontier.append(str(child.get("link")))
+    changed = False
+    for j in joints:
+        child = j.find("child")
+        if child is not None and child.get("link") in below:
+            root.remove(j)
+            changed = True
+        elif j.get("type") not in ("fixed", None) and j.get("name") not in chain:
+            j.set("type", "fixed")
+            for tag in ("limit", "mimic", "axis", "dynamics", "safety_controller"):
+                for el in j.findall(tag):
+                    j.remove(el)
+            changed = True
+    for el in root.findall("link"):
+        if el.get("name") in below:
+            root.remove(el)
+            changed = True
+    for el in root.findall("transmission"):         # transmissions of dropped joints would name nothing
+        names = {str(jt.get("name")) for jt in el.findall("joint")}
+        if names and not names & chain:
+            root.remove(el)
+            changed = True
+    return ET.tostring(root, encoding="unicode") if changed else robot_urdf
 
 
 def _tool_urdf(robot_urdf: str, flange_frame: str, tool_T: np.ndarray, tool: ToolGeometry) -> str:
@@ -153,8 +217,8 @@ class RobotModel:
         self.tool_T = tool_T.copy()
         self.flange_frame = flange_frame
         self.package_dirs = list(package_dirs or [])
-        self._robot_urdf = urdf_text
-        self._urdf = _tool_urdf(urdf_text, flange_frame, tool_T, self.tool)
+        self._robot_urdf = _arm_urdf(urdf_text, flange_frame)
+        self._urdf = _tool_urdf(self._robot_urdf, flange_frame, tool_T, self.tool)
         self.pin_model = pin.buildModelFromXML(self._urdf)
         if self.pin_model.nq != self.pin_model.nv:
             raise ConfigError(f"robot {name!r} has continuous / multi-dof joints (nq != nv)", robot=name)
@@ -175,7 +239,9 @@ class RobotModel:
         self.family_choice: FamilyChoice = detect_ik_family(self.pin_model, self.flange_frame_id,
                                                             self.lower_rad, self.upper_rad)
         self.closed_form: ClosedFormIK | None = None
-        self.solver: ClosedFormIK | NumericIK
+        self.solver: ClosedFormIK | BatchDLSIK | NumericIK
+        self.posture_rad: np.ndarray | None = None     # where a redundant arm's free parameter is pulled to
+        self.hold_joint: int | None = None             # the joint a redundant arm's IK holds at the posture
         self._build_solver()
 
     # Construction ------------------------------------------------------
@@ -249,6 +315,9 @@ class RobotModel:
             raise ValidationError(f"q needs {self.nq} joints, got shape {q.shape}", field="q")
         if self.closed_form is not None:
             return self.closed_form.fk_flange(q)
+        if isinstance(self.solver, BatchDLSIK):           # its vectorised product of exponentials
+            T = self.solver.fk(q.reshape(-1, self.nq)) @ self._tool_inv
+            return T[0] if q.ndim == 1 else T.reshape(*q.shape[:-1], 4, 4)
         return self.frame_poses(q, self.flange_frame_id)
 
     def frame_poses(self, q: np.ndarray, frame_id: int) -> np.ndarray:
@@ -302,7 +371,26 @@ class RobotModel:
             self.solver = self.closed_form
         else:
             self.closed_form = None
-            self.solver = NumericIK(self.pin_model, self.lower_rad, self.upper_rad, self.tcp_frame_id)
+            axes = joint_axes(self.pin_model, self.flange_frame_id)
+            if axes.revolute.all():             # any revolute arm (the 7-axis Panda): batched DLS on all rows
+                self.solver = BatchDLSIK(axes, self.lower_rad, self.upper_rad, self.tool_T, self.posture_rad,
+                                         self.hold_joint)
+            else:
+                self.solver = NumericIK(self.pin_model, self.lower_rad, self.upper_rad, self.tcp_frame_id)
+
+    def set_posture(self, q_rad: np.ndarray, hold_joint: str | None = None) -> None:
+        """The posture a redundant arm's IK resolves its free parameter towards (a cell's home), and the
+        joint it holds there (``batch_dls.py``); no effect on a closed-form arm."""
+        q = np.asarray(q_rad, dtype=float).reshape(-1)
+        if q.shape != (self.nq,):
+            raise ValidationError(f"posture needs {self.nq} joints", field="posture")
+        if hold_joint is not None and hold_joint not in self.joint_names:
+            raise ConfigError(f"{hold_joint!r} is not a joint of {self.name}", field="robot.redundancy_joint",
+                              value=hold_joint, joints=self.joint_names)
+        self.posture_rad = q.copy()
+        self.hold_joint = None if hold_joint is None else self.joint_names.index(hold_joint)
+        if isinstance(self.solver, BatchDLSIK):
+            self._build_solver()
 
     def _add_collision_pairs(self) -> None:
         """All pairs of geometries except those on the same or on parent/child joints."""

@@ -13,14 +13,15 @@ How theta is chosen, cheapest first:
    subsample of the path (<= ``SAMPLE_ROWS`` rows, all candidates at once per
    IK call) and scored per row: infinite if the IK status is not OK, else a
    penalty for a joint within 15 % of its range from a limit and for
-   ``|sin q5|`` under sin 15 deg (the wrist singularity; closed-form arms).
+   the wrist bend's ``|sin|`` under sin 15 deg (the family's wrist singularity;
+   closed-form arms; a redundant arm's batched IK keeps away from limits itself).
    Candidates feasible on the whole subsample are ranked by their worst row
    cost, then mean cost, then ``|theta|``; the best few are verified on every
    row (IK with continuity from ``q_start``, then a joint-jump test) and the
    first that passes everywhere is used: no wrist motion from the rotation.
 2. **Piecewise rotation (Viterbi).** If no constant theta works, every
    candidate is solved on every row (closed-form arms; cost ``K`` full IK
-   passes, costs kept as float32 (N, K)). Rows are grouped in blocks (at most
+   passes, costs kept as float32 (N, K); also the batched DLS IK of redundant arms). Rows are grouped in blocks (at most
    ``MAX_BLOCKS``), a block's cost for a candidate is the sum of its row costs
    (infeasible rows cost ``INFEASIBLE_COST``), and a Viterbi pass over blocks
    picks the sequence minimising block costs plus ``ROT_CHANGE_COST`` per
@@ -45,6 +46,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from fabric.robot.batch_dls import BatchDLSIK
 from fabric.robot.joint_jumps import joint_jumps
 from fabric.robot.kinematics import IK_JUMP, IK_OK
 from fabric.robot.model import RobotModel
@@ -146,6 +148,8 @@ class _PathSolver:
                  thetas_deg: np.ndarray, jump_rad: float) -> None:
         self.robot = robot
         self.cf = robot.closed_form             # None for numeric-IK arms
+        # solvers that take every row at once (closed form, batched DLS) get the whole-path steps
+        self.batched = self.cf is not None or bool(getattr(robot.solver, "batched", False))
         self.p = p                              # (3, N) TCP positions
         self.fr = fr
         self.q_start = q_start
@@ -200,14 +204,29 @@ class _PathSolver:
             q, status = self.robot.ik(self.poses(rows, theta_deg), seed)
         return JointSolution(q, status)
 
+    def ik_candidates(self, rows: slice | np.ndarray) -> list[JointSolution]:
+        """IK of some rows at every candidate rotation, each continuous from ``q_start``.
+
+        The batched DLS solver gets all candidates in one call (its rows seed each other only
+        within a candidate's run of rows), without retrying failed rows (a candidate failing on the
+        sample is dropped anyway); the closed form takes them one by one (each call is fast).
+        """
+        solver = self.robot.solver
+        if not isinstance(solver, BatchDLSIK):
+            return [self.ik(rows, th, self.q_start) for th in self.thetas]
+        T = np.concatenate([self.poses(rows, th) for th in self.thetas])
+        q, status = solver.solve(T, self.q_start, retry=False)      # feasibility: no retries of failed rows
+        m = len(T) // len(self.thetas)
+        return [JointSolution(q[k * m:(k + 1) * m], status[k * m:(k + 1) * m]) for k in range(len(self.thetas))]
+
     def row_cost(self, q: np.ndarray, status: np.ndarray) -> np.ndarray:
         """Per-row cost of a joint solution (inf when infeasible)."""
         r = self.robot
         span = r.upper_rad - r.lower_rad
         margin = np.min(np.minimum(q - r.lower_rad, r.upper_rad - q) / span, axis=1)
         cost = np.maximum(0.0, LIMIT_MARGIN_R - margin) / LIMIT_MARGIN_R
-        if r.closed_form is not None:
-            cost += np.maximum(0.0, WRIST_SIN_SOFT - np.abs(np.sin(q[:, 4]))) / WRIST_SIN_SOFT
+        if r.closed_form is not None:          # the family's wrist singularity (theta5 = 0 for OPW and UR arms)
+            cost += np.maximum(0.0, WRIST_SIN_SOFT - r.closed_form.wrist_sin(q)) / WRIST_SIN_SOFT
         return np.where(status == IK_OK, cost, np.inf)
 
     def solve(self) -> PathIK:
@@ -217,7 +236,7 @@ class _PathSolver:
             sol = found.solution
             strategy = "constant"
         else:
-            if self.cf is not None:
+            if self.batched:
                 strategy = "viterbi"
                 rot = self._viterbi()
             else:
@@ -241,11 +260,11 @@ class _PathSolver:
 
     def _constant(self) -> ConstantRotation | None:
         """Step 1: the best constant rotation verified on every row, or None."""
-        m = SAMPLE_ROWS if self.cf is not None else SAMPLE_ROWS_NUMERIC
+        m = SAMPLE_ROWS if self.batched else SAMPLE_ROWS_NUMERIC
         rows = np.unique(np.linspace(0, self.n - 1, min(self.n, m)).round().astype(int))
         ranked: list[_Rank] = []
-        for k, th in enumerate(self.thetas):
-            c = self.row_cost(*self.ik(rows, th, self.q_start))
+        for k, (th, sol) in enumerate(zip(self.thetas, self.ik_candidates(rows), strict=True)):
+            c = self.row_cost(*sol)
             if np.all(np.isfinite(c)):
                 ranked.append(_Rank(float(c.max()), float(c.mean()), abs(float(th)), k))
         for rank in sorted(ranked)[:VERIFY_TOP]:
@@ -258,8 +277,8 @@ class _PathSolver:
     def _costs(self) -> np.ndarray:
         """Row costs (N, K) of every candidate (finite; infeasible = INFEASIBLE_COST)."""
         C = np.empty((self.n, len(self.thetas)), dtype=np.float32)
-        for k, th in enumerate(self.thetas):
-            C[:, k] = np.minimum(self.row_cost(*self.ik(slice(None), th, self.q_start)), INFEASIBLE_COST)
+        for k, sol in enumerate(self.ik_candidates(slice(None))):
+            C[:, k] = np.minimum(self.row_cost(*sol), INFEASIBLE_COST)
         return C
 
     def _viterbi(self) -> np.ndarray:

@@ -231,6 +231,10 @@ class URArm:
         return q, ok, sing, gap
 
     # Wrist singularity -----------------------------------------------------
+    def wrist_sin(self, q: np.ndarray) -> np.ndarray:
+        """``|sin theta5|`` of joints (6, N): 0 at the wrist singularity (axes 4 and 6 parallel)."""
+        return np.abs(np.sin(self._theta(q[4], 4)))
+
     def wrist_degenerate(self, q: np.ndarray) -> np.ndarray:
         """Rows of joints (6, N) with sin(theta5) = 0: axes 4 and 6 parallel, A6 free."""
         return np.abs(np.sin(self._theta(q[4], 4))) < 1e-9

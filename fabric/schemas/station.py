@@ -1,6 +1,6 @@
 """Station (digital twin) messages: telemetry, commands and reports.
 
-Small fixed vectors (a pose's 3 coordinates, 6 joints) are plain lists so a
+Small fixed vectors (a pose's 3 coordinates, the arm's joints) are plain lists so a
 monitor needs nothing but msgpack; bulk data elsewhere is packed arrays.
 """
 from __future__ import annotations
@@ -23,7 +23,7 @@ class Pose:
     seq: int                     # the pose stream's sample number: from 1 for each run of the station process,
                                  # +1 per published sample (a ``position`` reply: that of the last sample)
     t_sim_s: float               # the station's simulated clock when sampled
-    q_deg: list[float]           # joint angles A1..An (6 for the bundled robots), degrees
+    q_deg: list[float]           # joint angles A1..An (the arm's joints: 6, or 7 for the Panda cell), degrees
     xyz_mm: list[float]          # TCP in the plate frame (work object), x y z
     quat_wxyz: list[float]       # TCP orientation in the plate frame: unit quaternion w x y z
     base_xyz_mm: list[float]     # TCP in the robot base frame, x y z

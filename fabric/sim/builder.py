@@ -70,7 +70,7 @@ class LegBuilder:
         """Time the twin's own rows from their start pose."""
         s = spec.start
         thermal = spec.thermal.copy() if spec.thermal is not None else None
-        return time_program(mini_program(spec.rows, spec.wobj), self.robot,
+        return time_program(mini_program(spec.rows, spec.wobj, nq=self.robot.nq), self.robot,
                             start_state=StartState(np.asarray(s.q_rad), np.asarray(s.xyz_mm),
                                                    np.asarray(s.quat_wxyz), thermal=thermal, t0_s=spec.t0_s),
                             accel_mm_s2=self.config.accel_mm_s2,

@@ -10,8 +10,8 @@ from fabric.motion.program import MOVEL, Program
 from fabric.robot.frames import R_from_quat
 from fabric.wire.errors import ValidationError
 
-__all__ = ["check_program", "row_blocks", "extrusion_rate", "max_extrusion_rate", "quat_to_rotvec", "R_to_zyx_deg",
-           "quat_to_zyx_deg", "write_lines", "write_ascii"]
+__all__ = ["check_program", "check_six_axes", "row_blocks", "extrusion_rate", "max_extrusion_rate",
+           "quat_to_rotvec", "R_to_zyx_deg", "quat_to_zyx_deg", "write_lines", "write_ascii"]
 
 BLOCK_ROWS = 20_000     # rows formatted per write: output streams, memory stays flat
 CHECK_ROWS = 1 << 18    # rows checked at once
@@ -37,6 +37,16 @@ def check_program(program: Program) -> None:
                 raise ValidationError(f"row {row}: {name} is not finite", field=name, row=row,
                                       gcode_line=int(program.gcode_line[row]))
         program.release_pages(a, b)
+
+
+def check_six_axes(program: Program, language: str) -> None:
+    """Refuse a program of an arm that is not 6-axis in a language whose joint moves have six axes.
+
+    RAPID's ``robax``, KRL's ``A1..A6`` and URScript's ``movej`` take six joints; a 7-axis arm
+    (the Panda) exports as CSV."""
+    if program.nq != 6:
+        raise ValidationError(f"{language} takes the joints of a 6-axis arm, this program has {program.nq} "
+                              "per row: export it as CSV", field="format", value=language, nq=program.nq)
 
 
 def row_blocks(start: int, stop: int, size: int = BLOCK_ROWS) -> Iterator[tuple[int, int]]:

@@ -25,6 +25,7 @@ from fabric.motion.program import MOVEL, Program
 from fabric.planning.post.common import (
     R_to_zyx_deg,
     check_program,
+    check_six_axes,
     max_extrusion_rate,
     quat_to_zyx_deg,
     write_ascii,
@@ -68,6 +69,7 @@ def write_krl(program: Program, src: TextIO, dat: TextIO | None, *, name: str = 
     self-contained file, e.g. for a single download).
     """
     check_program(program)
+    check_six_axes(program, "KRL")
     if not name.isidentifier() or len(name) > 24:
         raise ValidationError("KRL program name must be an identifier of <= 24 chars", field="name", value=name)
     tool = np.eye(4) if tool_T is None else np.asarray(tool_T, dtype=float)

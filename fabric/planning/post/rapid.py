@@ -38,7 +38,14 @@ import numpy as np
 
 from fabric.ahead import AHEAD, WORKERS
 from fabric.motion.program import MOVEJ, MOVEL, Program
-from fabric.planning.post.common import CHECK_ROWS, check_program, row_blocks, write_ascii, write_lines
+from fabric.planning.post.common import (
+    CHECK_ROWS,
+    check_program,
+    check_six_axes,
+    row_blocks,
+    write_ascii,
+    write_lines,
+)
 from fabric.planning.post.numtext import ChoiceColumn, Column, FixedColumn, format_rows, trimmed_text
 from fabric.planning.post.walk import (
     Block,
@@ -139,6 +146,7 @@ def write_rapid(program: Program, sink: TextIO | Callable[[str], TextIO], *,
     (4x4, mm; identity if omitted).
     """
     check_program(program)
+    check_six_axes(program, "RAPID")
     opt = options or RapidOptions()
     tool = np.eye(4) if tool_T is None else np.asarray(tool_T, dtype=float)
     moving = program.op <= MOVEL

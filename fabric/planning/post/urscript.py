@@ -20,7 +20,14 @@ from typing import TextIO
 import numpy as np
 
 from fabric.motion.program import MOVEL, Program
-from fabric.planning.post.common import check_program, max_extrusion_rate, quat_to_rotvec, write_ascii, write_lines
+from fabric.planning.post.common import (
+    check_program,
+    check_six_axes,
+    max_extrusion_rate,
+    quat_to_rotvec,
+    write_ascii,
+    write_lines,
+)
 from fabric.planning.post.numtext import Column, FixedColumn, format_rows
 from fabric.planning.post.walk import (
     Block,
@@ -56,6 +63,7 @@ def write_urscript(program: Program, out: TextIO, *, name: str = "am_print", too
                    joint_speed_rad_s: float = 1.0, accel_m_s2: float = 1.2) -> int:
     """Write ``program`` as a URScript program to ``out``; returns the number of targets."""
     check_program(program)
+    check_six_axes(program, "URScript")
     if not name.isidentifier():
         raise ValidationError("URScript program name must be an identifier", field="name", value=name)
     if not (joint_speed_rad_s > 0 and accel_m_s2 > 0):

@@ -1,4 +1,9 @@
-"""TCP pose and the joints, each against its limits, with a warning when one comes near a limit."""
+"""TCP pose and the joints, each against its limits, with a warning when one comes near a limit.
+
+Any number of joints: one line each while they fit under the TCP line; when the
+panel is shorter than that (a 7-axis arm in the wide layout's 7-line panel)
+the joints go two to a line, in columns.
+"""
 from __future__ import annotations
 
 from typing import Any
@@ -40,9 +45,17 @@ class JointsPanel(Static):
             return Text("waiting for the pose ...", style="dim")
         x, y, z = p.xyz_mm
         out = Text(f"TCP {x:7.1f} {y:7.1f} {z:6.1f} mm\n", no_wrap=True, overflow="crop")
-        lower, upper = self.limits if self.limits else ([None] * len(p.q_deg), [None] * len(p.q_deg))
-        for i, q in enumerate(p.q_deg):
-            out.append(joint_line(i, q, lower[i], upper[i]))
-            if i < len(p.q_deg) - 1:
+        n = len(p.q_deg)
+        lower, upper = self.limits if self.limits and len(self.limits[0]) == n else ([None] * n, [None] * n)
+        lines = [joint_line(i, q, lower[i], upper[i]) for i, q in enumerate(p.q_deg)]
+        rows = self.content_size.height - 1             # under the TCP line (0 before the first layout)
+        per_line = 2 if 0 < rows < n else 1
+        width = max((t.cell_len for t in lines), default=0) + 2
+        for k in range(0, n, per_line):
+            for j, text in enumerate(lines[k:k + per_line]):
+                if j:
+                    out.append(" " * (width - lines[k].cell_len))
+                out.append(text)
+            if k + per_line < n:
                 out.append("\n")
         return out

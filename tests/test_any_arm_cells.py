@@ -1,0 +1,98 @@
+"""Any arm (issue 20): the Panda (7 axes), the UR10 and the KR 6 R700 print the sample part through the real services.
+
+Each cell runs as the five service processes a user's ``fabric-cli up --cell-config NAME`` starts; the
+print job goes slice -> plan -> collision check -> station at rtf 0, and its program comes back from
+the planner in the cell's native export (RAPID, KRL, URScript; CSV for the Panda) with one joint
+column per axis. The station's pose carries the arm's joints.
+"""
+from __future__ import annotations
+
+import io
+import threading
+from dataclasses import replace
+
+import msgpack
+import numpy as np
+import pytest
+import zenoh
+
+from fabric import schemas as s
+from fabric.cli.up import CellProcesses
+from fabric.client import Client
+from fabric.client.follow import follow_print
+from fabric.demo import sample_model
+from fabric.robot.cell import Cell
+
+from conftest import make_settings
+
+pytestmark = pytest.mark.timeout(300)
+
+CELL_SERVICES = ("station", "slicer", "planner", "collision")      # the services that read the cell model
+
+
+@pytest.fixture(scope="module", params=["panda", "ur10", "kr6r700"])
+def cell_up(request, tmp_path_factory):
+    """The five services of one built-in cell, started as processes and awaited by liveliness."""
+    name = request.param
+    st = make_settings()
+    cell = CellProcesses(st, log_dir=tmp_path_factory.mktemp(f"{name}-logs"),
+                         data_dir=tmp_path_factory.mktemp(f"{name}-data"),
+                         extra_args={svc: ["--cell-config", name] for svc in CELL_SERVICES})
+    cell.start(deadline_s=120.0)
+    try:
+        yield name, cell
+    finally:
+        cell.stop()
+
+
+def test_the_sample_part_prints_on_the_cell(cell_up) -> None:
+    name, procs = cell_up
+    model_cell = Cell.builtin(name)
+    nq = model_cell.robot.nq
+    joints: list[int] = []
+    lock = threading.Lock()
+
+    def on_pose(sample: zenoh.Sample) -> None:       # a plain monitor: msgpack only
+        msg = msgpack.unpackb(sample.payload.to_bytes())
+        with lock:
+            joints.append(len(msg["q_deg"]))
+
+    with Client.connect(procs.client_settings) as client:
+        client.wait_alive(deadline_s=60)
+        sub = client.session.declare_subscriber(f"am/{procs.cell}/station/pose", on_pose)
+        model = sample_model()
+        acc = client.submit(s.JobSubmit(model=model.read_bytes(), filename=model.name, profile="robot-1.2mm",
+                                        start=True, rtf=0.0))
+        client.wait_print_job(acc.job_id, lambda r: r.state in ("printing", "loaded", "finished"), timeout=240)
+        end = follow_print(client, timeout_s=240)
+        assert end.kind == "finished"
+        rec = client.wait_print_job(acc.job_id, lambda r: False, timeout=30)
+        sub.undeclare()
+        assert rec.state == "finished" and rec.collisions is not None and rec.collisions.collision_free
+        assert rec.plan is not None and rec.plan.runnable and rec.plan.feasible_r == 1.0
+        assert rec.deposited_mm3 == pytest.approx(rec.plan.extruded_mm3, rel=1e-6)
+        with lock:
+            assert joints and set(joints) == {nq}, f"poses with {set(joints)} joints, the arm has {nq}"
+
+        # the program in the cell's native export, and as CSV with one column per joint
+        native = io.BytesIO()
+        assert client.export_to(rec.program_id, model_cell.native_export, native) > 1000
+        text = native.getvalue().decode("latin-1")
+        marker = {"rapid": "MoveL", "krl": "LIN", "urscript": "movel(", "csv": "q1_deg"}[model_cell.native_export]
+        assert marker in text
+        csv = io.BytesIO()
+        client.export_to(rec.program_id, "csv", csv)
+        header, first = csv.getvalue().decode().splitlines()[:2]
+        cols = header.split(",")
+        assert [c for c in cols if c.startswith("q")][4:] == [f"q{j + 1}_deg" for j in range(nq)]
+        q_first = np.radians([float(v) for v in first.split(",")[8:8 + nq]])
+        assert model_cell.robot.within_limits(q_first)[0]
+
+
+def test_up_starts_services_with_the_named_cell(cell_up) -> None:
+    name, procs = cell_up
+    with Client.connect(replace(procs.client_settings, mode="client")) as client:
+        client.wait_alive(deadline_s=60)
+        state = client.state()
+    wobj = Cell.builtin(name).wobj_T()[:3, 3]
+    np.testing.assert_allclose(state.wobj_xyz_mm, wobj, atol=1e-6)      # the station runs that cell

@@ -1,0 +1,121 @@
+"""Planning benchmark on every built-in cell: one G-code raster -> verified joint program + CSV, against per-point DLS.
+
+For each cell of ``fabric/cells/`` (the IRB 140, KR 6 R700, UR5, UR10 with
+their closed forms, the 7-axis Panda with the batched DLS of
+``fabric/robot/batch_dls.py``) the same layered serpentine raster
+(``plan_bench.write_raster``, ``n_moves`` moves, placed on that cell's plate by
+its work object) is planned with :func:`fabric.planning.plan_gcode_file` (parse,
+map, path IK with the free nozzle rotation and the joint-jump test,
+reachability, cycle time) and written as CSV (``q1_deg .. qN_deg``), the work
+``fabric-cli plan FILE --csv OUT`` asks of the planner, here in one process.
+The baseline, in the same process, is ``dls_ik_warm`` of
+``tools/bench/ik_baseline.py`` (per-point Pinocchio damped least squares,
+warm-started along the path) on ``n_dls`` consecutive planned targets of the
+same cell. Writes ``docs/bench/plan_cells.md`` and ``plan_cells.json``.
+
+    .venv/bin/python tools/bench/plan_cells_bench.py [n_moves] [n_dls]
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from ik_baseline import dls_ik_warm  # noqa: E402
+from plan_bench import write_raster  # noqa: E402
+
+from fabric.motion.program import MOVEL  # noqa: E402
+from fabric.planning import PlanOptions, plan_gcode_file  # noqa: E402
+from fabric.planning.post import write_csv  # noqa: E402
+from fabric.robot.cell import Cell, builtin_cell_names  # noqa: E402
+from fabric.robot.frames import R_from_quat, make_T  # noqa: E402
+
+
+def bench_cell(name: str, gcode: Path, moves: int, n_dls: int, tmp: Path) -> dict[str, object]:
+    cell = Cell.builtin(name)
+    t0 = time.perf_counter()
+    res = plan_gcode_file(gcode, cell, PlanOptions())
+    plan_s = time.perf_counter() - t0
+    prog = res.program
+    out = tmp / f"{name}.csv"
+    t0 = time.perf_counter()
+    with open(out, "w", newline="\n") as f:
+        rows_written = write_csv(prog, f)
+    csv_s = time.perf_counter() - t0
+    header = out.open().readline().strip().split(",")
+    # the per-point baseline on consecutive planned targets from the middle of the path
+    motion = np.flatnonzero(prog.op == MOVEL)
+    a = len(motion) // 2
+    rows = motion[a:a + n_dls]
+    T = prog.wobj @ make_T(R_from_quat(prog.quat_wxyz[rows]), prog.xyz_mm[rows])
+    t0 = time.perf_counter()
+    _q, ok = dls_ik_warm(cell.robot, T, prog.q_rad[motion[a - 1]], prog.q_rad[motion[a - 2]])
+    dls_s = time.perf_counter() - t0
+    st = res.stats
+    return {
+        "cell": name, "ik": "closed form (" + cell.robot.ik_family + ")" if cell.robot.closed_form is not None
+        else "batched DLS", "joints": cell.robot.nq, "moves": moves, "feasible_r": res.report.feasible_r,
+        "plan_s": plan_s, "ik_s": st.ik_s, "plan_moves_per_s": st.moves / plan_s,
+        "csv_s": csv_s, "csv_rows": rows_written, "csv_joint_columns": sum(c.endswith("_deg") for c in header),
+        "plan_and_csv_moves_per_s": st.moves / (plan_s + csv_s),
+        "dls_targets": len(rows), "dls_targets_per_s": len(rows) / dls_s, "dls_converged_r": float(ok.mean()),
+        "plan_vs_dls_x": (st.moves / plan_s) / (len(rows) / dls_s),
+    }
+
+
+def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
+    lines = [
+        "# Planning on every built-in cell against per-point DLS IK",
+        "",
+        f"`.venv/bin/python tools/bench/plan_cells_bench.py {meta['n_moves']} {meta['n_dls']}` on "
+        f"{meta['machine']} ({meta['cpus']} CPUs, shared with other work: read the ratios, not the absolute rates).",
+        "",
+        "The same layered serpentine raster on each cell's plate, planned by `plan_gcode_file` (parse, map, "
+        "path IK with the free nozzle rotation and the joint-jump test, reachability, cycle time) and written "
+        "as CSV (one `qN_deg` column per joint), in one process; the baseline is per-point Pinocchio DLS "
+        "warm-started along the path (`tools/bench/ik_baseline.py`) on consecutive planned targets of the "
+        "same cell.",
+        "",
+        "| cell | IK | joints | moves | reachable | plan (s) | of which IK (s) | plan (moves/s) | CSV (s) "
+        "| plan + CSV (moves/s) | DLS (targets/s) | plan / DLS |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['cell']} | {r['ik']} | {r['joints']} | {r['moves']:,} "
+            f"| {100 * float(r['feasible_r']):.2f} % | {r['plan_s']:.2f} "          # type: ignore[arg-type]
+            f"| {r['ik_s']:.2f} | {r['plan_moves_per_s']:,.0f} | {r['csv_s']:.2f} "
+            f"| {r['plan_and_csv_moves_per_s']:,.0f} | {r['dls_targets_per_s']:,.0f} | {r['plan_vs_dls_x']:,.1f}x |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str]) -> None:
+    n_moves = int(argv[1]) if len(argv) > 1 else 200_000
+    n_dls = int(argv[2]) if len(argv) > 2 else 3000
+    rows = []
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        gcode = tmp / "raster.gcode"
+        moves = write_raster(gcode, n_moves)
+        for name in builtin_cell_names():
+            rows.append(bench_cell(name, gcode, moves, n_dls, tmp))
+            print(json.dumps(rows[-1]), flush=True)
+    meta = {"n_moves": n_moves, "n_dls": n_dls, "machine": platform.machine(), "cpus": os.cpu_count(),
+            "python": platform.python_version(), "numpy": np.__version__}
+    out = ROOT / "docs" / "bench"
+    (out / "plan_cells.json").write_text(json.dumps({"meta": meta, "cells": rows}, indent=2))
+    (out / "plan_cells.md").write_text(report(rows, meta))
+
+
+if __name__ == "__main__":
+    main(sys.argv)
