@@ -266,7 +266,9 @@ class _PathSolver:
         for k, (th, sol) in enumerate(zip(self.thetas, self.ik_candidates(rows), strict=True)):
             c = self.row_cost(*sol)
             if np.all(np.isfinite(c)):
-                ranked.append(_Rank(float(c.max()), float(c.mean()), abs(float(th)), k))
+                # costs equal but for rounding are a tie (the smallest rotation wins): a rotation about the
+                # nozzle changes only A6 on a vertical nozzle, and the same path cut into blocks must rank alike
+                ranked.append(_Rank(round(float(c.max()), 9), round(float(c.mean()), 9), abs(float(th)), k))
         for rank in sorted(ranked)[:VERIFY_TOP]:
             theta = float(self.thetas[rank.candidate])
             sol = self._final(theta)
