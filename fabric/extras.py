@@ -18,7 +18,8 @@ __all__ = ["EXTRAS", "extra_of", "missing_extra", "require"]
 EXTRAS: dict[str, dict[str, str]] = {
     "services": {"pin": "pinocchio", "coal": "coal", "example-robot-data-loaders": "example_robot_data",
                  "trimesh": "trimesh", "shapely": "shapely", "manifold3d": "manifold3d",
-                 "mapbox-earcut": "mapbox_earcut", "networkx": "networkx", "scipy": "scipy", "ruckig": "ruckig"},
+                 "mapbox-earcut": "mapbox_earcut", "networkx": "networkx", "scipy": "scipy", "ruckig": "ruckig",
+                 "tetgen": "tetgen"},
     "tui": {"textual": "textual"},
     "record": {"pyarrow": "pyarrow", "matplotlib": "matplotlib"},
 }

@@ -318,6 +318,7 @@ def render() -> str:
             "[Versions](#versions-_v), [Commands](#commands), [Errors](#errors), [Telemetry](#telemetry), "
             "[Time bases](#time-bases), [Station states](#station-states), [Events](#events), "
             "[Print jobs](#print-jobs), [Slicing and planning jobs](#slicing-and-planning-jobs), "
+            "[Multi-axis G-code](#multi-axis-g-code-curved-layers), "
             "[Artifacts](#artifacts), [A plain client](#a-client-with-nothing-but-zenoh-and-msgpack), "
             "[Worked examples](#worked-examples), [Messages](#messages).\n"]
     out = head
@@ -327,7 +328,7 @@ def render() -> str:
     out += _commands_table()
     out.append("")
     for key in ("errors", "telemetry", "time_bases", "station_states", "events", "print_jobs", "pipeline_jobs",
-                "artifacts", "plain_client"):
+                "multiaxis", "artifacts", "plain_client"):
         out.append(_fill(prose.SECTIONS[key], values))
     out += _examples_md()
     out += _messages()

@@ -44,7 +44,7 @@ def _progress(quiet: bool):
 def cmd_slice(c: Client, a: argparse.Namespace) -> int:
     req = s.SliceRequest(**model_source(c, read_input(a.model)), filename=Path(a.model).name, profile=a.profile,
                          backend=a.backend, overrides=parse_sets(a.set),
-                         center_xy_mm=list(a.center) if a.center else None)
+                         center_xy_mm=list(a.center) if a.center else None, layers=a.layers)
     acc = c.slice(req)
     st = c.wait_job("slicer", acc.job_id, on_progress=_progress(a.json))
     if not a.json:
@@ -124,6 +124,8 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--profile", default="taz-pla-medium")
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a profile key")
     p.add_argument("--center", nargs=2, type=float, metavar=("X_MM", "Y_MM"), help="part centre on the plate")
+    p.add_argument("--layers", default="planar", choices=s.pipeline.LAYER_MODES,
+                   help="planar layers, or curved layers with a tilted nozzle (builtin; multi-axis G-code)")
     p.set_defaults(run=cmd_slice)
 
     p = sub.add_parser("plan", parents=[common], help="plan G-code into a robot program; export it")

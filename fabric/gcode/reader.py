@@ -11,7 +11,7 @@ from fabric.gcode.dialects import detect_slicer
 from fabric.gcode.interp import ChunkSummary, Interpreter, LexedBlock, lex_and_tabulate
 from fabric.gcode.material import HEAD_BYTES, Material, read_material
 from fabric.gcode.toolpath import Toolpath
-from fabric.wire.errors import NotFound, ValidationError
+from fabric.wire.errors import GcodeError, NotFound, ValidationError
 
 __all__ = ["parse_gcode", "parse_gcode_file", "iter_blocks", "ToolpathChunks", "BLOCK_BYTES"]
 
@@ -62,6 +62,19 @@ def _check(chord_tol_mm: float, block_bytes: int) -> None:
         raise ValidationError("block_bytes must be >= 1024", field="block_bytes", value=block_bytes)
 
 
+MULTIAXIS_MARK = b"; multiaxis:"          # the first line of the multi-axis dialect (fabric.slicing.curved.gcode)
+
+
+def refuse_multiaxis(head: bytes) -> None:
+    """Refuse G-code in the multi-axis dialect (a nozzle axis I J K on every move): the planner does not plan
+    a tilted nozzle yet, and planning the file with a vertical one would print another part."""
+    if MULTIAXIS_MARK in head[:4096]:
+        raise GcodeError("this G-code is in the multi-axis dialect (curved layers, every move with its nozzle axis "
+                         "I J K: fabric-cli slice --layers curved): the planner plans a vertical nozzle only, which "
+                         "would print another part, so it is refused; slice with planar layers to print it now",
+                         line=1, text=head.split(b"\n", 1)[0].decode("utf-8", "replace"), dialect="multiaxis")
+
+
 def parse_gcode(source: str | bytes | bytearray | memoryview, *, chord_tol_mm: float = 0.01,
                 block_bytes: int = BLOCK_BYTES,
                 progress: Callable[[float], None] | None = None) -> Toolpath:
@@ -77,6 +90,7 @@ def parse_gcode(source: str | bytes | bytearray | memoryview, *, chord_tol_mm: f
     else:
         data = source if isinstance(source, (bytes, bytearray)) else bytes(source)
     view = memoryview(data).cast("B")
+    refuse_multiaxis(bytes(view[:4096]))
     interp = Interpreter(chord_tol_mm, rows_hint=len(data) // 12)
     n, pos = len(view), 0
     for lexed in lexed_blocks(_memory_blocks(data, view, block_bytes)):
@@ -104,6 +118,8 @@ def parse_gcode_file(path: str | os.PathLike[str], *, chord_tol_mm: float = 0.01
     interp = Interpreter(chord_tol_mm, rows_hint=size // 12)      # moves take >= ~12 bytes of text
     done = 0
     with stream:
+        refuse_multiaxis(stream.read(4096))
+        stream.seek(0)
         for lexed in lexed_blocks(iter_blocks(stream, block_bytes)):
             interp.feed_lexed(lexed)
             done += len(lexed.block)
@@ -161,6 +177,7 @@ class ToolpathChunks:
             self.head = bytes(view[:HEAD_BYTES])
             self.tail = bytes(view[max(self.size - HEAD_BYTES, HEAD_BYTES):])
         self.slicer = detect_slicer(self.head[:8192])
+        refuse_multiaxis(self.head)
 
     def material(self, n_lines: int = 0) -> Material:
         """What the file's comments state (``n_lines``, the file's line count, names the lines of errors in its

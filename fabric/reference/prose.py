@@ -298,6 +298,21 @@ at most @@jobs_max@@) from the `offset`-th (0-based) in queue order, of `states`
 reply's `total` is how many match in all and `offset` echoes the place of its first record. Page on with
 `offset + len(jobs)` until it reaches `total`. `common.Empty` (what older clients send) asks the first
 page. `job_move` answers with the first page of the queue after the move (up to 100 records, and `total`).
+
+**The file library.** Every file submitted enters the supervisor's library once per content and name
+(`supervisor.LibraryFile`: its `file_id`, size, when it was added and last used, how many jobs were made
+from it, the last job's id, state, settings and plan figures); `supervisor/file_add` keeps a file without
+printing it. `supervisor/files` pages through it, most recently used first (`FilesQuery.name_contains`
+filters); `supervisor/file` reads one entry (by its id or a unique start of 6 characters or more);
+`supervisor/file_remove` forgets it (the records of its jobs stay). A `JobSubmit` with `model` empty and
+`file_id` set prints a library file again (give the settings: the entry's are what its last job used).
+A submission that is refused leaves no entry.
+
+**By hand, while no print is on** (station idle, ready, stopped or fault, and not moving):
+`station/jog` moves the nozzle straight by a vector in the plate frame (at most 200 mm a command), certified
+against the table, the plate and the part first (a hit is a `collision` error of kind `jog`);
+`station/extrude` pushes or pulls filament with the robot still, refused below the material's minimum
+extrusion temperature (the loaded program's, else 170 C). Events `jogged` and `extruded` say when each ended.
 """
 
 PIPELINE_JOBS = """\
@@ -314,6 +329,28 @@ statuses of its last jobs in memory only: after a restart, ask for the result by
 the last piece ended; at most @@chunk_max_mb@@ MB each, the client sends @@chunk_mb@@ MB), the last with the
 whole input's `sha256`; once `done`, name the `upload_id` in the request (`SliceRequest.upload_id`,
 `PlanRequest.upload_id`) with an empty inline field. Inline inputs up to @@inline_mb@@ MB are usual.
+"""
+
+MULTIAXIS = """\
+## Multi-axis G-code (curved layers)
+
+A G-code file whose first line is `; multiaxis: nozzle axis in I J K` is in the multi-axis dialect, written
+by `fabric-cli slice --layers curved` (`SliceRequest.layers` "curved", built-in back-end only).
+
+- `G1 X Y Z I J K E F` is an extruding move: X Y Z the nozzle tip in the plate frame (mm, absolute, G90);
+  I J K the nozzle axis as a unit vector in the plate frame, pointing from the tip up the nozzle (`I0 J0 K1`
+  is a vertical nozzle, the tilt is acos K); E filament in mm, relative (M83); F mm/min, modal.
+- `G0 X Y Z I J K F` is a travel, with the same meaning.
+- The axis is modal like X Y Z (the built-in writer repeats it on every move); readers normalise (I, J, K)
+  and a zero vector is an error. In this dialect I J K are never arc offsets (no G2/G3).
+- Rotation about the nozzle axis is free: the planner chooses it.
+- Markers are those of planar G-code: `;LAYER_CHANGE`, `;Z:` (the layer's highest tip), `;HEIGHT:` (the
+  nominal thickness; the real one varies along a curved layer and is carried by E), `;TYPE:`, `;WIDTH:`.
+- Header lines `; curved: key = value` state the slice's measured figures (overhang_mm2 and
+  planar_overhang_mm2, thickness_min_mm and thickness_max_mm, max_tilt_deg, max_neighbour_deg, cusp_mean_mm,
+  ...).
+- A reader that does not implement the dialect must not plan the file with a vertical tool. This release's
+  planner does not plan a tilted nozzle yet: it refuses such a file with a `gcode` error naming line 1.
 """
 
 ARTIFACTS = """\
@@ -378,4 +415,5 @@ nothing of this project.
 SECTIONS = {"transport": TRANSPORT, "keys": KEYS, "payloads": PAYLOADS, "versions": VERSIONS,
             "commands": COMMANDS, "errors": ERRORS, "telemetry": TELEMETRY, "time_bases": TIME_BASES,
             "station_states": STATION_STATES, "events": EVENTS, "print_jobs": PRINT_JOBS,
-            "pipeline_jobs": PIPELINE_JOBS, "artifacts": ARTIFACTS, "plain_client": PLAIN_CLIENT}
+            "pipeline_jobs": PIPELINE_JOBS, "multiaxis": MULTIAXIS, "artifacts": ARTIFACTS,
+            "plain_client": PLAIN_CLIENT}

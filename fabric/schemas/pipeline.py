@@ -10,6 +10,7 @@ from fabric.schemas.common import ErrorReply
 from fabric.wire.errors import COLD_EXTRUSION_REASONS, UNREACHABLE_REASONS, ValidationError
 
 BACKENDS = ("builtin", "prusaslicer", "slic3r")
+LAYER_MODES = ("planar", "curved")      # flat layers, or curved layers with a tilted nozzle (builtin only)
 EXPORT_FORMATS = ("rapid", "krl", "urscript", "csv")
 JOB_SOURCES = ("model", "gcode")
 GCODE_SUFFIXES = (".gcode", ".gco", ".g", ".nc")   # a file named so is G-code (JobSubmit source "" infers it)
@@ -24,9 +25,12 @@ MATERIAL_SOURCES = ("option", "gcode", "assumed")  # where a plan's filament dia
 
 # --- slicer ------------------------------------------------------------------
 
-@schema("slicer.SliceRequest", version=2)
+@schema("slicer.SliceRequest", version=3)
 class SliceRequest:
-    """Slice a model sent as bytes (so the slicer may run on another host), inline or uploaded in chunks."""
+    """Slice a model sent as bytes (so the slicer may run on another host), inline or uploaded in chunks.
+
+    Version 3: ``layers`` "curved" slices along curved layers (builtin back-end only) and writes the
+    multi-axis G-code dialect (every move carries the nozzle axis as I J K)."""
     model: bytes                    # the model file's bytes (STL, OBJ or 3MF); empty when ``upload_id`` is given
     filename: str = f(max_len=255)  # its file name: the suffix (.stl, .obj, .3mf) says the format
     profile: str = "taz-pla-medium"     # the slicing profile (``slicer/backends`` lists them)
@@ -35,6 +39,7 @@ class SliceRequest:
     center_xy_mm: list[float] | None = f(default=None, shape=(2,))  # where the part's center goes, plate frame
                                                                     # (nil: the plate's center)
     upload_id: str = f(default="", max_len=64)      # a model sent in chunks to slicer/upload (``model`` is empty)
+    layers: str = f(default="planar", choices=LAYER_MODES)   # planar, or curved (builtin only; multi-axis G-code)
 
 
 @schema("slicer.SliceResult", version=2)
@@ -161,9 +166,9 @@ class ProgramMsg:
     Stored as a planner artifact (media type ``application/x-am-fabric-program+msgpack``) whose id is the
     sha256 of this message's bytes. Every column has one row per instruction (n rows): ``op`` (u1:
     0 MoveJ, 1 MoveL, 2 Wait, 3 SetTemp, 4 WaitTemp, 5 Retract), ``section`` (u1: 0 approach, 1 print,
-    2 return home), ``q_rad`` (f8, n x 6: joint targets), ``xyz_mm`` (f8, n x 3) and ``quat_wxyz`` (f8,
-    n x 4): the TCP target in the plate frame, ``speed_mm_s`` (f8: MoveL TCP speed), ``vel_r`` (f8: MoveJ
-    share of the joints' velocity limits), ``zone_mm`` (f8: blending zone, 0 = stop point),
+    2 return home), ``q_rad`` (f8, n x nq: joint targets, nq the arm's joints), ``xyz_mm`` (f8, n x 3)
+    and ``quat_wxyz`` (f8, n x 4): the TCP target in the plate frame, ``speed_mm_s`` (f8: MoveL TCP speed),
+    ``vel_r`` (f8: MoveJ share of the joints' velocity limits), ``zone_mm`` (f8: blending zone, 0 = stop point),
     ``flow_mm3_mm`` (f8: volume deposited per mm of path, 0 = extruder off), ``value`` (f8: Wait seconds,
     SetTemp/WaitTemp Celsius, Retract filament mm, negative = retract), ``aux`` (i2: heater of
     SetTemp/WaitTemp, 0 nozzle, 1 bed), ``gcode_line`` (i8: source line, -1 none) and ``layer`` (i4:

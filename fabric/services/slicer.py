@@ -17,7 +17,7 @@ from fabric.server.service import Service
 from fabric.server.uploads import UploadStore
 from fabric.slicing import Placement, available_backends, list_profiles, load_profile, slice_model
 from fabric.wire.config import add_cell_argument, service_data_dir
-from fabric.wire.errors import NotFound
+from fabric.wire.errors import BadRequest, NotFound
 
 __all__ = ["SlicerService", "build", "add_arguments"]
 
@@ -47,6 +47,8 @@ class SlicerService(Service):
 
     def on_slice(self, req: s.SliceRequest) -> s.JobAccepted:
         profile = load_profile(req.profile, req.overrides)     # a bad profile fails now, not in the job
+        if req.layers == "curved" and req.backend != "builtin":
+            raise BadRequest(f"curved layers need the builtin back-end, not {req.backend!r}", backend=req.backend)
         size = self.uploads.path(req.upload_id).stat().st_size if req.upload_id else len(req.model)
         require_room(self.data_dir, GCODE_PER_MODEL_BYTE * size, self.name, "slicing this model")
         backends = available_backends()
@@ -69,7 +71,7 @@ class SlicerService(Service):
         model = self.uploads.path(req.upload_id).read_bytes() if req.upload_id else req.model
         res = slice_model(model, req.filename, profile, backend=req.backend, placement=placement,
                           plate_size_mm=self.plate_size_mm, build_height_mm=self.build_height_mm,
-                          progress=lambda fr: job.progress(fr, "slicing"))
+                          progress=lambda fr: job.progress(fr, "slicing"), layers=req.layers)
         data = res.gcode.encode() if isinstance(res.gcode, str) else bytes(res.gcode)
         name = req.filename.rsplit(".", 1)[0] + ".gcode"
         gid = self.store_artifact(s.Artifact(artifact_id=content_id(data), name=name,
@@ -77,7 +79,9 @@ class SlicerService(Service):
         result = s.SliceResult(gcode_id=gid, backend=res.backend, layers=int(res.layers),
                                extruded_mm3=float(res.extruded_mm3), filament_mm=float(res.filament_mm),
                                model_volume_mm3=float(res.model_volume_mm3), faces=int(res.faces),
-                               elapsed_s=float(res.elapsed_s), warnings=list(res.warnings))
+                               elapsed_s=float(res.elapsed_s), warnings=list(res.warnings),
+                               retractions=int(res.retractions), travel_mm=float(res.travel_mm),
+                               bridge_area_mm2=float(res.bridge_area_mm2))
         self.records.put("slice", gid, result)
         return gid
 

@@ -21,11 +21,12 @@ from fabric.slicing.gcode_stats import gcode_stats
 from fabric.slicing.mesh import load_mesh
 from fabric.slicing.placement import Placement, place_mesh
 from fabric.slicing.profile import Profile
-from fabric.wire.errors import NotFound
+from fabric.wire.errors import BadRequest, NotFound
 
 __all__ = ["SliceResult", "slice_model", "available_backends", "BACKENDS"]
 
 BACKENDS = ("builtin", *EXTERNAL)
+LAYER_MODES = ("planar", "curved")
 
 
 @dataclass
@@ -37,7 +38,11 @@ class SliceResult:
     use. ``bbox_mm`` is the placed part's bounding box ``[[xmin, ymin, zmin],
     [xmax, ymax, zmax]]`` in bed coordinates. ``elapsed_s`` is the whole call:
     loading, repair, placement and slicing (for external back-ends, their
-    process start included).
+    process start included). ``retractions`` counts the retractions (each a
+    stop of the nozzle), ``travel_mm`` the XY length of the non-extruding
+    moves, both read from the G-code for every back-end; ``bridge_area_mm2``
+    is the area printed as bridges, summed over layers (for an external
+    back-end estimated as its bridge volume over the layer height).
     """
 
     gcode: str
@@ -50,6 +55,9 @@ class SliceResult:
     bbox_mm: list[list[float]]
     warnings: list[str] = field(default_factory=list)
     elapsed_s: float = 0.0
+    retractions: int = 0
+    travel_mm: float = 0.0
+    bridge_area_mm2: float = 0.0
 
 
 def _builtin_version() -> str:
@@ -70,16 +78,21 @@ def available_backends() -> dict[str, str | None]:
 def slice_model(data: bytes, filename: str, profile: Profile, backend: str = "builtin",
                 placement: Placement | None = None, plate_size_mm: tuple[float, float] = (250.0, 250.0),
                 build_height_mm: float = 250.0,
-                progress: Callable[[float], None] | None = None) -> SliceResult:
+                progress: Callable[[float], None] | None = None, layers: str = "planar") -> SliceResult:
     """Slice a model given as bytes (format from ``filename``'s suffix) with ``profile`` on ``backend``.
 
-    Raises NotFound (unknown or missing back-end), MeshError, PlacementError,
-    SlicerError (an external slicer failed).
+    ``layers`` "curved" runs the built-in curved-layer slicer (:mod:`.curved`), which writes the
+    multi-axis dialect. Raises NotFound (unknown or missing back-end), BadRequest (curved layers on
+    an external back-end), MeshError, PlacementError, SlicerError (an external slicer failed).
     """
     t0 = time.perf_counter()
     if backend not in BACKENDS:
         raise NotFound(f"unknown slicer back-end {backend!r} (known: {', '.join(BACKENDS)})",
                        backend=backend, known=list(BACKENDS))
+    if layers not in LAYER_MODES:
+        raise BadRequest(f"unknown layer mode {layers!r} (known: {', '.join(LAYER_MODES)})", layers=layers)
+    if layers == "curved" and backend != "builtin":
+        raise BadRequest(f"curved layers need the builtin back-end, not {backend!r}", backend=backend)
     if backend != "builtin" and external_version(backend) is None:
         raise NotFound(f"slicer back-end {backend!r} is not installed", backend=backend)
     report = progress or (lambda _f: None)
@@ -92,17 +105,27 @@ def slice_model(data: bytes, filename: str, profile: Profile, backend: str = "bu
     def sub(lo: float, hi: float) -> Callable[[float], None]:
         return lambda f: report(lo + (hi - lo) * min(max(f, 0.0), 1.0))
 
-    if backend == "builtin":
+    if layers == "curved":
+        from fabric.slicing.curved import slice_curved  # TetGen and the field solvers: only when asked
+        cs = slice_curved(placed, profile, progress=sub(0.05, 0.98))
+        gcode, layers_n, extruded, filament = cs.gcode, cs.layers, cs.extruded_mm3, cs.filament_mm
+        retractions, travel_mm, bridge_mm2 = cs.retractions, cs.travel_mm, 0.0
+        warnings += cs.warnings
+    elif backend == "builtin":
         out = slice_mesh(placed, profile, sub(0.05, 0.98))
-        gcode, layers, extruded, filament = out.gcode, out.layers, out.extruded_mm3, out.filament_mm
+        gcode, layers_n, extruded, filament = out.gcode, out.layers, out.extruded_mm3, out.filament_mm
+        retractions, travel_mm, bridge_mm2 = out.retractions, out.travel_mm, out.bridge_area_mm2
         warnings += out.warnings
     else:
         gcode = run_external(backend, placed, profile, plate_size_mm, build_height_mm, sub(0.05, 0.95))
         stats = gcode_stats(gcode, profile.filament_diameter_mm)
-        layers, extruded, filament = stats.layers, stats.extruded_mm3, stats.extruded_filament_mm
+        layers_n, extruded, filament = stats.layers, stats.extruded_mm3, stats.extruded_filament_mm
+        retractions, travel_mm = stats.retractions, stats.travel_mm
+        bridge_mm2 = stats.volume_by_type_mm3.get("Bridge infill", 0.0) / profile.layer_height_mm
     report(1.0)
     lo, hi = placed.bounds
-    return SliceResult(gcode=gcode, backend=backend, layers=layers, extruded_mm3=float(extruded),
+    return SliceResult(gcode=gcode, backend=backend, layers=layers_n, extruded_mm3=float(extruded),
                        filament_mm=float(filament), model_volume_mm3=float(placed.volume),
                        faces=int(len(placed.faces)), bbox_mm=[lo.tolist(), hi.tolist()],
-                       warnings=warnings, elapsed_s=time.perf_counter() - t0)
+                       warnings=warnings, elapsed_s=time.perf_counter() - t0, retractions=int(retractions),
+                       travel_mm=float(travel_mm), bridge_area_mm2=float(bridge_mm2))

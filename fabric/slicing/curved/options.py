@@ -1,0 +1,70 @@
+"""Options of the curved-layer slicer and the layer-thickness bounds it derives from a profile."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from fabric.slicing.profile import Profile
+from fabric.wire.errors import BadRequest
+
+__all__ = ["CurvedOptions", "ThicknessBounds", "thickness_bounds", "MAX_THICKNESS_RATIO"]
+
+MAX_THICKNESS_RATIO = 6.0       # thickest over thinnest layer, anywhere in the part
+
+
+@dataclass(frozen=True)
+class CurvedOptions:
+    """How the curved slicer builds its fields and nozzle axes.
+
+    ``max_tilt_deg`` is the largest angle between the nozzle axis and +z the
+    cell may use; ``top_band_layers`` layers under the top surface follow it
+    (0: none); a face is top surface when its normal is within
+    ``top_slope_deg`` of +z. Laplacian passes over the volume mesh (at most
+    ``axis_smoothing_passes``) smooth the nozzle axis until the axes at the two
+    ends of every mesh edge are within ``max_neighbour_deg``. ``interior_nodes``
+    sets the volume mesh's resolution.
+    """
+
+    max_tilt_deg: float = 45.0
+    top_band_layers: int = 4
+    top_slope_deg: float = 60.0
+    axis_smoothing_passes: int = 40
+    max_neighbour_deg: float = 30.0
+    interior_nodes: int = 20000
+    heat_time_r: float = 1.0
+
+    def __post_init__(self) -> None:
+        checks = {"max_tilt_deg": (0.0, 89.0), "top_slope_deg": (0.0, 89.0), "heat_time_r": (0.01, 100.0),
+                  "max_neighbour_deg": (1.0, 90.0)}
+        for key, (lo, hi) in checks.items():
+            value = getattr(self, key)
+            if not (math.isfinite(value) and lo <= value <= hi):
+                raise BadRequest(f"curved slicing: {key} = {value} is out of range [{lo}, {hi}]", key=key, value=value)
+        for key, hi_n in (("top_band_layers", 50), ("axis_smoothing_passes", 200), ("interior_nodes", 2_000_000)):
+            value = getattr(self, key)
+            if not 0 <= value <= hi_n:
+                raise BadRequest(f"curved slicing: {key} = {value} is out of range [0, {hi_n}]", key=key, value=value)
+
+
+@dataclass(frozen=True)
+class ThicknessBounds:
+    """The layer thicknesses the bead model accepts for a profile (mm)."""
+
+    nominal_mm: float
+    min_mm: float
+    max_mm: float
+
+
+def thickness_bounds(profile: Profile) -> ThicknessBounds:
+    """Thinnest and thickest layer a curved slice may lay with this profile.
+
+    The thickest is bounded by the nozzle (a bead cannot be taller than the
+    nozzle's bore) and by the bead model (narrower than tall is not a bead);
+    the thinnest is the thickest over :data:`MAX_THICKNESS_RATIO`, and never
+    more than half the nominal layer height.
+    """
+    h = profile.layer_height_mm
+    max_mm = min(2.0 * h, profile.nozzle_diameter_mm, 0.9 * profile.extrusion_width_mm)
+    max_mm = max(max_mm, h)
+    min_mm = max(max_mm / MAX_THICKNESS_RATIO, 0.01)
+    return ThicknessBounds(nominal_mm=h, min_mm=min(min_mm, 0.5 * h), max_mm=max_mm)
