@@ -11,6 +11,7 @@ from fabric.slicing.curved import MULTIAXIS_HEADER, CurvedSlice, slice_curved, t
 from fabric.slicing.curved.options import MAX_THICKNESS_RATIO
 from fabric.slicing.curved.shapes import SHAPES
 from fabric.slicing.profile import load_profile
+from fabric.wire.errors import GcodeError
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -79,7 +80,12 @@ def test_every_extruding_move_carries_a_unit_nozzle_axis(sliced, name):
     assert tilted.max() > 5.0, "the nozzle never tilts: the axis is not carried through"
 
 
-def test_the_gcode_reader_takes_the_dialect_as_xyz_moves(sliced):
+def test_the_gcode_reader_refuses_the_dialect_until_the_planner_tilts(sliced):
+    """Read as plain XYZ moves, the file would be planned with a vertical nozzle: another part. The reader
+    refuses it on line 1; with the header line taken away the moves themselves parse, layer by layer."""
     out = sliced["arch"]
-    toolpath = parse_gcode(out.gcode)
-    assert toolpath.n_layers == out.layers
+    with pytest.raises(GcodeError, match="multi-axis dialect") as err:
+        parse_gcode(out.gcode)
+    assert err.value.details["line"] == 1
+    body = out.gcode.split("\n", 1)[1]
+    assert parse_gcode(body).n_layers == out.layers
