@@ -8,12 +8,14 @@ its work object) is planned with :func:`fabric.planning.plan_gcode_file` (parse,
 map, path IK with the free nozzle rotation and the joint-jump test,
 reachability, cycle time) and written as CSV (``q1_deg .. qN_deg``), the work
 ``fabric-cli plan FILE --csv OUT`` asks of the planner, here in one process.
-The baseline, in the same process, is ``dls_ik_warm`` of
+Then the user's path: ``fabric-cli plan FILE --csv OUT`` as a whole process, against a
+planner process serving that cell (``--cell-config NAME``), ``n_cli`` runs, the
+best compared (the first run of each cell is reported too). The baseline, in the same process, is ``dls_ik_warm`` of
 ``tools/bench/ik_baseline.py`` (per-point Pinocchio damped least squares,
 warm-started along the path) on ``n_dls`` consecutive planned targets of the
 same cell. Writes ``docs/bench/plan_cells.md`` and ``plan_cells.json``.
 
-    .venv/bin/python tools/bench/plan_cells_bench.py [n_moves] [n_dls]
+    .venv/bin/python tools/bench/plan_cells_bench.py [n_moves] [n_dls] [n_cli]
 """
 from __future__ import annotations
 
@@ -32,16 +34,32 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from ik_baseline import dls_ik_warm  # noqa: E402
-from plan_bench import write_raster  # noqa: E402
+from plan_bench import _free_port, _run_cli, write_raster  # noqa: E402
 
+from fabric.cli.up import CellProcesses  # noqa: E402
 from fabric.motion.program import MOVEL  # noqa: E402
 from fabric.planning import PlanOptions, plan_gcode_file  # noqa: E402
 from fabric.planning.post import write_csv  # noqa: E402
 from fabric.robot.cell import Cell, builtin_cell_names  # noqa: E402
 from fabric.robot.frames import R_from_quat, make_T  # noqa: E402
+from fabric.wire.config import SessionSettings  # noqa: E402
 
 
-def bench_cell(name: str, gcode: Path, moves: int, n_dls: int, tmp: Path) -> dict[str, object]:
+def cli_runs(name: str, gcode: Path, tmp: Path, n_runs: int) -> list[float]:
+    """Wall seconds of ``fabric-cli plan FILE --csv OUT`` (whole processes) against a planner serving ``name``."""
+    settings = SessionSettings(connect=[f"tcp/127.0.0.1:{_free_port()}"], cell=f"pc{name}")
+    cell = CellProcesses(settings, ("planner",), log_dir=tmp / f"logs-{name}", data_dir=tmp / f"data-{name}",
+                         extra_args={"planner": ["--cell-config", name]})
+    cell.start(deadline_s=90.0)
+    args = SessionSettings(connect=settings.connect, cell=settings.cell, mode="client").to_args()
+    try:
+        return [_run_cli([sys.executable, "-m", "fabric.cli.main", "plan", str(gcode), "--csv",
+                          str(tmp / f"{name}-cli.csv"), *args]).wall_s for _ in range(n_runs)]
+    finally:
+        cell.stop()
+
+
+def bench_cell(name: str, gcode: Path, moves: int, n_dls: int, tmp: Path, n_cli: int) -> dict[str, object]:
     cell = Cell.builtin(name)
     t0 = time.perf_counter()
     res = plan_gcode_file(gcode, cell, PlanOptions())
@@ -62,7 +80,10 @@ def bench_cell(name: str, gcode: Path, moves: int, n_dls: int, tmp: Path) -> dic
     _q, ok = dls_ik_warm(cell.robot, T, prog.q_rad[motion[a - 1]], prog.q_rad[motion[a - 2]])
     dls_s = time.perf_counter() - t0
     st = res.stats
+    cli_s = cli_runs(name, gcode, tmp, n_cli) if n_cli > 0 else []
     return {
+        "cli_s": cli_s, "cli_moves_per_s": st.moves / min(cli_s) if cli_s else float("nan"),
+        "cli_vs_dls_x": (st.moves / min(cli_s)) / (len(rows) / dls_s) if cli_s else float("nan"),
         "cell": name, "ik": "closed form (" + cell.robot.ik_family + ")" if cell.robot.closed_form is not None
         else "batched DLS", "joints": cell.robot.nq, "moves": moves, "feasible_r": res.report.feasible_r,
         "plan_s": plan_s, "ik_s": st.ik_s, "plan_moves_per_s": st.moves / plan_s,
@@ -73,11 +94,16 @@ def bench_cell(name: str, gcode: Path, moves: int, n_dls: int, tmp: Path) -> dic
     }
 
 
+def _cli_text(r: dict[str, object]) -> str:
+    runs = r["cli_s"]
+    return f"{runs[0]:.2f}, {min(runs):.2f}" if isinstance(runs, list) and runs else "-"
+
+
 def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
     lines = [
         "# Planning on every built-in cell against per-point DLS IK",
         "",
-        f"`.venv/bin/python tools/bench/plan_cells_bench.py {meta['n_moves']} {meta['n_dls']}` on "
+        f"`.venv/bin/python tools/bench/plan_cells_bench.py {meta['n_moves']} {meta['n_dls']} {meta['n_cli']}` on "
         f"{meta['machine']} ({meta['cpus']} CPUs, shared with other work: read the ratios, not the absolute rates).",
         "",
         "The same layered serpentine raster on each cell's plate, planned by `plan_gcode_file` (parse, map, "
@@ -87,30 +113,33 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
         "same cell.",
         "",
         "| cell | IK | joints | moves | reachable | plan (s) | of which IK (s) | plan (moves/s) | CSV (s) "
-        "| plan + CSV (moves/s) | DLS (targets/s) | plan / DLS |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| plan + CSV (moves/s) | DLS (targets/s) | plan / DLS | `fabric-cli plan --csv` (s: first, best) "
+        "| CLI / DLS |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
             f"| {r['cell']} | {r['ik']} | {r['joints']} | {r['moves']:,} "
             f"| {100 * float(r['feasible_r']):.2f} % | {r['plan_s']:.2f} "          # type: ignore[arg-type]
             f"| {r['ik_s']:.2f} | {r['plan_moves_per_s']:,.0f} | {r['csv_s']:.2f} "
-            f"| {r['plan_and_csv_moves_per_s']:,.0f} | {r['dls_targets_per_s']:,.0f} | {r['plan_vs_dls_x']:,.1f}x |")
+            f"| {r['plan_and_csv_moves_per_s']:,.0f} | {r['dls_targets_per_s']:,.0f} | {r['plan_vs_dls_x']:,.1f}x "
+            f"| {_cli_text(r)} | {r['cli_vs_dls_x']:,.1f}x |")
     return "\n".join(lines) + "\n"
 
 
 def main(argv: list[str]) -> None:
     n_moves = int(argv[1]) if len(argv) > 1 else 200_000
     n_dls = int(argv[2]) if len(argv) > 2 else 3000
+    n_cli = int(argv[3]) if len(argv) > 3 else 2
     rows = []
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         gcode = tmp / "raster.gcode"
         moves = write_raster(gcode, n_moves)
         for name in builtin_cell_names():
-            rows.append(bench_cell(name, gcode, moves, n_dls, tmp))
+            rows.append(bench_cell(name, gcode, moves, n_dls, tmp, n_cli))
             print(json.dumps(rows[-1]), flush=True)
-    meta = {"n_moves": n_moves, "n_dls": n_dls, "machine": platform.machine(), "cpus": os.cpu_count(),
+    meta = {"n_moves": n_moves, "n_dls": n_dls, "n_cli": n_cli, "machine": platform.machine(), "cpus": os.cpu_count(),
             "python": platform.python_version(), "numpy": np.__version__}
     out = ROOT / "docs" / "bench"
     (out / "plan_cells.json").write_text(json.dumps({"meta": meta, "cells": rows}, indent=2))
