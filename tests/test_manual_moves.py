@@ -72,6 +72,13 @@ def test_jog_and_extrude_by_hand(session, settings, tmp_path, capsys):
             assert np.allclose(client.position().xyz_mm, after.xyz_mm) and next_seq(client) == seq
             with pytest.raises(ValidationError, match="longer than"):
                 client.jog(dx_mm=500.0)
+            with pytest.raises(ValidationError, match="non-zero"):
+                client.jog()
+            with pytest.raises(ValidationError):                    # the schema's bound: at most 200 mm/s
+                client.jog(dz_mm=1.0, speed_mm_s=1000.0)
+            with pytest.raises(ValidationError, match="non-zero"):
+                client.extrude(0.0)
+            assert np.allclose(client.position().xyz_mm, after.xyz_mm) and next_seq(client) == seq
 
             # filament by hand: refused cold (nothing changes), pushed once the nozzle is hot
             with pytest.raises(StateError, match="below the minimum extrusion temperature"):

@@ -312,6 +312,8 @@ class Twin:
     def extrude(self, length_mm: float, feed_mm_s: float) -> None:
         """Push (> 0) or pull back (< 0) ``length_mm`` of filament at ``feed_mm_s``, the robot still; refused
         with the nozzle below the minimum extrusion temperature (the loaded material's, else firmware's)."""
+        if not math.isfinite(length_mm) or length_mm == 0.0:
+            raise ValidationError("give a non-zero filament length", field="length_mm", value=length_mm)
         self._refuse("extrude", manual.MANUAL_STATES)
         self._busy("extrude")
         min_c = self.runner.min_extrude_c() if self.s.program is not None else manual.FIRMWARE_MIN_EXTRUDE_C
