@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import time
 from pathlib import Path
 
 from fabric import schemas as s
@@ -11,25 +10,9 @@ from fabric.cli.job_cmds import add_follow_args, submit_and_follow
 from fabric.cli.output import emit
 from fabric.cli.pipeline_cmds import parse_sets
 from fabric.client import Client
+from fabric.printjobs.library_text import date_text, plan_text, size_text
 
 __all__ = ["register"]
-
-
-def _when(t_s: float) -> str:
-    return time.strftime("%Y-%m-%d %H:%M", time.localtime(t_s)) if t_s else "-"
-
-
-def _size(n: int) -> str:
-    for unit, k in (("GB", 1 << 30), ("MB", 1 << 20), ("kB", 1 << 10)):
-        if n >= k:
-            return f"{n / k:.1f} {unit}"
-    return f"{n} B"
-
-
-def _plan(e: s.LibraryFile) -> str:
-    if not e.layers:
-        return "not planned yet"
-    return f"{e.layers} layers, {e.extruded_mm3:.0f} mm3, {e.estimate_s / 60:.0f} min"
 
 
 def _list_text(page: s.FileList) -> str:
@@ -37,8 +20,8 @@ def _list_text(page: s.FileList) -> str:
         return "the library is empty (files enter it when submitted, or with fabric-cli files add)" \
             if page.total == 0 else f"no files from {page.offset + 1} (of {page.total})"
     head = f"{'file':<12}  {'name':<28} {'kind':<6} {'size':>9}  {'last used':<16}  {'jobs':>4}  last job"
-    rows = [f"{e.file_id}  {e.name[:28]:<28} {e.source:<6} {_size(e.size_bytes):>9}  "
-            f"{_when(e.used_s or e.added_s):<16}  {e.jobs:>4}  {(e.last_state or '-'):<10} {_plan(e)}"
+    rows = [f"{e.file_id}  {e.name[:28]:<28} {e.source:<6} {size_text(e.size_bytes):>9}  "
+            f"{date_text(e.used_s or e.added_s):<16}  {e.jobs:>4}  {(e.last_state or '-'):<10} {plan_text(e)}"
             for e in page.files]
     if len(page.files) < page.total:
         rows.append(f"showing {page.offset + 1}-{page.offset + len(page.files)} of {page.total}")
@@ -46,10 +29,10 @@ def _list_text(page: s.FileList) -> str:
 
 
 def _entry_text(e: s.LibraryFile) -> str:
-    lines = [f"file {e.file_id}: {e.name} ({e.source}, {_size(e.size_bytes)})",
-             f"  added      {_when(e.added_s)}   last used {_when(e.used_s)}   jobs {e.jobs}",
+    lines = [f"file {e.file_id}: {e.name} ({e.source}, {size_text(e.size_bytes)})",
+             f"  added      {date_text(e.added_s)}   last used {date_text(e.used_s)}   jobs {e.jobs}",
              f"  last job   {e.last_job_id or '-'} {e.last_state}",
-             f"  plan       {_plan(e)}",
+             f"  plan       {plan_text(e)}",
              f"  settings   profile {e.profile}, slicer {e.backend}, rtf {e.rtf:g}"
              + (f", filament {e.filament_diameter_mm:g} mm" if e.filament_diameter_mm else "")
              + "".join(f", {k}={v}" for k, v in sorted(e.overrides.items()))]

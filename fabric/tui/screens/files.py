@@ -2,7 +2,6 @@
 recently used first, with what its last job did; print one again with that job's settings, or forget it."""
 from __future__ import annotations
 
-import time
 from typing import TYPE_CHECKING
 
 from textual import work
@@ -13,7 +12,7 @@ from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Header, Label
 
 from fabric import schemas as s
-from fabric.printjobs.history import duration_text
+from fabric.printjobs.library_text import date_text, plan_text, size_text
 from fabric.tui.messages import Reply
 from fabric.tui.screens.confirm import ConfirmDialog
 from fabric.tui.screens.report import ReportDialog
@@ -28,23 +27,6 @@ if TYPE_CHECKING:
 PAGE = 200          # the most files listed (most recently used first)
 
 
-def size_text(n: int) -> str:
-    for unit, k in (("GB", 1 << 30), ("MB", 1 << 20), ("kB", 1 << 10)):
-        if n >= k:
-            return f"{n / k:.1f} {unit}"
-    return f"{n} B"
-
-
-def plan_text(e: s.LibraryFile) -> str:
-    if not e.layers:
-        return "-"
-    return f"{e.layers} layers, {e.extruded_mm3:.0f} mm3, {duration_text(e.estimate_s)}"
-
-
-def _when(t_s: float) -> str:
-    return time.strftime("%Y-%m-%d %H:%M", time.localtime(t_s)) if t_s else "-"
-
-
 def entry_report(e: s.LibraryFile) -> str:
     """Everything the library knows of one file, for its dialog."""
     settings = (f"profile {e.profile}, slicer {e.backend}, rtf {e.rtf:g}"
@@ -52,8 +34,8 @@ def entry_report(e: s.LibraryFile) -> str:
                 + "".join(f", {k}={v}" for k, v in sorted(e.overrides.items())))
     return "\n".join([f"{e.name} ({e.source}, {size_text(e.size_bytes)})",
                       f"file id    {e.file_id}",
-                      f"added      {_when(e.added_s)}",
-                      f"last used  {_when(e.used_s)} ({e.jobs} job{'s' if e.jobs != 1 else ''})",
+                      f"added      {date_text(e.added_s)}",
+                      f"last used  {date_text(e.used_s)} ({e.jobs} job{'s' if e.jobs != 1 else ''})",
                       f"last job   {e.last_job_id or '-'} {e.last_state}",
                       f"plan       {plan_text(e)}",
                       f"settings   {settings}" if e.source == "model" or e.jobs else "",
