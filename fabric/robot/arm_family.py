@@ -24,7 +24,7 @@ import numpy as np
 
 from fabric.wire.errors import ConfigError
 
-__all__ = ["ClosedFormArm", "IKFamilyMismatch", "ANG_TOL", "DIST_TOL_MM", "FK_TOL_MM", "FK_TOL_ROT"]
+__all__ = ["ClosedFormArm", "IKFamilyMismatch", "cols_in_frame", "ANG_TOL", "DIST_TOL_MM", "FK_TOL_MM", "FK_TOL_ROT"]
 
 ANG_TOL = 1e-7            # |cos| for "perpendicular", |sin| for "parallel" axes
 DIST_TOL_MM = 1e-6        # "the axes meet"
@@ -85,3 +85,17 @@ class ClosedFormArm(Protocol):
     def resolve_wrist(self, C: np.ndarray, q: np.ndarray, held: np.ndarray) -> np.ndarray:
         """Joints (6, M) of wrist-degenerate rows with the free angle taken from ``held`` (6, M), still exact."""
         ...
+
+
+def cols_in_frame(frame_T: np.ndarray | None, C: np.ndarray) -> np.ndarray:
+    """The nine pose columns ``C`` (position, z and y axes; ``kinematics.pose_cols``) expressed in the frame
+    ``frame_T`` (4x4, in the columns' frame; None: the same frame, ``C`` itself): a family's own base when the
+    URDF places axis 1 elsewhere."""
+    if frame_T is None:
+        return C
+    R, t = frame_T[:3, :3], frame_T[:3, 3]
+    out = np.empty_like(C)
+    out[0:3] = R.T @ (C[0:3] - t[:, None])
+    out[3:6] = R.T @ C[3:6]
+    out[6:9] = R.T @ C[6:9]
+    return out

@@ -34,6 +34,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from fabric.robot.arm_family import cols_in_frame
 from fabric.robot.kinematics import (
     ELBOW_SING_COS,
     SHOULDER_SING_MM,
@@ -128,14 +129,7 @@ class OPWArm:
     # Inverse kinematics ----------------------------------------------------
     def _model_cols(self, C: np.ndarray) -> np.ndarray:
         """End-frame columns in the OPW base (the URDF base unless axis 1 is placed otherwise)."""
-        if self._base is None:
-            return C
-        R, t = self._base[:3, :3], self._base[:3, 3]
-        out = np.empty_like(C)
-        out[0:3] = R.T @ (C[0:3] - t[:, None])
-        out[3:6] = R.T @ C[3:6]
-        out[6:9] = R.T @ C[6:9]
-        return out
+        return cols_in_frame(self._base, C)
 
     def _centre(self, C: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return C[0] - self.c4 * C[3], C[1] - self.c4 * C[4], C[2] - self.c4 * C[5]

@@ -36,6 +36,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from fabric.robot.arm_family import cols_in_frame
 from fabric.robot.kinematics import ELBOW_SING_COS, SHOULDER_SING_MM, WRIST_SING_SIN, _flip, _wrap
 from fabric.robot.ur_derive import URParams, ur_dh_frames
 
@@ -108,14 +109,7 @@ class URArm:
     # Inverse kinematics ----------------------------------------------------
     def _model_cols(self, C: np.ndarray) -> np.ndarray:
         """DH frame-6 columns in the DH base (the URDF base unless axis 1 is placed otherwise)."""
-        if self._base is None:
-            return C
-        R, t = self._base[:3, :3], self._base[:3, 3]
-        out = np.empty_like(C)
-        out[0:3] = R.T @ (C[0:3] - t[:, None])
-        out[3:6] = R.T @ C[3:6]
-        out[6:9] = R.T @ C[6:9]
-        return out
+        return cols_in_frame(self._base, C)
 
     def _shoulder(self, C: np.ndarray, shoulder: int, q1_hold: np.ndarray | None) -> _Shoulder:
         """Step 1 of the module docstring."""

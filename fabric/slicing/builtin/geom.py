@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-__all__ = ["MITRE", "clean", "offset"]
+__all__ = ["MITRE", "clean", "offset", "ring_walk"]
 
 MITRE = {"join_style": "mitre", "mitre_limit": 3.0}
 _REPEAT_MM = 1e-5           # vertices closer than this are merged
@@ -39,3 +39,18 @@ def offset(geom: shapely.Geometry, distance_mm: float) -> shapely.Geometry:
         if distance_mm < 0 and out.is_empty and geom.area > -distance_mm * geom.length * 1.01:
             out = shapely.buffer(shapely.simplify(geom, 1e-3), distance_mm, **MITRE)
     return out
+
+
+def ring_walk(pos: np.ndarray, xy: np.ndarray, length_mm: float, s_from: float, s_to: float,
+              fwd: float) -> np.ndarray:
+    """A closed ring's vertices strictly between arc positions ``s_from`` and ``s_to``, the shorter way round
+    (``fwd``: the forward distance from ``s_from`` to ``s_to``). ``pos`` and ``xy`` hold each vertex once (no
+    closing duplicate), ``pos`` its arc position from the first."""
+    if fwd <= length_mm - fwd:
+        i1 = int(np.searchsorted(pos, s_from, side="right"))
+        i2 = int(np.searchsorted(pos, s_to, side="left"))
+        return xy[i1:i2] if s_to >= s_from else np.concatenate([xy[i1:], xy[:i2]])
+    i1 = int(np.searchsorted(pos, s_to, side="right"))
+    i2 = int(np.searchsorted(pos, s_from, side="left"))
+    part = xy[i1:i2] if s_from >= s_to else np.concatenate([xy[i1:], xy[:i2]])
+    return part[::-1]

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
+from fabric.slicing.builtin.geom import ring_walk
+
 __all__ = ["Rings", "Segments", "scan_segments", "adjust_solid_spacing", "extend_to", "chain_segments"]
 
 
@@ -249,17 +251,7 @@ def chain_segments(seg: Segments, start_bed: tuple[float, float], link_max_mm: f
 def _ring_path(rings: Rings, r: int, s_from: float, s_to: float, fwd: float) -> np.ndarray:
     """Ring vertices strictly between arc positions ``s_from`` and ``s_to``, the shorter way round."""
     lo, hi = int(rings.start[r]), int(rings.start[r + 1]) - 1      # hi: the closing duplicate
-    pos = rings.pos[lo:hi]
-    xy = rings.xy[lo:hi]
-    L = float(rings.length[r])
-    if fwd <= L - fwd:
-        i1 = int(np.searchsorted(pos, s_from, side="right"))
-        i2 = int(np.searchsorted(pos, s_to, side="left"))
-        return xy[i1:i2] if s_to >= s_from else np.concatenate([xy[i1:], xy[:i2]])
-    i1 = int(np.searchsorted(pos, s_to, side="right"))
-    i2 = int(np.searchsorted(pos, s_from, side="left"))
-    part = xy[i1:i2] if s_from >= s_to else np.concatenate([xy[i1:], xy[:i2]])
-    return part[::-1]
+    return ring_walk(rings.pos[lo:hi], rings.xy[lo:hi], float(rings.length[r]), s_from, s_to, fwd)
 
 
 def _boustrophedon(seg: Segments, start_bed: tuple[float, float]) -> tuple[list[int], np.ndarray, np.ndarray]:

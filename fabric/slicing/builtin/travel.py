@@ -28,6 +28,8 @@ import math
 import numpy as np
 import shapely
 
+from fabric.slicing.builtin.geom import ring_walk
+
 __all__ = ["TravelPlanner", "TravelPiece", "travel_pieces", "INSIDE_MARGIN_MM", "OUTLINE_MARGIN_MM"]
 
 INSIDE_MARGIN_MM = 0.05     # the region's edge lies this far outside the external perimeter's centreline
@@ -49,16 +51,7 @@ class _Ring:
 
     def walk(self, s_from: float, s_to: float) -> np.ndarray:
         """Ring vertices strictly between arc positions ``s_from`` and ``s_to``, the shorter way round."""
-        pos, xy, L = self.pos[:-1], self.xy[:-1], self.length
-        fwd = (s_to - s_from) % L
-        if fwd <= L - fwd:
-            i1 = int(np.searchsorted(pos, s_from, side="right"))
-            i2 = int(np.searchsorted(pos, s_to, side="left"))
-            return xy[i1:i2] if s_to >= s_from else np.concatenate([xy[i1:], xy[:i2]])
-        i1 = int(np.searchsorted(pos, s_to, side="right"))
-        i2 = int(np.searchsorted(pos, s_from, side="left"))
-        part = xy[i1:i2] if s_from >= s_to else np.concatenate([xy[i1:], xy[:i2]])
-        return part[::-1]
+        return ring_walk(self.pos[:-1], self.xy[:-1], self.length, s_from, s_to, (s_to - s_from) % self.length)
 
 
 class TravelPiece:
