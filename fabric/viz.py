@@ -26,7 +26,11 @@ def toolpath_png(program: Program, title: str = "toolpath", max_segments: int = 
     rows = np.flatnonzero((program.section == PRINT) & (program.op == MOVEL))
     rows = rows[rows > 0]
     seg = np.stack([program.xyz_mm[rows - 1], program.xyz_mm[rows]], axis=1)
-    return segments_png(seg, program.flow_mm3_mm[rows] > 0, program.layer[rows], title, max_segments, layer)
+    axis = None
+    if program.meta.get("multiaxis", False):      # the nozzle axis: minus the TCP's z
+        from fabric.sim.deposition import nozzle_axes
+        axis = nozzle_axes(program.quat_wxyz[rows])
+    return segments_png(seg, program.flow_mm3_mm[rows] > 0, program.layer[rows], title, max_segments, layer, axis)
 
 
 def gcode_png(toolpath: Any, title: str = "toolpath", max_segments: int = 200_000, layer: int | None = None) -> bytes:
@@ -34,29 +38,36 @@ def gcode_png(toolpath: Any, title: str = "toolpath", max_segments: int = 200_00
     ends = toolpath.xyz_mm
     starts = np.concatenate([toolpath.start_xyz_mm[None, :], ends[:-1]]) if len(ends) else ends
     seg = np.stack([starts, ends], axis=1)
-    return segments_png(seg, toolpath.e_mm > 0, toolpath.layer, title, max_segments, layer)
+    return segments_png(seg, toolpath.e_mm > 0, toolpath.layer, title, max_segments, layer,
+                        getattr(toolpath, "axis", None))
 
 
 def segments_png(seg: np.ndarray, extruding: np.ndarray, layer: np.ndarray, title: str = "toolpath",
-                 max_segments: int = 200_000, only_layer: int | None = None) -> bytes:
+                 max_segments: int = 200_000, only_layer: int | None = None, axis: np.ndarray | None = None) -> bytes:
     """3D view and top view of segments ``seg`` (n, 2, 3) mm. With ``only_layer`` (0-based) the 3D view
-    shows the part up to that layer and the top view that layer alone."""
+    shows the part up to that layer and the top view that layer alone. With ``axis`` (n, 3: the nozzle axis at
+    each segment's end, curved layers) a third view shows a slice of the part from the front: the layers as
+    the curves they are, and the nozzle's tilt along the one shown (or the last)."""
     matplotlib, plt = _pyplot()
     from matplotlib.collections import LineCollection
     from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
     ext = np.asarray(extruding, dtype=bool)
     layer = np.asarray(layer)
+    axis = None if axis is None else np.asarray(axis, dtype=float)
     if only_layer is not None:
         keep = layer <= only_layer
         seg, ext, layer = seg[keep], ext[keep], layer[keep]
+        axis = None if axis is None else axis[keep]
     if len(seg) > max_segments:   # keep the picture cheap on million-move programs
         keep = np.linspace(0, len(seg) - 1, max_segments).astype(int)
         seg, ext, layer = seg[keep], ext[keep], layer[keep]
+        axis = None if axis is None else axis[keep]
     colors = matplotlib.colormaps["viridis"]((layer - layer.min()) / max(1, np.ptp(layer)) if len(layer) else [])
 
-    fig = plt.figure(figsize=(11, 5), dpi=110)
-    ax = fig.add_subplot(1, 2, 1, projection="3d")
+    panels = 2 if axis is None else 3
+    fig = plt.figure(figsize=(5.5 * panels, 5), dpi=110)
+    ax = fig.add_subplot(1, panels, 1, projection="3d")
     ax.add_collection3d(Line3DCollection(seg[ext], colors=colors[ext], linewidths=0.6), autolim=False)
     ax.add_collection3d(Line3DCollection(seg[~ext], colors=(0.8, 0.2, 0.2, 0.25), linewidths=0.3), autolim=False)
     if ext.any():
@@ -69,7 +80,7 @@ def segments_png(seg: np.ndarray, extruding: np.ndarray, layer: np.ndarray, titl
     ax.set_xlabel("x mm"), ax.set_ylabel("y mm"), ax.set_zlabel("z mm")
     n_layers = len(np.unique(layer[layer >= 0]))
     ax.set_title(f"{title}: {int(ext.sum())} extruding moves, {n_layers} layers")
-    ax2 = fig.add_subplot(1, 2, 2)
+    ax2 = fig.add_subplot(1, panels, 2)
     top = ext if only_layer is None else ext & (layer == only_layer)
     ax2.add_collection(LineCollection(seg[top][:, :, :2], colors=colors[top], linewidths=0.5))
     if only_layer is not None:
@@ -79,7 +90,40 @@ def segments_png(seg: np.ndarray, extruding: np.ndarray, layer: np.ndarray, titl
     ax2.set_aspect("equal")
     ax2.set_xlabel("x mm"), ax2.set_ylabel("y mm")
     ax2.set_title("top view" if only_layer is None else f"layer {only_layer + 1}")
+    if axis is not None:
+        _front_section(fig.add_subplot(1, 3, 3), seg, ext, layer, axis, colors, only_layer)
     return _png(fig, plt)
+
+
+def _front_section(ax: Any, seg: np.ndarray, ext: np.ndarray, layer: np.ndarray, axis: np.ndarray,
+                   colors: np.ndarray, only_layer: int | None) -> None:
+    """The part cut by a slab through its middle (``y`` within 1.5 mm of the centre), seen from the front:
+    every layer's beads in the slab as x-z curves, and the nozzle axis drawn along the layer shown (or the
+    last) as short ticks: what curved layers and a tilted nozzle look like."""
+    from matplotlib.collections import LineCollection
+
+    if not ext.any():
+        return
+    ends = seg[:, 1]
+    y_mid = float(np.median(ends[ext, 1]))
+    slab = ext & (np.abs(seg[:, 0, 1] - y_mid) < 1.5) & (np.abs(ends[:, 1] - y_mid) < 1.5)
+    ax.add_collection(LineCollection(list(seg[slab][:, :, [0, 2]]), colors=colors[slab], linewidths=0.8))
+    shown = int(layer[ext].max()) if only_layer is None else only_layer
+    tick = slab & (layer == shown)
+    if tick.any():
+        span = float(np.ptp(ends[ext, 0])) or 1.0
+        at = np.flatnonzero(tick)
+        x = ends[at, 0]                               # about 30 ticks across the part
+        _, first = np.unique(np.floor((x - x.min()) / (span / 30.0)), return_index=True)
+        at = at[first]
+        tip = ends[at][:, [0, 2]]
+        up = axis[at][:, [0, 2]] * (0.08 * span)
+        ax.add_collection(LineCollection(list(np.stack([tip, tip + up], axis=1)), colors=(0.85, 0.1, 0.1, 0.8),
+                                         linewidths=0.6))
+    ax.autoscale()
+    ax.set_aspect("equal")
+    ax.set_xlabel("x mm"), ax.set_ylabel("z mm")
+    ax.set_title(f"front section (y = {y_mid:.1f} mm): layers, nozzle axis on layer {shown + 1}")
 
 
 def telemetry_png(columns: Mapping[str, np.ndarray], title: str = "telemetry") -> bytes:

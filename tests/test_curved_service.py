@@ -7,6 +7,7 @@ import subprocess
 import sys
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from fabric import schemas as s
@@ -16,7 +17,7 @@ from fabric.robot.cell import Cell
 from fabric.services.planner import PlannerService
 from fabric.services.slicer import SlicerService
 from fabric.slicing.curved.shapes import arch
-from fabric.wire.errors import BadRequest, GcodeError
+from fabric.wire.errors import BadRequest
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -51,18 +52,25 @@ def test_fabric_cli_slices_curved_layers_into_the_multiaxis_dialect(slicer, sess
     extruding = [ln for ln in text.splitlines() if ln.startswith("G1 X")]
     assert extruding and all(AXIS_MOVE.match(ln) for ln in extruding)
 
-    # until the planner plans a tilted nozzle, it refuses the dialect (a vertical nozzle would print another
-    # part): in the reader, and through fabric-cli plan against a planner service
-    with pytest.raises(GcodeError, match="multi-axis dialect"):
-        parse_gcode(text)
-    planner = PlannerService(session, settings.cell, Cell.builtin("irb140"), data_dir=tmp_path / "planner")
+    fig = result["curved"]                              # the slice's figures travel with its result
+    assert fig["overhang_mm2"] < 0.1 * fig["planar_overhang_mm2"] and fig["max_tilt_deg"] <= 45.0 + 1e-6
+
+    # the reader takes the dialect: every move with its unit nozzle axis
+    tp = parse_gcode(text)
+    assert tp.multiaxis and tp.axis is not None and len(tp.axis) == len(tp)
+    np.testing.assert_allclose(np.linalg.norm(tp.axis, axis=1), 1.0, atol=1e-12)
+    assert np.degrees(np.arccos(tp.axis[:, 2].min())) <= 45.0 + 0.1
+    # and the planner plans it with the tilted nozzle: every target reached on the multi-axis cell
+    planner = PlannerService(session, settings.cell, Cell.builtin("irb140-multiaxis"), data_dir=tmp_path / "planner")
     planner.start()
     try:
-        r = subprocess.run([sys.executable, "-m", "fabric.cli.main", "plan", str(out),
+        r = subprocess.run([sys.executable, "-m", "fabric.cli.main", "plan", str(out), "--json",
                             *replace(settings, mode="client").to_args()], capture_output=True, text=True, timeout=120)
     finally:
         planner.close()
-    assert r.returncode != 0 and "error [gcode]" in r.stderr and "multi-axis dialect" in r.stderr, r.stderr
+    assert r.returncode == 0, r.stderr
+    summary = json.loads(r.stdout)["summary"]
+    assert summary["runnable"] and summary["feasible_r"] == 1.0 and summary["layers"] == result["layers"]
     assert "Traceback" not in r.stderr
 
 

@@ -47,7 +47,8 @@ def cmd_print(c: Client, a: argparse.Namespace) -> int:
                       profile=a.profile or e.profile, backend=a.backend or e.backend,
                       overrides=overrides if e.source == "model" else {},
                       start=a.start, rtf=e.rtf if a.rtf is None else a.rtf,
-                      filament_diameter_mm=a.filament_diameter or e.filament_diameter_mm)
+                      filament_diameter_mm=a.filament_diameter or e.filament_diameter_mm,
+                      layers=(a.layers or e.layer_mode) if e.source == "model" else "planar")
     return submit_and_follow(c, a, req)
 
 
@@ -90,6 +91,8 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("file_id")
     p.add_argument("--profile", default=None)
     p.add_argument("--backend", default=None, choices=s.pipeline.BACKENDS)
+    p.add_argument("--layers", default=None, choices=s.pipeline.LAYER_MODES,
+                   help="planar or curved layers (default: the last job's)")
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a profile key (replaces the last "
                    "job's overrides)")
     p.add_argument("--filament-diameter", type=float, default=None, metavar="MM")

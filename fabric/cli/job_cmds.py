@@ -91,7 +91,8 @@ def resolve_job_id(c: Client, job_id: str) -> str:
 
 
 def _record_text(rec: s.JobRecord) -> str:
-    lines = [f"job {rec.job_id}: {rec.filename} ({rec.source}) {rec.state}" + (" (prepared)" if rec.prepared else ""),
+    source = f"{rec.source}, curved layers" if rec.layers == "curved" else rec.source
+    lines = [f"job {rec.job_id}: {rec.filename} ({source}) {rec.state}" + (" (prepared)" if rec.prepared else ""),
              f"  stage      {rec.stage}"]
     if rec.reason:
         lines.append(f"  reason     {rec.reason}")
@@ -133,7 +134,7 @@ def cmd_submit(c: Client, a: argparse.Namespace) -> int:
     # no --source: the supervisor takes it from the file name (JobSubmit.source "", as any client may send)
     req = s.JobSubmit(model=read_whole(a.file), filename=Path(a.file).name, source=a.source or "", profile=a.profile,
                       backend=a.backend, overrides=parse_sets(a.set), start=a.start, rtf=a.rtf,
-                      filament_diameter_mm=a.filament_diameter)
+                      filament_diameter_mm=a.filament_diameter, layers=a.layers)
     return submit_and_follow(c, a, req)
 
 
@@ -174,6 +175,8 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("file")
     p.add_argument("--profile", default="taz-pla-medium")
     p.add_argument("--backend", default="builtin", choices=s.pipeline.BACKENDS)
+    p.add_argument("--layers", default="planar", choices=s.pipeline.LAYER_MODES,
+                   help="planar layers, or curved layers with a tilted nozzle (a model; builtin slicer)")
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a profile key (a model)")
     p.add_argument("--filament-diameter", type=float, default=None, metavar="MM",
                    help="the filament's diameter (e.g. 2.85), for G-code that does not state it; a model is sliced "

@@ -54,8 +54,22 @@ def cmd_slice(c: Client, a: argparse.Namespace) -> int:
     Path(a.output).write_bytes(gcode.data)
     emit(res, a.json, lambda r: (f"{a.output}: {r.layers} layers, {r.extruded_mm3:.0f} mm3 "
                                  f"({r.filament_mm:.0f} mm filament) with {r.backend} in {r.elapsed_s:.2f} s"
+                                 + "".join(f"\n  {line}" for line in curved_lines(r.curved))
                                  + "".join(f"\n  warning: {w}" for w in r.warnings)))
     return 0
+
+
+def curved_lines(fig: dict[str, float]) -> list[str]:
+    """A curved slice's figures in words, planar beside curved (empty for planar layers)."""
+    if not fig:
+        return []
+    g = lambda k: fig.get(k, float("nan"))       # noqa: E731
+    return [f"curved layers: overhang {g('planar_overhang_mm2'):.0f} mm2 planar -> {g('overhang_mm2'):.0f} mm2 "
+            f"({100 * g('overhang_reduction_r'):.0f} % less), thickness {g('thickness_min_mm'):.3f}.."
+            f"{g('thickness_max_mm'):.3f} mm (ratio {g('thickness_ratio_r'):.2f})",
+            f"nozzle tilt up to {g('max_tilt_deg'):.1f} deg, neighbouring axes within {g('max_neighbour_deg'):.1f} "
+            f"deg, top-surface cusp mean {g('planar_cusp_mean_mm'):.3f} -> {g('cusp_mean_mm'):.3f} mm, max "
+            f"{g('planar_cusp_max_mm'):.3f} -> {g('cusp_max_mm'):.3f} mm"]
 
 
 def plan_file(c: Client, data: bytes | LargeInput, filename: str, a: argparse.Namespace,

@@ -6,7 +6,9 @@ recomputed): from the move's start to its end, ``width_mm`` wide and
 ``height_mm`` high, hanging below the nozzle path. Its collision solid is the
 box of that width and height along the move (it contains the twin's rounded
 cross-section and its octagonal mesh), with x along the move, z along the
-plate normal (a move along the normal itself gets any side axis). Beads carry
+nozzle axis the bead was laid with, made normal to the move (the plate
+normal for planar printing; a move along the axis itself stands centred on
+its path, with any side axis). Beads carry
 the program row that laid them (their birth: a motion is checked only against
 beads laid before it), their layer and the G-code line.
 
@@ -23,11 +25,11 @@ import numpy as np
 
 from fabric.collision.bodies import MM
 from fabric.motion.program import MOVEL, Program
-from fabric.sim.deposition import Deposition
+from fabric.sim.deposition import UP, Deposition, bead_frames, nozzle_axes
 
 __all__ = ["BeadSolids", "BEAD_ARRAYS"]
 
-BEAD_ARRAYS = ("start_mm", "end_mm", "width_mm", "height_mm", "layer", "row")
+BEAD_ARRAYS = ("start_mm", "end_mm", "width_mm", "height_mm", "layer", "row", "axis")
 _MIN_LEN_MM = 1e-6
 
 
@@ -65,8 +67,9 @@ class BeadSolids:
         rows = rows[rows > 0]
         dep = Deposition(program)                                 # the twin's bead dimensions
         width, height = dep.dims(program.layer[rows], program.flow_mm3_mm[rows])
+        axis = nozzle_axes(program.quat_wxyz[rows]) if program.meta.get("multiaxis", False) else None
         return cls.from_path(program.xyz_mm[rows - 1], program.xyz_mm[rows], width, height, program.layer[rows],
-                             rows, program.gcode_line[rows], program.wobj)
+                             rows, program.gcode_line[rows], program.wobj, axis)
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray], wobj: np.ndarray,
@@ -74,17 +77,24 @@ class BeadSolids:
         """Beads as the twin records them (:meth:`Deposition.to_arrays`, plate frame ``wobj``)."""
         n = len(arrays["row"])
         lines = gcode_line if gcode_line is not None else np.full(n, -1, dtype=np.int64)
+        axis = arrays.get("axis")
+        tilted = axis is not None and len(axis) == n and bool(np.any(np.asarray(axis) != UP))   # else planar
         return cls.from_path(arrays["start_mm"], arrays["end_mm"], arrays["width_mm"], arrays["height_mm"],
-                             arrays["layer"], arrays["row"], lines, wobj)
+                             arrays["layer"], arrays["row"], lines, wobj, axis if tilted else None)
 
     @classmethod
     def from_path(cls, start_mm: np.ndarray, end_mm: np.ndarray, width_mm: np.ndarray, height_mm: np.ndarray,
-                  layer: np.ndarray, row: np.ndarray, gcode_line: np.ndarray, wobj: np.ndarray) -> BeadSolids:
-        """Boxes of the beads from ``start_mm`` to ``end_mm`` (plate frame ``wobj``, mm), hanging below."""
+                  layer: np.ndarray, row: np.ndarray, gcode_line: np.ndarray, wobj: np.ndarray,
+                  axis: np.ndarray | None = None) -> BeadSolids:
+        """Boxes of the beads from ``start_mm`` to ``end_mm`` (plate frame ``wobj``, mm), hanging below the path
+        along each bead's nozzle axis ``axis`` (plate frame; None: the plate normal, planar printing)."""
         T = np.asarray(wobj, dtype=float)
         a = np.asarray(start_mm, dtype=float).reshape(-1, 3) @ T[:3, :3].T + T[:3, 3]
         b = np.asarray(end_mm, dtype=float).reshape(-1, 3) @ T[:3, :3].T + T[:3, 3]
         n = len(a)
+        if axis is not None:
+            return cls._tilted(a, b, np.asarray(axis, dtype=float).reshape(n, 3) @ T[:3, :3].T, width_mm, height_mm,
+                               layer, row, gcode_line)
         up_plate = T[:3, 2] / np.linalg.norm(T[:3, 2])
         d = b - a
         length = np.linalg.norm(d, axis=1)
@@ -103,6 +113,22 @@ class BeadSolids:
         centre = (a + b) / 2.0 - up * hang[:, None]
         axes = np.stack([along, side, up], axis=2)
         return cls(centre, axes, half, np.asarray(layer, dtype=np.int64).reshape(n),
+                   np.asarray(row, dtype=np.int64).reshape(n), np.asarray(gcode_line, dtype=np.int64).reshape(n))
+
+    @classmethod
+    def _tilted(cls, a: np.ndarray, b: np.ndarray, axis: np.ndarray, width_mm: np.ndarray, height_mm: np.ndarray,
+                layer: np.ndarray, row: np.ndarray, gcode_line: np.ndarray) -> BeadSolids:
+        """:meth:`from_path` of beads laid with their own nozzle axes (base frame): the twin's bead frames."""
+        n = len(a)
+        along, _, up, columnar = bead_frames(b - a, axis)
+        length = np.linalg.norm(b - a, axis=1)
+        w = np.asarray(width_mm, dtype=float).reshape(n)
+        h = np.asarray(height_mm, dtype=float).reshape(n)
+        half = np.column_stack([np.maximum(length, _MIN_LEN_MM) / 2.0, w / 2.0, h / 2.0])
+        hang = np.where(columnar, 0.0, h / 2.0)
+        centre = (a + b) / 2.0 - up * hang[:, None]
+        side = np.cross(up, along)                                  # (along, side, up) a proper rotation
+        return cls(centre, np.stack([along, side, up], axis=2), half, np.asarray(layer, dtype=np.int64).reshape(n),
                    np.asarray(row, dtype=np.int64).reshape(n), np.asarray(gcode_line, dtype=np.int64).reshape(n))
 
     def extend(self, more: BeadSolids) -> BeadSolids:

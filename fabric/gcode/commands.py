@@ -17,12 +17,13 @@ _LUT = np.full(2000, -1, np.int16)
 for _name, _code in KNOWN.items():
     _LUT[(_name[0] == "M") * 1000 + int(_name[1:])] = _code
 
-# Parameter letters kept for known commands, in column order.
-PARAMS = "XYZEFIJRPSL"
+# Parameter letters kept for known commands, in column order (K: the nozzle axis of the multi-axis dialect,
+# with I and J; an arc's centre offset in the plane G17 never changes to, elsewhere, and then ignored).
+PARAMS = "XYZEFIJRPSLK"
 COL = np.full(256, -1, np.int8)
 for _i, _ch in enumerate(PARAMS):
     COL[ord(_ch)] = _i
-LENGTH_COLS = [PARAMS.index(ch) for ch in "XYZEFIJR"]   # scaled by G20 (inches)
+LENGTH_COLS = [PARAMS.index(ch) for ch in "XYZEFIJRK"]   # scaled by G20 (inches; an axis I J K is normalised)
 
 # Commands whose parameters may be bare letters ("G28 X Y", Prusa's "G28 W").
 FLAG_OK = frozenset({KNOWN["G28"]})

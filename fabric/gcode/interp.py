@@ -12,6 +12,12 @@ cumulative array ops (``modal.py``) instead of a loop over lines:
 * the state at the end of a block (position, modes, feed; layer and feature in
   ``layers.py``) is carried into the next block, so memory is bounded by the
   block size plus the output arrays.
+
+The multi-axis dialect (``multiaxis=True``: curved layers, ``docs/protocol.md``)
+adds the nozzle axis: on G0/G1, I J K are the axis (from the tip up the
+nozzle), modal per letter like X Y Z, normalised per row; a zero vector and
+arcs (where I J would be centre offsets) are errors naming their line. A move
+that only turns the axis (no X Y Z change) turns it for the moves after it.
 """
 from __future__ import annotations
 
@@ -33,7 +39,7 @@ __all__ = ["Interpreter", "LexedBlock", "lex_and_tabulate", "DEFAULT_FEED_MM_S"]
 
 DEFAULT_FEED_MM_S = 25.0     # feed before the first F word (Marlin's 1500 mm/min)
 _G = dict(KNOWN)
-X, Y, Z, E, F, I, J, R, P, S, L = range(len(PARAMS))     # noqa: E741  (G-code's own parameter letters)
+X, Y, Z, E, F, I, J, R, P, S, L, K = range(len(PARAMS))     # noqa: E741  (G-code's own parameter letters)
 _G3 = _G["G3"]                 # G0, G1, G2, G3 are the first four codes: motion is ``code <= _G3``
 _EVENT_COLUMNS = ("ev_row", "ev_kind", "ev_value", "ev_aux", "ev_line")
 
@@ -64,6 +70,7 @@ class _State:
     """What one block leaves to the next: modes, feed, logical position and offset (X, Y, Z, E), counts."""
 
     unit_mm: float = 1.0
+    axis: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))     # I J K (multi-axis)
     abs_xyz: float = 1.0
     abs_e: float = 1.0
     feed_mm_s: float = DEFAULT_FEED_MM_S
@@ -116,12 +123,18 @@ class _MotionRows:
 class Interpreter:
     """Feed blocks of whole lines with :meth:`feed`, then take the :class:`Toolpath` from :meth:`finish`."""
 
-    def __init__(self, chord_tol_mm: float = 0.01, rows_hint: int = 0) -> None:   # rows_hint: a capacity
+    def __init__(self, chord_tol_mm: float = 0.01, rows_hint: int = 0,   # rows_hint: a capacity
+                 multiaxis: bool = False) -> None:
         self.chord_tol_mm = float(chord_tol_mm)
+        self.multiaxis = bool(multiaxis)
         self.state = _State()
         self.layers = LayerTracker()
-        self._rows = RowColumns({"xyz": ("f8", (3,)), "e": ("f8", ()), "feed": ("f8", ()), "line": ("i8", ()),
-                                 "layer": ("i4", ()), "feature": ("i2", ())}, rows_hint)
+        spec: dict[str, tuple[str, tuple[int, ...]]] = {
+            "xyz": ("f8", (3,)), "e": ("f8", ()), "feed": ("f8", ()), "line": ("i8", ()), "layer": ("i4", ()),
+            "feature": ("i2", ())}
+        if self.multiaxis:
+            spec["axis"] = ("f8", (3,))
+        self._rows = RowColumns(spec, rows_hint)
         self._out: dict[str, list[np.ndarray]] = {k: [] for k in _EVENT_COLUMNS}
         self._unknown: dict[str, int] = {}
         self._start: np.ndarray | None = None
@@ -290,7 +303,30 @@ class Interpreter:
         if self._start is None and total:
             self._start = s[:, np.flatnonzero(count)[0]].copy()
         rows = {"xyz": xyz, "e": e_rows, "feed": np.repeat(feed, count), "line": np.repeat(line, count)}
+        if self.multiaxis:
+            rows["axis"] = self._axes(table, lin, lin_row, arc, errors)
         return _MotionRows(rows, ExtrudeOnly(line[eonly], e_move[eonly]))
+
+    def _axes(self, table: CommandTable, lin: np.ndarray, lin_row: np.ndarray, arc: np.ndarray,
+              errors: list[LineError]) -> np.ndarray:
+        """The unit nozzle axis (I J K, modal per letter) of the block's moving G0/G1 rows (multi-axis dialect)."""
+        st = self.state
+        if len(arc):
+            errors.append(LineError(int(table.line[arc[0]]), "an arc (G2/G3) in the multi-axis dialect, where "
+                                                             "I J K are the nozzle axis: write arcs as G1 moves"))
+        raw = np.empty((len(table.code), 3))
+        for k, c in enumerate((I, J, K)):
+            raw[:, k] = ffill(table.par[:, c], lin & table.has[:, c], st.axis[k])
+        if len(raw):
+            st.axis = raw[-1].copy()
+        ax = raw[lin_row]
+        norm = np.sqrt(np.einsum("ij,ij->i", ax, ax))
+        zero = np.flatnonzero(~(norm > 1e-9))
+        if len(zero):
+            errors.append(LineError(int(table.line[lin_row][zero[0]]),
+                                    "the nozzle axis I J K is the zero vector (it must point up the nozzle)"))
+            norm[zero] = 1.0
+        return ax / norm[:, None]
 
     def _events(self, table: CommandTable, row_line: np.ndarray, eonly: ExtrudeOnly,
                 errors: list[LineError]) -> dict[str, np.ndarray]:
@@ -349,7 +385,8 @@ class Interpreter:
             event_value=ev["ev_value"][sel].astype("f8", copy=False),
             event_aux=ev["ev_aux"][sel].astype("i2", copy=False),
             event_line=ev["ev_line"][sel].astype("i8", copy=False), layer_z_mm=np.zeros(0),
-            unknown_commands={}, n_lines=self.state.lines)
+            unknown_commands={}, n_lines=self.state.lines,
+            axis=cols["axis"][:c].copy() if self.multiaxis else None)
         if c:
             ch.last_xyz = xyz[-1].copy()
         # the rest moves to the front of the columns; the events left keep their rows (relative to the new base)
@@ -399,7 +436,7 @@ class Interpreter:
             event_kind=cat("ev_kind", "u1"), event_value=cat("ev_value", "f8"),
             event_aux=cat("ev_aux", "i2"), event_line=cat("ev_line", "i8"),
             layer_z_mm=layers.layer_z_mm, unknown_commands=dict(sorted(self._unknown.items())),
-            n_lines=self.state.lines)
+            n_lines=self.state.lines, axis=rows["axis"] if self.multiaxis else None)
 
 
 @dataclass

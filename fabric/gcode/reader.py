@@ -11,9 +11,9 @@ from fabric.gcode.dialects import detect_slicer
 from fabric.gcode.interp import ChunkSummary, Interpreter, LexedBlock, lex_and_tabulate
 from fabric.gcode.material import HEAD_BYTES, Material, read_material
 from fabric.gcode.toolpath import Toolpath
-from fabric.wire.errors import GcodeError, NotFound, ValidationError
+from fabric.wire.errors import NotFound, ValidationError
 
-__all__ = ["parse_gcode", "parse_gcode_file", "iter_blocks", "ToolpathChunks", "BLOCK_BYTES"]
+__all__ = ["parse_gcode", "parse_gcode_file", "iter_blocks", "ToolpathChunks", "BLOCK_BYTES", "is_multiaxis"]
 
 BLOCK_BYTES = 1 << 19      # ~20k lines (measured fastest with the lexer a block ahead: 0.33 s for 1M moves)
 LEX_AHEAD = 2              # blocks lexed by a worker thread ahead of the interpreter
@@ -65,14 +65,11 @@ def _check(chord_tol_mm: float, block_bytes: int) -> None:
 MULTIAXIS_MARK = b"; multiaxis:"          # the first line of the multi-axis dialect (fabric.slicing.curved.gcode)
 
 
-def refuse_multiaxis(head: bytes) -> None:
-    """Refuse G-code in the multi-axis dialect (a nozzle axis I J K on every move): the planner does not plan
-    a tilted nozzle yet, and planning the file with a vertical one would print another part."""
-    if MULTIAXIS_MARK in head[:4096]:
-        raise GcodeError("this G-code is in the multi-axis dialect (curved layers, every move with its nozzle axis "
-                         "I J K: fabric-cli slice --layers curved): the planner plans a vertical nozzle only, which "
-                         "would print another part, so it is refused; slice with planar layers to print it now",
-                         line=1, text=head.split(b"\n", 1)[0].decode("utf-8", "replace"), dialect="multiaxis")
+def is_multiaxis(head: bytes) -> bool:
+    """Whether G-code whose first bytes are ``head`` is in the multi-axis dialect (a nozzle axis I J K on every
+    move; its first line, or a comment line of the first 4 KiB, is ``; multiaxis: ...``)."""
+    head = head[:4096]
+    return head.startswith(MULTIAXIS_MARK) or b"\n" + MULTIAXIS_MARK in head
 
 
 def parse_gcode(source: str | bytes | bytearray | memoryview, *, chord_tol_mm: float = 0.01,
@@ -90,8 +87,7 @@ def parse_gcode(source: str | bytes | bytearray | memoryview, *, chord_tol_mm: f
     else:
         data = source if isinstance(source, (bytes, bytearray)) else bytes(source)
     view = memoryview(data).cast("B")
-    refuse_multiaxis(bytes(view[:4096]))
-    interp = Interpreter(chord_tol_mm, rows_hint=len(data) // 12)
+    interp = Interpreter(chord_tol_mm, rows_hint=len(data) // 12, multiaxis=is_multiaxis(bytes(view[:4096])))
     n, pos = len(view), 0
     for lexed in lexed_blocks(_memory_blocks(data, view, block_bytes)):
         interp.feed_lexed(lexed)
@@ -115,11 +111,11 @@ def parse_gcode_file(path: str | os.PathLike[str], *, chord_tol_mm: float = 0.01
         stream = open(path, "rb")     # noqa: SIM115  (closed by the with block below)
     except FileNotFoundError as exc:
         raise NotFound(f"G-code file not found: {path}", file=str(path)) from exc
-    interp = Interpreter(chord_tol_mm, rows_hint=size // 12)      # moves take >= ~12 bytes of text
     done = 0
     with stream:
-        refuse_multiaxis(stream.read(4096))
+        multiaxis = is_multiaxis(stream.read(4096))
         stream.seek(0)
+        interp = Interpreter(chord_tol_mm, rows_hint=size // 12, multiaxis=multiaxis)   # moves take >= ~12 bytes
         for lexed in lexed_blocks(iter_blocks(stream, block_bytes)):
             interp.feed_lexed(lexed)
             done += len(lexed.block)
@@ -177,7 +173,7 @@ class ToolpathChunks:
             self.head = bytes(view[:HEAD_BYTES])
             self.tail = bytes(view[max(self.size - HEAD_BYTES, HEAD_BYTES):])
         self.slicer = detect_slicer(self.head[:8192])
-        refuse_multiaxis(self.head)
+        self.multiaxis = is_multiaxis(self.head)
 
     def material(self, n_lines: int = 0) -> Material:
         """What the file's comments state (``n_lines``, the file's line count, names the lines of errors in its
@@ -185,7 +181,8 @@ class ToolpathChunks:
         return read_material(self.head, self.tail, n_lines)
 
     def __iter__(self) -> Iterator[tuple[Toolpath, bool]]:
-        interp = Interpreter(self.chord_tol_mm, rows_hint=self.chunk_rows + 2 * (self.block_bytes // 12))
+        interp = Interpreter(self.chord_tol_mm, rows_hint=self.chunk_rows + 2 * (self.block_bytes // 12),
+                             multiaxis=self.multiaxis)
         pending: Toolpath | None = None
         done = 0
         with contextlib.ExitStack() as stack:

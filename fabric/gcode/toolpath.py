@@ -13,6 +13,11 @@ moves (a retract or prime with no XYZ motion).
 before the first F word). G28 is taken as "this axis is now at 0": the robot
 does not home, so the toolpath keeps the G-code's own coordinates.
 
+``axis`` is None for planar G-code (the nozzle vertical, the planner's
+``tilt_deg`` aside); for the multi-axis dialect (``fabric.gcode.reader``) it
+is the unit nozzle axis of every row, from the tip up the nozzle, in the
+G-code frame.
+
 ``layer`` is the 0-based sequence number of layer changes (not the slicer's
 own number: Cura's raft layers ``;LAYER:-2`` become 0); rows before the first
 layer are ``-1``. ``feature`` indexes ``feature_names`` (0 is ``"none"``).
@@ -70,6 +75,7 @@ class Toolpath:
     n_lines: int = 0
     slicer: str = "unknown"
     material: Material = field(default_factory=Material)     # what the file's comments state
+    axis: np.ndarray | None = None         # (N, 3) unit nozzle axis per row (multi-axis dialect); None: planar
 
     def __len__(self) -> int:
         return len(self.line)
@@ -124,7 +130,12 @@ class Toolpath:
             event_value=self.event_value[sel], event_aux=self.event_aux[sel],
             event_line=self.event_line[sel], layer_z_mm=self.layer_z_mm,
             unknown_commands=self.unknown_commands, n_lines=self.n_lines,
-            slicer=self.slicer)
+            slicer=self.slicer, axis=None if self.axis is None else self.axis[start:stop])
+
+    @property
+    def multiaxis(self) -> bool:
+        """Whether the rows carry their own nozzle axes (the multi-axis dialect)."""
+        return self.axis is not None
 
 
 class RowColumns:

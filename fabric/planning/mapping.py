@@ -12,7 +12,10 @@ just before that move. Fan events have no robot instruction and are counted.
 Travel lifts: a run of consecutive non-extruding rows whose XY length is at
 least ``lift_min_travel_mm`` is lifted by ``travel_lift_mm`` along the plate z:
 a move straight up from the last point, the run's points raised, and a move
-straight down onto the run's last point.
+straight down onto the run's last point. A multi-axis toolpath (rows with
+their own nozzle axes, ``Toolpath.axis``) carries each row's axis into the
+``axis`` column, and its lifts go along the nozzle axis of each point instead
+of the plate z (the same thing for a vertical nozzle).
 
 The whole mapping is array arithmetic: each toolpath row owns a block of output
 rows ``[events..., up?, move, down?]`` whose offsets are a cumulative sum.
@@ -65,6 +68,8 @@ class PrintRows:
     layer: np.ndarray
     first_xyz_mm: np.ndarray
     first_line: int
+    axis: np.ndarray | None       # (rows, 3) nozzle axis per row (multi-axis toolpaths); None: vertical
+    first_axis: np.ndarray        # (3,) the nozzle axis where the approach lands
     n_lifts: int
     n_fan_events: int
 
@@ -206,6 +211,9 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0, *
     del offs
     # columns (views into arrays with room for the approach and return rows)
     size = head + total + tail
+    axes = tp.axis
+    first_axis = np.array([0.0, 0.0, 1.0]) if axes is None else np.array(axes[0], dtype=float)
+    full_axis = None if axes is None else np.zeros((size, 3))
     full: dict[str, np.ndarray] = {
         "op": np.full(size, MOVEL, np.uint8), "xyz_mm": np.zeros((size, 3)), "speed_mm_s": np.zeros(size),
         "zone_mm": np.zeros(size), "flow_mm3_mm": np.zeros(size), "value": np.zeros(size),
@@ -215,18 +223,30 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0, *
     op, xyz = view["op"], view["xyz_mm"]
     op[ev_pos] = ev_op
     xyz[main] = pts[sl]
+    ax = None if full_axis is None or axes is None else full_axis[head:head + total]
+    if ax is not None and axes is not None:
+        ax[main] = axes[sl]
     if len(ui):
         li = np.flatnonzero(lifted)
-        xyz[main[li], 2] += opt.travel_lift_mm
         pi = k0 + ui - 1                          # the point the lift starts from
         xyz[main[ui] - 1] = np.where((pi >= 0)[:, None], pts[np.maximum(pi, 0)], start[None])
-        xyz[main[ui] - 1, 2] += opt.travel_lift_mm
         xyz[main[di] + 1] = pts[k0 + di]
+        if ax is None or axes is None:
+            xyz[main[li], 2] += opt.travel_lift_mm
+            xyz[main[ui] - 1, 2] += opt.travel_lift_mm
+        else:                                     # along each point's nozzle axis
+            up_axis = np.where((pi >= 0)[:, None], axes[np.maximum(pi, 0)], first_axis[None])
+            xyz[main[li]] += opt.travel_lift_mm * axes[k0 + li]
+            xyz[main[ui] - 1] += opt.travel_lift_mm * up_axis
+            ax[main[ui] - 1] = up_axis
+            ax[main[di] + 1] = axes[k0 + di]
     # an event row repeats the pose of the motion row before it (the first point if none)
     prev_pos = np.full(len(slot), -1)
     after = np.flatnonzero(slot > 0)              # events after some toolpath row: that row's move (or down)
     prev_pos[after] = main[slot[after] - 1] + np.isin(slot[after] - 1, di)
     xyz[ev_pos] = np.where((prev_pos >= 0)[:, None], xyz[np.maximum(prev_pos, 0)], start[None])
+    if ax is not None:
+        ax[ev_pos] = np.where((prev_pos >= 0)[:, None], ax[np.maximum(prev_pos, 0)], first_axis[None])
     motion = op == MOVEL
     speed_col, line, layer = view["speed_mm_s"], view["gcode_line"], view["layer"]
     t_line, t_layer = tp.line[sl], tp.layer[sl]
@@ -246,6 +266,10 @@ def map_toolpath(tp: Toolpath, opt: PlanOptions, head: int = 0, tail: int = 0, *
     zone[ev_pos[ev_pos > 0] - 1] = 0.0
     if last:
         zone[-1] = 0.0
+    if full_axis is not None and axes is not None:    # the approach and return rows: the end points' axes
+        full_axis[:head] = first_axis
+        full_axis[head + total:] = full_axis[head + total - 1] if total else first_axis
     return PrintRows(start=head, stop=head + total, **full,
                      first_xyz_mm=np.asarray(start, dtype=float).copy(),
-                     first_line=int(tp.line[0]), n_lifts=int(ui.size), n_fan_events=n_fan)
+                     first_line=int(tp.line[0]), n_lifts=int(ui.size), n_fan_events=n_fan,
+                     axis=full_axis, first_axis=first_axis)

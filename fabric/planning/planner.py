@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import queue
+import re
 import threading
 import time
 from collections.abc import Callable, Generator, Iterable, Iterator
@@ -48,9 +49,10 @@ from fabric.planning.material import resolve_material
 from fabric.planning.options import PlanOptions
 from fabric.planning.post.names import program_name
 from fabric.planning.report import UNREACHABLE_CODES, PlanResult, PlanStats, Reachability
+from fabric.planning.turns import split_turns
 from fabric.robot.frames import inv_T, quat_from_R
 from fabric.robot.kinematics import IK_JUMP, IK_OK
-from fabric.wire.errors import FabricError
+from fabric.wire.errors import FabricError, ValidationError
 
 __all__ = ["plan_gcode", "plan_gcode_file", "plan_toolpath"]
 
@@ -102,12 +104,17 @@ def plan_gcode_file(path: str | os.PathLike[str], cell: Any, options: PlanOption
 def _assemble(tp: Toolpath, cell: Any, opt: PlanOptions, first: bool = True, last: bool = True
               ) -> tuple[Program, _Assembled]:
     """Program rows of a toolpath chunk (plate frame, no joints yet): the approach before the first chunk's
-    print rows, the return home after the last's."""
+    print rows, the return home after the last's. A multi-axis chunk approaches and leaves along the nozzle
+    axis of its first and last point (straight down and up for a vertical nozzle)."""
     head, tail = (2 if first else 0), (2 if last else 0)
+    if tp.multiaxis and any(opt.tilt_deg):
+        raise ValidationError("tilt_deg tilts the nozzle of planar G-code; this multi-axis G-code states the "
+                              "nozzle axis of every move (I J K): plan it with tilt_deg 0", field="tilt_deg",
+                              value=list(opt.tilt_deg))
     pr = map_toolpath(tp, opt, head=head, tail=tail, first=first, last=last)
     h = opt.approach_height_mm or float(cell.approach_height_mm)
     v_app = min(opt.approach_speed_mm_s or float(cell.approach_speed_mm_s), opt.max_tcp_speed_mm_s)
-    up = np.array([0.0, 0.0, h])
+    up = h * pr.first_axis
     n = len(pr.op)
     cols = {name: getattr(pr, name) for name in ("op", "xyz_mm", "speed_mm_s", "zone_mm", "flow_mm3_mm",
                                                  "value", "aux", "gcode_line", "layer")}
@@ -130,12 +137,13 @@ def _assemble(tp: Toolpath, cell: Any, opt: PlanOptions, first: bool = True, las
     if last:
         end = prog.xyz_mm[pr.stop - 1] if len(pr) else pr.first_xyz_mm
         prog.op[-2:] = (MOVEL, MOVEJ)
-        prog.xyz_mm[-2] = end + up
+        prog.xyz_mm[-2] = end + (up if pr.axis is None else h * pr.axis[-2])
         prog.speed_mm_s[[-2, -1]] = v_app
         prog.zone_mm[[-2, -1]] = 0.0
     dropped = dropped_lifts = 0
+    axis = pr.axis
     if first:
-        prog, dropped, dropped_lifts = _start_at_first_bead(prog, pr.stop)
+        prog, dropped, dropped_lifts, axis = _start_at_first_bead(prog, pr.stop, axis)
     n = len(prog)
     # non-motion rows (temperatures, waits, retractions) hold the TCP where the last motion row left it (a
     # chunk after the first starts with a move: the cut is between two extruding moves)
@@ -143,22 +151,28 @@ def _assemble(tp: Toolpath, cell: Any, opt: PlanOptions, first: bool = True, las
     last_motion = np.maximum.accumulate(np.where(motion, np.arange(n), 0))
     rest = np.flatnonzero(~motion)
     prog.xyz_mm[rest] = prog.xyz_mm[last_motion[rest]]
+    if axis is not None:
+        axis[rest] = axis[last_motion[rest]]
     return prog, _Assembled(print_rows=len(pr) - dropped, lifts=pr.n_lifts - dropped_lifts,
-                            fan_events=pr.n_fan_events, approach_speed_mm_s=v_app, leading_dropped=dropped)
+                            fan_events=pr.n_fan_events, approach_speed_mm_s=v_app, leading_dropped=dropped,
+                            axis=axis)
 
 
 @dataclass
 class _Assembled:
-    """What assembling a chunk found besides its rows."""
+    """What assembling a chunk found besides its rows (``axis``: the nozzle axis of every row, plate frame,
+    from the tip up the nozzle, for a multi-axis toolpath; None for planar G-code)."""
 
     print_rows: int
     lifts: int
     fan_events: int
     approach_speed_mm_s: float
     leading_dropped: int
+    axis: np.ndarray | None = None
 
 
-def _start_at_first_bead(prog: Program, stop: int) -> tuple[Program, int, int]:
+def _start_at_first_bead(prog: Program, stop: int, axis: np.ndarray | None = None
+                         ) -> tuple[Program, int, int, np.ndarray | None]:
     """Approach the first bead directly, heating at the approach height.
 
     A slicer's file starts at the bed origin: heat, then travel to the part. A
@@ -173,13 +187,18 @@ def _start_at_first_bead(prog: Program, stop: int) -> tuple[Program, int, int]:
     body = np.arange(2, stop)
     extruding = body[(prog.op[body] == MOVEL) & (prog.flow_mm3_mm[body] > 0)]
     if len(extruding) == 0:
-        return prog, 0, 0
+        return prog, 0, 0, axis
     lead = np.arange(2, int(extruding[0]))
     travel = lead[prog.op[lead] <= MOVEL]
     heat = lead[np.isin(prog.op[lead], (WAIT, SET_TEMP, WAIT_TEMP))]
     other = lead[(prog.op[lead] > MOVEL) & ~np.isin(prog.op[lead], (WAIT, SET_TEMP, WAIT_TEMP))]
     if len(travel):
-        prog.xyz_mm[0] = prog.xyz_mm[travel[-1]] + (prog.xyz_mm[0] - prog.xyz_mm[1])
+        if axis is None:
+            prog.xyz_mm[0] = prog.xyz_mm[travel[-1]] + (prog.xyz_mm[0] - prog.xyz_mm[1])
+        else:                                     # the approach comes down along the first bead's axis
+            height = float(np.linalg.norm(prog.xyz_mm[0] - prog.xyz_mm[1]))
+            axis[0] = axis[1] = axis[travel[-1]]
+            prog.xyz_mm[0] = prog.xyz_mm[travel[-1]] + height * axis[0]
         prog.xyz_mm[1] = prog.xyz_mm[travel[-1]]
         prog.gcode_line[1] = prog.gcode_line[travel[-1]]
     prog.section[heat] = APPROACH
@@ -192,7 +211,10 @@ def _start_at_first_bead(prog: Program, stop: int) -> tuple[Program, int, int]:
     for name, col in prog.columns().items():
         col[k:f] = col[order].copy()
         cols[name] = col[k:]
-    return Program(**cols, wobj=prog.wobj, meta=prog.meta), k, lifts
+    if axis is not None:
+        axis[k:f] = axis[order].copy()
+        axis = axis[k:]
+    return Program(**cols, wobj=prog.wobj, meta=prog.meta), k, lifts, axis
 
 
 @dataclass
@@ -205,9 +227,11 @@ class _Seed:
 
 
 def _solve(prog: Program, cell: Any, opt: PlanOptions, progress: Progress | None, seed: _Seed | None = None,
-           last: bool = True) -> tuple[np.ndarray, np.ndarray]:
+           last: bool = True, axis: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """IK of every motion row (but the final home move of the ``last`` chunk), in blocks, from ``seed`` (carried
-    to the next chunk); fills q and quat. Returns (status, rot_deg)."""
+    to the next chunk); fills q and quat. ``axis`` (rows, 3): each row's nozzle axis in the plate frame, from
+    the tip up the nozzle (multi-axis G-code; the TCP z points the other way, out of the nozzle); None: the
+    options' one nozzle axis. Returns (status, rot_deg)."""
     from fabric.robot.path_ik import solve_path
 
     robot = cell.robot
@@ -231,7 +255,11 @@ def _solve(prog: Program, cell: Any, opt: PlanOptions, progress: Progress | None
             xyz_b = p + wobj[:3, 3]
         else:
             xyz_b = np.einsum("ij,kj->ik", p, wobj[:3, :3]) + wobj[:3, 3]     # no BLAS: (N,3)x(3,3)
-        res = solve_path(robot, xyz_b, np.broadcast_to(axis_b, xyz_b.shape), seed.q_rad,
+        if axis is None:
+            z_b = np.broadcast_to(axis_b, xyz_b.shape)
+        else:                                   # TCP z = -(nozzle axis), turned into the base frame
+            z_b = -(axis[idx] if plate_is_base else np.einsum("ij,kj->ik", axis[idx], wobj[:3, :3]))
+        res = solve_path(robot, xyz_b, z_b, seed.q_rad,
                          rot_range_deg=opt.rot_range_deg, rot_step_deg=opt.rot_step_deg, jump_deg=JUMP_DEG)
         put(prog.q_rad, res.q_rad)
         st = res.status.copy()
@@ -328,11 +356,25 @@ def plan_toolpath(tp: Toolpath, cell: Any, options: PlanOptions | None = None,
 _EXTRA: dict[str, tuple[str, tuple[int, ...]]] = {"status": ("u1", ()), "rot_deg": ("f8", ())}
 
 
+_WIDTH = re.compile(rb"^;WIDTH:\s*([0-9]*\.?[0-9]+)", re.M)
+
+
+def _stated_width(head: bytes) -> dict[str, float]:
+    """``{"bead_width_mm": w}`` from the first ``;WIDTH:`` marker of a multi-axis file's first bytes (its
+    curved-layer beads are that wide; their height varies with the flow), or nothing when there is none."""
+    m = _WIDTH.search(head)
+    if m is None:
+        return {}
+    w = float(m.group(1))
+    return {"bead_width_mm": w} if 0.0 < w < 100.0 else {}
+
+
 class _Whole:
     """A whole toolpath as the one chunk of :func:`_plan_chunks`."""
 
     def __init__(self, tp: Toolpath) -> None:
         self.tp, self.slicer, self.fraction, self.toolpath = tp, tp.slicer, 1.0, tp
+        self.multiaxis = tp.multiaxis
         self.summary = ChunkSummary(n_lines=tp.n_lines, n_rows=len(tp), layer_z_mm=tp.layer_z_mm,
                                     unknown_commands=dict(tp.unknown_commands), feature_names=list(tp.feature_names))
 
@@ -485,6 +527,7 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
     ik_s = 0.0
     wobj = np.asarray(cell.wobj_T() if opt.wobj_T is None else opt.wobj_T, dtype=float)
     it = _parsed_ahead(chunks) if streamed else iter(chunks)
+    prev_axis: np.ndarray | None = None          # the nozzle axis the chunk before ended with (multi-axis)
     try:
         first = True
         while True:
@@ -494,9 +537,14 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
             if item is None:
                 break
             tp, last = item
-            prog, asm = _assemble(tp, cell, opt, first, last)
+            split = split_turns(tp, opt.max_turn_deg, prev_axis)     # multi-axis: big nozzle turns in pieces
+            if tp.axis is not None and len(tp):
+                prev_axis = tp.axis[-1].copy()
+            prog, asm = _assemble(split, cell, opt, first, last)
+            del split
             t1 = time.perf_counter()
-            status, rot = _solve(prog, cell, dataclasses.replace(opt, ik_block_rows=ik_rows), None, seed, last)
+            status, rot = _solve(prog, cell, dataclasses.replace(opt, ik_block_rows=ik_rows), None, seed, last,
+                                 asm.axis)
             ik_s += time.perf_counter() - t1
             _joint_speeds(prog, cell, asm.approach_speed_mm_s)
             motion = prog.op <= MOVEL
@@ -516,6 +564,8 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
             chunks.material(summary.n_lines)        # the error again, naming its line now that the lines are known
             raise deferred
         prog_meta: dict[str, Any] = {"source_lines": summary.n_lines, "slicer": chunks.slicer}
+        if chunks.multiaxis:                     # the twin lays beads along each row's nozzle axis
+            prog_meta.update(multiaxis=True, **_stated_width(getattr(chunks, "head", b"")))
         prog_meta.update(travel_lifts=tot.lifts, fan_events_dropped=tot.fan_events,
                          approach_speed_mm_s=tot.approach_speed_mm_s, leading_travels_dropped=tot.leading_dropped)
         prog_meta.update(print_rows=tot.print_rows, options=opt.to_dict(), **material.meta(), **meta)

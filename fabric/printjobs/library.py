@@ -70,6 +70,7 @@ class FileLibrary:
         entry.used_s = rec.created_s or time.time()
         entry.last_job_id, entry.last_state = rec.job_id, rec.state
         entry.profile, entry.backend, entry.overrides = rec.profile, rec.backend, dict(rec.overrides)
+        entry.layer_mode = rec.layers
         entry.rtf, entry.filament_diameter_mm = rec.rtf, rec.filament_diameter_mm
         self.store.put(entry)
         return entry

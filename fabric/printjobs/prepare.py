@@ -100,7 +100,7 @@ class Preparer:
         if rec.filament_diameter_mm is not None:       # sliced for the filament the job was submitted with
             overrides["filament_diameter_mm"] = f"{rec.filament_diameter_mm:g}"
         acc = self.client.slice(s.SliceRequest(model=model, filename=rec.filename, profile=rec.profile,
-                                               backend=rec.backend, overrides=overrides))
+                                               backend=rec.backend, overrides=overrides, layers=rec.layers))
         done = self.client.wait_job("slicer", acc.job_id, timeout=self.budget_s)
         rec.gcode_id = done.result_id
         self.client.pin("slicer", rec.gcode_id, rec.job_id)

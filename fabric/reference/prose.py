@@ -335,7 +335,8 @@ MULTIAXIS = """\
 ## Multi-axis G-code (curved layers)
 
 A G-code file whose first line is `; multiaxis: nozzle axis in I J K` is in the multi-axis dialect, written
-by `fabric-cli slice --layers curved` (`SliceRequest.layers` "curved", built-in back-end only).
+by `fabric-cli slice --layers curved` (`SliceRequest.layers` "curved", built-in back-end only) and by a job
+submitted with `layers` "curved" (`fabric-cli job submit part.stl --layers curved`).
 
 - `G1 X Y Z I J K E F` is an extruding move: X Y Z the nozzle tip in the plate frame (mm, absolute, G90);
   I J K the nozzle axis as a unit vector in the plate frame, pointing from the tip up the nozzle (`I0 J0 K1`
@@ -349,8 +350,20 @@ by `fabric-cli slice --layers curved` (`SliceRequest.layers` "curved", built-in 
 - Header lines `; curved: key = value` state the slice's measured figures (overhang_mm2 and
   planar_overhang_mm2, thickness_min_mm and thickness_max_mm, max_tilt_deg, max_neighbour_deg, cusp_mean_mm,
   ...).
-- A reader that does not implement the dialect must not plan the file with a vertical tool. This release's
-  planner does not plan a tilted nozzle yet: it refuses such a file with a `gcode` error naming line 1.
+- A reader that does not implement the dialect must not plan the file with a vertical tool.
+- The planner plans every move with its own nozzle axis (the TCP's z is minus the axis): a move that turns
+  the axis by more than `PlanRequest`'s `max_turn_deg` (default 5 deg) is planned as equal pieces (the point
+  along the segment, the axis along the great circle), travel lifts and the approach and return go along the
+  nozzle axis, and the reachability report counts every target. `tilt_deg` is refused for such a file. A
+  move that only turns the axis (no X Y Z) turns it for the moves after it; arcs and a zero axis are `gcode`
+  errors naming their line.
+- The program says `meta.multiaxis` true and the bead width (`;WIDTH:`): the twin lays each bead hanging
+  along the nozzle axis it was laid with, its height from its flow (`station/beads` carries each bead's
+  `axis`), and the collision check orients the part's beads the same way.
+- A cell must be able to follow the tilt: on the paper's cell (`irb140`), where a vertical nozzle is ~22 deg
+  from the forearm's axis, a nozzle tilted around a part makes A4 turn a full turn per lap (joint jumps);
+  the built-in cell `irb140-multiaxis` (the work table 350 mm above the robot base, a slender nozzle) reaches
+  every target of the test shapes with one configuration.
 """
 
 ARTIFACTS = """\

@@ -8,7 +8,7 @@ the last job made from it (so that "print again" needs nothing else) and what th
 from __future__ import annotations
 
 from fabric.schemas.base import f, schema
-from fabric.schemas.pipeline import BACKENDS, JOB_SOURCES
+from fabric.schemas.pipeline import BACKENDS, JOB_SOURCES, LAYER_MODES
 
 __all__ = ["FileAdd", "FileList", "FileQuery", "FilesQuery", "LibraryFile", "MAX_FILES_PAGE"]
 
@@ -31,6 +31,7 @@ class LibraryFile:
     profile: str = "taz-pla-medium"              # the last job's slicing profile: what "print again" uses
     backend: str = f(default="builtin", choices=BACKENDS)     # the last job's slicer
     overrides: dict[str, str] = f(factory=dict)  # the last job's profile keys
+    layer_mode: str = f(default="planar", choices=LAYER_MODES)    # the last job's layers: planar or curved
     rtf: float = f(default=1.0, ge=0.0, le=1e6)  # the last job's real-time factor
     filament_diameter_mm: float | None = None    # the last job's filament (nil: as the file states)
     layers: int = f(default=0, ge=0)             # the last plan's layers (0: not planned yet)

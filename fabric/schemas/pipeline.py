@@ -42,7 +42,7 @@ class SliceRequest:
     layers: str = f(default="planar", choices=LAYER_MODES)   # planar, or curved (builtin only; multi-axis G-code)
 
 
-@schema("slicer.SliceResult", version=2)
+@schema("slicer.SliceResult", version=3)
 class SliceResult:
     """What slicing produced: the G-code (an artifact at the slicer) and its numbers."""
     gcode_id: str                   # the G-code's artifact id (``am/<cell>/slicer/artifact/<gcode_id>``)
@@ -57,6 +57,8 @@ class SliceResult:
     retractions: int = f(default=0, ge=0)   # retractions in the G-code (each one a stop of the nozzle)
     travel_mm: float = f(default=0.0, ge=0.0)    # XY length of the moves that do not extrude
     bridge_area_mm2: float = f(default=0.0, ge=0.0)  # area printed as bridges, summed over layers
+    curved: dict[str, float] = f(factory=dict)  # curved layers: the slice's measured figures (version 3: overhang
+                                                # against planar, thickness, tilt, neighbour angles, cusp)
 
 
 @schema("slicer.Backends")
@@ -68,12 +70,13 @@ class Backends:
 
 # --- planner -----------------------------------------------------------------
 
-@schema("planner.PlanRequest", version=3)
+@schema("planner.PlanRequest", version=4)
 class PlanRequest:
     """Plan G-code given inline (``gcode``), uploaded in chunks (``upload_id``, planner/upload) or by the
     slicer's artifact id (``gcode_id``).
 
-    ``filament_diameter_mm`` overrides what the G-code states (None: as stated, else assumed and said so)."""
+    ``filament_diameter_mm`` overrides what the G-code states (None: as stated, else assumed and said so).
+    Version 4: ``max_turn_deg`` (G-code in the multi-axis dialect)."""
     gcode: bytes = b""              # the G-code itself (inline: up to 4 MB is usual; larger goes by upload)
     gcode_id: str = ""              # or the slicer's G-code artifact id
     filename: str = "part.gcode"    # a name for it (messages and the program's name)
@@ -91,6 +94,8 @@ class PlanRequest:
                                     # 1.75 assumed (and said so in the summary's warnings)
     allow_off_plate: bool = False               # targets off the plate or below it: counted, not fatal
     upload_id: str = f(default="", max_len=64)  # or G-code sent in chunks to planner/upload
+    max_turn_deg: float = f(default=5.0, ge=0.1, le=90.0)   # multi-axis G-code: a move turning the nozzle axis
+                                    # more than this is planned as equal pieces
 
 
 @schema("planner.UnreachableTarget")
@@ -289,6 +294,9 @@ class Beads:
     gcode_line: np.ndarray = f(dtype="<i8", shape=(None,), factory=lambda: np.zeros(0, np.int64))   # -1: none
     wobj: np.ndarray = f(dtype="<f8", shape=(4, 4), factory=lambda: np.eye(4))    # plate frame in the robot
                                                                   # base frame (mm)
+    axis: np.ndarray = f(dtype="<f8", shape=(None, 3), factory=lambda: np.zeros((0, 3)))   # nozzle axis each
+                                                                  # bead was laid with (plate frame, tip up);
+                                                                  # empty: straight up (planar printing)
 
 
 # --- supervisor ---------------------------------------------------------------
@@ -338,7 +346,7 @@ class JobOverride:
     bed_c: float | None = None                  # bed set point set (nil: not changed)
 
 
-@schema("supervisor.JobRecord", version=4)
+@schema("supervisor.JobRecord", version=5)
 class JobRecord:
     """One print job: what was submitted, where it is, what each stage produced, and how it ended.
 
@@ -348,7 +356,7 @@ class JobRecord:
     ``segments`` are the runs of its print (a stop and a restart at a layer, an interruption and its
     recovery: each a segment); ``started_s`` is the first one's start, the durations and the material are
     their totals. ``live_overrides`` are the speed, flow and temperature overrides set while it printed
-    (they end with the job). Version 4: ``segments`` and ``live_overrides``."""
+    (they end with the job). Version 4: ``segments`` and ``live_overrides``. Version 5: ``layers``."""
     job_id: str                                 # the job's id (12 hex digits)
     filename: str                               # the submitted file's name
     source: str = f(default="model", choices=JOB_SOURCES)      # a model to slice, or G-code to plan as it is
@@ -356,6 +364,7 @@ class JobRecord:
     backend: str = ""                           # the slicer (a model)
     model_id: str = ""                          # the submitted file (an artifact at the supervisor)
     overrides: dict[str, str] = f(factory=dict)  # slicing profile overrides
+    layers: str = f(default="planar", choices=LAYER_MODES)     # planar or curved layers (a model; version 5)
     start: bool = False                         # start printing once loaded (as submitted; job next keeps it)
     rtf: float = f(default=1.0, ge=0.0, le=1e6)     # the real-time factor its print runs at
     state: str = f(default="queued", choices=PRINT_JOB_STATES)     # see "Print jobs" in docs/protocol.md
@@ -400,7 +409,7 @@ class FabricStatus:
     job_error: str = ""                         # why the latest job could not be read (then ``job`` is nil)
 
 
-@schema("supervisor.JobSubmit", version=5)
+@schema("supervisor.JobSubmit", version=6)
 class JobSubmit:
     """STL/OBJ/3MF bytes -> slice -> plan -> collision check -> load (-> start); or G-code bytes
     (``source`` "gcode") -> plan -> check -> load (-> start). The file enters the supervisor's library
@@ -409,7 +418,9 @@ class JobSubmit:
     ``source`` empty (the default) is taken from ``filename``: .gcode, .gco, .g and .nc are G-code; .stl,
     .obj and .3mf a model; any other name is a ``validation`` error naming ``source``. The print runs at
     real time (``rtf`` 1) unless asked otherwise, as ``fabric-cli job submit`` does. Version 3: ``source``
-    defaults to "" (inferred) and ``rtf`` to 1 (it was "model" and 0, as fast as possible)."""
+    defaults to "" (inferred) and ``rtf`` to 1 (it was "model" and 0, as fast as possible). Version 6:
+    ``layers`` "curved" slices a model along curved layers with a tilted nozzle (built-in slicer; the
+    multi-axis G-code dialect, planned with the nozzle axis of every move)."""
     model: bytes                                # the file's bytes (a model, or G-code); empty with ``file_id``
     filename: str = f(max_len=255)              # its name (its suffix gives ``source`` when that is empty;
                                                 # "" with ``file_id``: the library's name)
@@ -424,6 +435,8 @@ class JobSubmit:
                                                 # G-code that does not say it (nil: as stated, else assumed);
                                                 # a model is sliced for it (version 4)
     file_id: str = f(default="", max_len=64)    # a library entry to print (``model`` empty), version 5
+    layers: str = f(default="planar", choices=LAYER_MODES)     # planar, or curved (a model, builtin slicer;
+                                                # version 6)
 
 
 def source_of(filename: str, source: str = "") -> str:

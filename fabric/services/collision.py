@@ -82,7 +82,7 @@ class StationBeads:
         while True:
             if len(page.row):
                 arrays = {"start_mm": page.start_mm, "end_mm": page.end_mm, "width_mm": page.width_mm,
-                          "height_mm": page.height_mm, "layer": page.layer, "row": page.row}
+                          "height_mm": page.height_mm, "layer": page.layer, "row": page.row, "axis": page.axis}
                 self.solids = self.solids.extend(BeadSolids.from_arrays(arrays, self.wobj, page.gcode_line))
             if len(self.solids) >= page.total or not len(page.row):
                 return self.solids

@@ -150,7 +150,8 @@ class PlannerService(Service):
                                np.asarray(req.wobj_rpy_deg or [0.0, 0.0, 0.0]))
         options = PlanOptions(offset_mm=tuple(req.offset_mm), tilt_deg=tuple(req.tilt_deg), speed_r=req.speed_r,
                               rot_step_deg=req.rot_step_deg, wobj_T=wobj,
-                              filament_diameter_mm=req.filament_diameter_mm, allow_off_plate=req.allow_off_plate)
+                              filament_diameter_mm=req.filament_diameter_mm, allow_off_plate=req.allow_off_plate,
+                              max_turn_deg=req.max_turn_deg)
         st = self.jobs.submit("plan", lambda job: self._run(job, req, options))
         return s.JobAccepted(job_id=st.job_id, kind="plan")
 

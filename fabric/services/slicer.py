@@ -81,7 +81,7 @@ class SlicerService(Service):
                                model_volume_mm3=float(res.model_volume_mm3), faces=int(res.faces),
                                elapsed_s=float(res.elapsed_s), warnings=list(res.warnings),
                                retractions=int(res.retractions), travel_mm=float(res.travel_mm),
-                               bridge_area_mm2=float(res.bridge_area_mm2))
+                               bridge_area_mm2=float(res.bridge_area_mm2), curved=dict(res.curved))
         self.records.put("slice", gid, result)
         return gid
 

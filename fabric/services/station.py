@@ -560,7 +560,8 @@ class StationService(Service):
                            width_mm=np.array(beads.width_mm[lo:hi], dtype="<f8"),
                            height_mm=np.array(beads.height_mm[lo:hi], dtype="<f8"),
                            layer=np.array(beads.layer[lo:hi], dtype="<i8"), row=rows.astype("<i8"),
-                           gcode_line=lines.astype("<i8"), wobj=np.array(wobj, dtype="<f8"))
+                           gcode_line=lines.astype("<i8"), wobj=np.array(wobj, dtype="<f8"),
+                           axis=np.array(beads.axis[lo:hi], dtype="<f8"))
         return self._step(read)
 
 

@@ -190,13 +190,19 @@ class SupervisorService(Service):
             raise ValidationError(f"a G-code job is not sliced: the profile keys {sorted(req.overrides)} would change "
                                   f"nothing; the filament's diameter is filament_diameter_mm (job submit "
                                   f"--filament-diameter)", field="overrides")
+        if req.layers != "planar" and source == "gcode":      # a multi-axis file says so in its first line
+            raise ValidationError(f"a G-code job is not sliced: layers {req.layers!r} would change nothing (G-code "
+                                  f"in the multi-axis dialect states its nozzle axes itself)", field="layers")
+        if req.layers == "curved" and req.backend != "builtin":
+            raise ValidationError(f"curved layers are sliced by the built-in slicer only, not {req.backend!r}",
+                                  field="layers", backend=req.backend)
         sub = self.library.keep(sub)                # on disk (content-addressed) and in the library
         job_id = uuid.uuid4().hex[:12]
         model_id = content_id(sub.data)
         self.artifacts.pin(model_id, job_id)
         now = time.time()
         rec = s.JobRecord(job_id=job_id, filename=sub.filename, source=source, profile=req.profile,
-                          backend=req.backend, model_id=model_id, overrides=dict(req.overrides),
+                          backend=req.backend, model_id=model_id, overrides=dict(req.overrides), layers=req.layers,
                           start=req.start, rtf=req.rtf, state="queued", stage="queued", created_s=now,
                           updated_s=now, filament_diameter_mm=req.filament_diameter_mm)
 

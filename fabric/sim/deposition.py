@@ -14,6 +14,17 @@ layers (the first layer: its height above the plate); width is
 that area formula. The mesh draws each bead as an octagonal prism: the
 ``w x h`` box with its corners cut so the octagon's area equals the stadium's
 (corner legs ``h * sqrt((1 - pi/4) / 2)``), hanging below the nozzle path.
+
+Multi-axis programs (``meta['multiaxis']``: curved layers, a tilted nozzle).
+Each bead keeps the nozzle axis it was laid with (``axis``, plate frame, from
+the tip up the nozzle; straight up for planar beads) and hangs from the
+nozzle path *along* that axis, its cross-section turned with it. A curved
+layer's thickness varies along the layer and the slicer's E carries it, so a
+bead's height is solved from its flow per mm with the width of the program
+(``meta['bead_width_mm']``, the G-code's ``;WIDTH:``): ``(w - h) h + pi h^2 / 4
+= flow`` (a flow more than a round bead of that width holds makes the bead
+wider, so a bead's volume is always its flow); without a width, beads are
+taken ``BEAD_ASPECT_R`` times as wide as high.
 """
 from __future__ import annotations
 
@@ -29,13 +40,51 @@ from fabric.wire.errors import ValidationError
 __all__ = ["Deposition", "VolumeReport", "bead_area_mm2"]
 
 _FIELDS = {"start_mm": (3,), "end_mm": (3,), "width_mm": (), "height_mm": (), "volume_mm3": (),
-           "row": (), "layer": ()}
+           "row": (), "layer": (), "axis": (3,)}
+OPTIONAL_FIELDS = {"axis"}    # absent from beads saved before multi-axis printing: straight up
 _CHAMFER = float(np.sqrt((1.0 - np.pi / 4.0) / 2.0))
+_K = 1.0 - np.pi / 4.0        # the stadium's area is w h - _K h^2
+BEAD_ASPECT_R = 1.6           # width / height of multi-axis beads when the program states no width
+UP = np.array([0.0, 0.0, 1.0])
 
 
 def bead_area_mm2(width_mm: np.ndarray, height_mm: np.ndarray) -> np.ndarray:
     """Cross-section of a bead (rectangle with semicircular sides)."""
     return (width_mm - height_mm) * height_mm + np.pi * height_mm ** 2 / 4.0
+
+
+def height_for_flow_mm(width_mm: np.ndarray | float, flow_mm3_mm: np.ndarray) -> np.ndarray:
+    """The bead height whose cross-section, at ``width_mm``, is ``flow_mm3_mm`` (the smaller root of
+    ``w h - _K h^2 = flow``; at most the height of the largest such bead, ``w / (2 _K)`` capped at the width)."""
+    w = np.asarray(width_mm, dtype=float)
+    a = np.maximum(np.asarray(flow_mm3_mm, dtype=float), 0.0)
+    disc = np.maximum(w * w - 4.0 * _K * a, 0.0)
+    return np.minimum((w - np.sqrt(disc)) / (2.0 * _K), w)
+
+
+def nozzle_axes(quat_wxyz: np.ndarray) -> np.ndarray:
+    """Nozzle axes (N, 3), from the tip up the nozzle, of TCP orientations (N, 4): minus each TCP's z axis."""
+    w, x, y, z = (quat_wxyz[..., k] for k in range(4))
+    return -np.stack([2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)], axis=-1)
+
+
+def bead_frames(direction: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per bead: unit ``along`` (the move), ``side`` and ``up`` (the nozzle axis made normal to the move), and
+    whether the move runs along the axis itself (``up`` is then any normal, and the bead stands centred).
+
+    ``direction`` (N, 3) end minus start; ``axis`` (N, 3) the nozzle axis. A zero-length move runs along x."""
+    length = np.linalg.norm(direction, axis=1)
+    along = np.where(length[:, None] > 1e-12, direction / np.where(length > 1e-12, length, 1.0)[:, None],
+                     [1.0, 0.0, 0.0])
+    side = np.cross(along, axis)
+    sn = np.linalg.norm(side, axis=1)
+    columnar = sn < 1e-9
+    side = np.where(columnar[:, None], np.cross(along, [0.0, 1.0, 0.0]), side)
+    side_n = np.linalg.norm(side, axis=1)
+    side = np.where(side_n[:, None] > 1e-9, side, np.cross(along, [1.0, 0.0, 0.0]))
+    side /= np.linalg.norm(side, axis=1)[:, None]
+    up = np.cross(side, along)
+    return along, side, up, columnar
 
 
 @dataclass
@@ -60,6 +109,7 @@ class Deposition:
         self._h_default = 0.2
         self._meta_w: float | None = None
         self._meta_h: float | None = None
+        self._multiaxis = False
         if program is not None:
             self._bead_shape(program)
 
@@ -70,6 +120,9 @@ class Deposition:
         meta = program.meta
         self._meta_w = float(meta["bead_width_mm"]) if "bead_width_mm" in meta else None
         self._meta_h = float(meta["layer_height_mm"]) if "layer_height_mm" in meta else None
+        self._multiaxis = bool(meta.get("multiaxis", False))
+        if self._multiaxis:                      # heights from the flow (module docstring): no layer spacing
+            return
         dep = (program.op == MOVEL) & (program.flow_mm3_mm > 0) & (program.layer >= 0)
         if not dep.any():
             return
@@ -92,6 +145,14 @@ class Deposition:
     def dims(self, layer: np.ndarray, flow_mm3_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Width and height (mm) of beads on ``layer`` extruding ``flow_mm3_mm``."""
         layer = np.asarray(layer)
+        if self._multiaxis:
+            flow = np.broadcast_to(np.asarray(flow_mm3_mm, dtype=float), layer.shape)
+            if self._meta_w is not None:
+                h = height_for_flow_mm(self._meta_w, flow)
+                # a flow more than a round bead of that width holds squeezes it wider: the volume is kept
+                return np.maximum(self._meta_w, flow / np.maximum(h, 1e-12) + _K * h), h
+            h = np.sqrt(np.maximum(flow, 0.0) / (BEAD_ASPECT_R - _K))
+            return BEAD_ASPECT_R * h, h
         if self._meta_h is not None:
             h = np.full(layer.shape, self._meta_h)
         else:
@@ -114,8 +175,9 @@ class Deposition:
         self._buf = new
 
     def add(self, row: np.ndarray, layer: np.ndarray, start_mm: np.ndarray, end_mm: np.ndarray,
-            volume_mm3: np.ndarray, flow_mm3_mm: np.ndarray) -> None:
-        """Append beads (vectorised); dimensions follow from the layer and the flow per mm."""
+            volume_mm3: np.ndarray, flow_mm3_mm: np.ndarray, axis: np.ndarray | None = None) -> None:
+        """Append beads (vectorised); dimensions follow from the layer and the flow per mm; ``axis`` (k, 3)
+        is the nozzle axis each was laid with (default straight up)."""
         row = np.atleast_1d(np.asarray(row, dtype=np.int64))
         k = len(row)
         if k == 0:
@@ -129,7 +191,8 @@ class Deposition:
         w, h = self.dims(np.atleast_1d(layer), np.atleast_1d(flow_mm3_mm))
         sl = slice(self._n, self._n + k)
         for name, val in (("row", row), ("layer", layer), ("start_mm", start_mm), ("end_mm", end_mm),
-                          ("volume_mm3", volume_mm3), ("width_mm", w), ("height_mm", h)):
+                          ("volume_mm3", volume_mm3), ("width_mm", w), ("height_mm", h),
+                          ("axis", UP if axis is None else axis)):
             self._buf[name][sl] = val
         self._n += k
 
@@ -142,11 +205,13 @@ class Deposition:
 
     @classmethod
     def from_arrays(cls, program: Program | None, arrays: dict[str, np.ndarray]) -> Deposition:
-        """The beads saved by :meth:`to_arrays`, for ``program`` (which sets the bead shape of new beads)."""
+        """The beads saved by :meth:`to_arrays`, for ``program`` (which sets the bead shape of new beads); beads
+        saved without their nozzle axes (before multi-axis printing) were laid straight up."""
+        n = len(arrays["row"]) if "row" in arrays else 0
+        arrays = {**{k: np.tile(UP, (n, 1)) for k in OPTIONAL_FIELDS if k not in arrays}, **arrays}
         if set(arrays) != set(_FIELDS):
             raise ValidationError(f"bead arrays {sorted(arrays)}, expected {sorted(_FIELDS)}", field="beads")
         dep = cls(program)
-        n = len(arrays["row"])
         dep._alloc(max(256, n))
         for k, shape in _FIELDS.items():
             arr = np.asarray(arrays[k])
@@ -173,20 +238,14 @@ class Deposition:
             raise ValidationError("nothing deposited yet", field="beads")
         a, b = self.start_mm, self.end_mm
         w, h = self.width_mm, self.height_mm
-        d = b - a
-        length = np.linalg.norm(d, axis=1)
-        u = d / np.where(length > 0, length, 1.0)[:, None]
-        side = np.cross(u, [0.0, 0.0, 1.0])
-        sn = np.linalg.norm(side, axis=1)
-        side = np.where(sn[:, None] > 1e-9, side / np.where(sn > 1e-9, sn, 1.0)[:, None], [1.0, 0.0, 0.0])
-        up = np.cross(side, u)
-        up = np.where(np.linalg.norm(up, axis=1)[:, None] > 1e-9, up, [0.0, 1.0, 0.0])
+        _, side, up, columnar = bead_frames(b - a, self.axis)
+        h_hang = np.where(columnar, 0.0, h)       # a bead laid along its own axis stands centred on the path
         # octagon (counter-clockwise in the side/up plane): the w x h box with chamfered corners
         W, H, C = 0.5 * w[:, None], 0.5 * h[:, None], _CHAMFER * h[:, None]
         px = np.concatenate([W, W, W - C, C - W, -W, -W, C - W, W - C], axis=1)
         py = np.concatenate([C - H, H - C, H, H, H - C, C - H, -H, -H], axis=1)
-        centre_a = a - 0.5 * h[:, None] * up
-        centre_b = b - 0.5 * h[:, None] * up
+        centre_a = a - 0.5 * h_hang[:, None] * up
+        centre_b = b - 0.5 * h_hang[:, None] * up
         ring = px[..., None] * side[:, None, :] + py[..., None] * up[:, None, :]   # (n, 8, 3)
         verts = np.concatenate([centre_a[:, None] + ring, centre_b[:, None] + ring], axis=1)  # (n, 16, 3)
         faces = _prism_faces()

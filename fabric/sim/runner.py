@@ -19,10 +19,11 @@ from typing import Any
 import numpy as np
 
 from fabric.motion.cold import DEFAULT_MIN_EXTRUDE_C, min_extrude_c
-from fabric.motion.program import MOVEL, NOZZLE, RETRACT, SET_TEMP, WAIT_TEMP
+from fabric.motion.program import MOVEL, NOZZLE, RETRACT, SET_TEMP, WAIT_TEMP, Program
 from fabric.motion.thermal import HEATER_NAMES
 from fabric.robot.frames import R_from_quat, inv_T, make_T
 from fabric.sim.builder import LegBuilder
+from fabric.sim.deposition import nozzle_axes
 from fabric.sim.legs import Leg
 from fabric.sim.state import TwinState
 from fabric.sim.types import Event
@@ -172,7 +173,7 @@ class LegRunner:
         if j[0] == 0:
             vol[0] += self.state.job.carry_mm3.pop(int(r[0]), 0.0)
         _, start, _ = tl.from_pose(j)
-        self.state.beads.add(r, p.layer[r], start, p.xyz_mm[r], vol, p.flow_mm3_mm[r])
+        self.state.beads.add(r, p.layer[r], start, p.xyz_mm[r], vol, p.flow_mm3_mm[r], _bead_axes(p, r))
 
     # Ending a leg ----------------------------------------------------------------------
 
@@ -268,6 +269,14 @@ class LegRunner:
             start = p.xyz_mm[r - 1] if r > 0 else end
             if vol > 0:
                 st.beads.add(np.array([r]), p.layer[r:r + 1], start[None], np.asarray(end)[None], np.array([vol]),
-                             p.flow_mm3_mm[r:r + 1])
+                             p.flow_mm3_mm[r:r + 1], _bead_axes(p, np.array([r])))
         job.carry_mm3.clear()
         job.resume_at = None
+
+
+def _bead_axes(program: Program, rows: np.ndarray) -> np.ndarray | None:
+    """The nozzle axes beads of ``rows`` are laid with (plate frame): the rows' own for a multi-axis program,
+    None (straight up) for a planar one."""
+    if not program.meta.get("multiaxis", False):
+        return None
+    return nozzle_axes(program.quat_wxyz[rows])

@@ -42,7 +42,9 @@ class SliceResult:
     stop of the nozzle), ``travel_mm`` the XY length of the non-extruding
     moves, both read from the G-code for every back-end; ``bridge_area_mm2``
     is the area printed as bridges, summed over layers (for an external
-    back-end estimated as its bridge volume over the layer height).
+    back-end estimated as its bridge volume over the layer height). ``curved``
+    holds a curved-layer slice's measured figures (overhang against planar,
+    thickness, tilt, neighbour angles, cusp; empty for planar layers).
     """
 
     gcode: str
@@ -58,6 +60,7 @@ class SliceResult:
     retractions: int = 0
     travel_mm: float = 0.0
     bridge_area_mm2: float = 0.0
+    curved: dict[str, float] = field(default_factory=dict)
 
 
 def _builtin_version() -> str:
@@ -105,12 +108,14 @@ def slice_model(data: bytes, filename: str, profile: Profile, backend: str = "bu
     def sub(lo: float, hi: float) -> Callable[[float], None]:
         return lambda f: report(lo + (hi - lo) * min(max(f, 0.0), 1.0))
 
+    curved: dict[str, float] = {}           # a curved slice's measured figures (curved/metrics.py)
     if layers == "curved":
         from fabric.slicing.curved import slice_curved  # TetGen and the field solvers: only when asked
         cs = slice_curved(placed, profile, progress=sub(0.05, 0.98))
         gcode, layers_n, extruded, filament = cs.gcode, cs.layers, cs.extruded_mm3, cs.filament_mm
         retractions, travel_mm, bridge_mm2 = cs.retractions, cs.travel_mm, 0.0
         warnings += cs.warnings
+        curved = {k: float(v) for k, v in cs.report.as_dict().items() if k != "elapsed_s"}
     elif backend == "builtin":
         out = slice_mesh(placed, profile, sub(0.05, 0.98))
         gcode, layers_n, extruded, filament = out.gcode, out.layers, out.extruded_mm3, out.filament_mm
@@ -128,4 +133,4 @@ def slice_model(data: bytes, filename: str, profile: Profile, backend: str = "bu
                        filament_mm=float(filament), model_volume_mm3=float(placed.volume),
                        faces=int(len(placed.faces)), bbox_mm=[lo.tolist(), hi.tolist()],
                        warnings=warnings, elapsed_s=time.perf_counter() - t0, retractions=int(retractions),
-                       travel_mm=float(travel_mm), bridge_area_mm2=float(bridge_mm2))
+                       travel_mm=float(travel_mm), bridge_area_mm2=float(bridge_mm2), curved=curved)

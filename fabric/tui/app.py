@@ -425,7 +425,8 @@ class FabricConsole(App):
         source = "gcode" if choice.path.suffix.lower() in GCODE_SUFFIXES else "model"
         try:
             req = s.JobSubmit(model=choice.path.read_bytes(), filename=choice.path.name, source=source,
-                              profile=choice.profile, backend=choice.backend, start=choice.start, rtf=choice.rtf)
+                              profile=choice.profile, backend=choice.backend, start=choice.start, rtf=choice.rtf,
+                              layers=choice.layers if source == "model" else "planar")
             acc = self.client.submit(req)
         except (FabricError, OSError) as err:
             self.post_message(Reply("submit", False, getattr(err, "message", str(err))))
@@ -445,7 +446,7 @@ class FabricConsole(App):
                                                  profile=rec.profile or "taz-pla-medium",
                                                  backend=rec.backend or "builtin", overrides=dict(rec.overrides),
                                                  start=rec.start, rtf=rec.rtf,
-                                                 filament_diameter_mm=rec.filament_diameter_mm))
+                                                 filament_diameter_mm=rec.filament_diameter_mm, layers=rec.layers))
         except FabricError as err:
             why = "the file is no longer kept: submit it again (a)" if err.code == "not_found" else err.message
             self.post_message(Reply("print again", False, f"job {rec.job_id}: {why}"))

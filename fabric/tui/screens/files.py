@@ -126,7 +126,8 @@ class FilesScreen(Screen):
         """(A worker thread) A new job from the library file, with its last job's settings."""
         acc = client.submit(s.JobSubmit(model=b"", filename="", file_id=e.file_id, profile=e.profile,
                                         backend=e.backend, overrides=dict(e.overrides) if e.source == "model" else {},
-                                        start=True, rtf=e.rtf, filament_diameter_mm=e.filament_diameter_mm))
+                                        start=True, rtf=e.rtf, filament_diameter_mm=e.filament_diameter_mm,
+                                        layers=e.layer_mode if e.source == "model" else "planar"))
         return s.Ack(ok=True, message=f"job {acc.job_id} queued: {e.name} again (from the library)")
 
     def action_remove(self) -> None:

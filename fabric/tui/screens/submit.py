@@ -1,5 +1,5 @@
 """Submit a print job: a model (STL, 3MF, OBJ) or G-code from a file picker or the bundled samples, with the
-slicer's back-ends and profiles."""
+slicer's back-ends, profiles and layers (planar, or curved with a tilted nozzle)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -27,6 +27,7 @@ class SubmitChoice:
     profile: str
     start: bool
     rtf: float
+    layers: str = "planar"       # planar, or curved layers with a tilted nozzle (a model, builtin slicer)
 
 
 class SubmitDialog(ModalScreen[SubmitChoice | None]):
@@ -53,6 +54,8 @@ class SubmitDialog(ModalScreen[SubmitChoice | None]):
                              id="submit-profile")
             with Horizontal(classes="field"):
                 yield Checkbox("start once loaded", value=True, id="submit-start")
+                yield Select([("planar layers", "planar"), ("curved layers", "curved")], value="planar",
+                             allow_blank=False, id="submit-layers")
                 yield Input(placeholder=f"sim speed (0 = max, empty = {DEFAULT_RTF:g})", id="submit-rtf",
                             validators=[Number(minimum=0, maximum=1e6)], type="number", valid_empty=True)
             with Horizontal(classes="dialog-buttons"):
@@ -94,4 +97,5 @@ class SubmitDialog(ModalScreen[SubmitChoice | None]):
         self.dismiss(SubmitChoice(path, str(self.query_one("#submit-backend", Select).value),
                                   str(self.query_one("#submit-profile", Select).value),
                                   self.query_one("#submit-start", Checkbox).value,
-                                  float(raw) if raw else DEFAULT_RTF))
+                                  float(raw) if raw else DEFAULT_RTF,
+                                  str(self.query_one("#submit-layers", Select).value)))

@@ -1,5 +1,5 @@
 """The current layer's toolpath drawn with braille dots, the nozzle's position on it, live; and where a collision
-check found its first hit."""
+check found its first hit. Curved layers (a multi-axis program) get a side view under the top view."""
 from __future__ import annotations
 
 from typing import Any
@@ -40,6 +40,36 @@ class ToolpathView(Static):
             return Text("no program loaded", style="dim")
         if w < 4 or h < 2:
             return Text("")
+        if tp.curved and h >= 8:                     # curved layers: the top view over a side view
+            side_h = max(3, h // 3)
+            top = self._top_view(tp, w, h - side_h)
+            return Text("\n").join([top, self._side_view(tp, w, side_h)])
+        return self._top_view(tp, w, h)
+
+    def _side_view(self, tp: Any, w: int, h: int) -> Text:
+        """The part seen from the front (x across, z up): the layers printed so far dim, the layer shown
+        bright (green where printed), and the nozzle; a curved layer shows as the curve it is."""
+        layer = self._shown_layer()
+        canvas = BrailleCanvas(w, h)
+        x_lo, _, x_hi, _ = tp.bounds_mm
+        z_lo, z_hi = tp.z_bounds_mm
+        to_px = self._scale((x_lo, z_lo, x_hi, z_hi), canvas.size_px)
+        below = np.flatnonzero(tp.extruding & (tp.layer < layer))
+        if len(below) > 20_000:                      # enough to show the part's shape
+            below = below[np.linspace(0, len(below) - 1, 20_000).astype(np.int64)]
+        idx = tp.of_layer(layer)
+        idx = idx[tp.extruding[idx]]
+        done = tp.row[idx] <= self.row_index
+        for sel, style, rank in ((below, TRAVEL_STYLE, 0), (idx[~done], TODO_STYLE, 1), (idx[done], DONE_STYLE, 2)):
+            (x0, y0) = to_px(np.column_stack([tp.start_xy_mm[sel, 0], tp.start_z_mm[sel]]))
+            (x1, y1) = to_px(np.column_stack([tp.end_xy_mm[sel, 0], tp.end_z_mm[sel]]))
+            canvas.lines(x0, y0, x1, y1, style, rank)
+        if self.nozzle_xyz_mm is not None:
+            (nx,), (ny,) = to_px(np.asarray([[self.nozzle_xyz_mm[0], self.nozzle_xyz_mm[2]]], dtype=float))
+            canvas.mark(nx, ny, NOZZLE_GLYPH, NOZZLE_STYLE)
+        return canvas.render()
+
+    def _top_view(self, tp: Any, w: int, h: int) -> Text:
         layer = self._shown_layer()
         canvas = BrailleCanvas(w, h)
         to_px = self._scale(tp.bounds_mm, canvas.size_px)
@@ -92,7 +122,7 @@ class ToolpathView(Static):
             self.border_title = "layer"
             return
         shown = self._shown_layer()
-        title = f"layer {shown + 1}/{tp.layers_total}"
+        title = f"{'curved ' if tp.curved else ''}layer {shown + 1}/{tp.layers_total}"
         hit = self.hit
         if hit is not None:
             if hit.layer == -1:
