@@ -121,6 +121,26 @@ class PlanStats:
         return asdict(self)
 
 
+def unreachable_detail(program: Program, row: int, reason: str) -> str:
+    """The first unreachable target's reason in more words, where there are more to say: which joint jumps
+    and by how much; for a tilted nozzle (a multi-axis program) whose jump or singularity is in the wrist,
+    that the cell's wrist cannot follow the tilt. "" otherwise."""
+    if not 0 < row < len(program):
+        return ""
+    wrist = ""
+    if program.meta.get("multiaxis", False):
+        wrist = ("; the tilted nozzle turns the wrist past a limit or through its singularity, so this cell "
+                 "cannot follow the tilt continuously (a cell whose wrist stays bent can: irb140-multiaxis)")
+    if reason == "joint jump":
+        step = np.degrees(np.abs(program.q_rad[row] - program.q_rad[row - 1]))
+        j = int(np.argmax(step))
+        text = f"A{j + 1} turns {step[j]:.0f} deg between two neighbouring targets, a change of configuration"
+        return text + (wrist if j >= 3 else "")
+    if reason == "singular" and wrist:
+        return "the wrist is straight" + wrist
+    return ""
+
+
 @dataclass
 class PlanResult:
     """A planned G-code file: the program, its reachability, the cycle-time estimate and stats."""

@@ -120,7 +120,7 @@ class Preparer:
         fu = summary.first_unreachable
         if fu is not None:
             raise UnreachableError(f"the program has unreachable targets, the first at G-code line "
-                                   f"{fu.gcode_line}: {fu.reason}", gcode_line=fu.gcode_line, reason=fu.reason,
+                                   f"{fu.gcode_line}: {fu.why()}", gcode_line=fu.gcode_line, reason=fu.reason,
                                    row=fu.row)
         cold = summary.cold_extrusion
         if cold is not None:

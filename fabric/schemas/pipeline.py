@@ -98,12 +98,18 @@ class PlanRequest:
                                     # more than this is planned as equal pieces
 
 
-@schema("planner.UnreachableTarget")
+@schema("planner.UnreachableTarget", version=2)
 class UnreachableTarget:
-    """The first target the robot cannot reach: where (G-code line, program row) and why."""
+    """The first target the robot cannot reach: where (G-code line, program row) and why (version 2:
+    ``detail``, the why in words where there is more to say: which joint jumps, and by how much)."""
     gcode_line: int                 # the G-code line (1-based; -1: not from G-code)
     reason: str = f(choices=UNREACHABLE_REASONS)    # why
     row: int = -1                   # the program row
+    detail: str = ""                # more on why, in words ("" when the reason says it all)
+
+    def why(self) -> str:
+        """The reason, and its detail when there is one."""
+        return f"{self.reason}: {self.detail}" if self.detail else self.reason
 
 
 @schema("planner.ColdExtrusion")

@@ -40,7 +40,7 @@ from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.memory import give_back_freed_memory, keep_freed_memory
 from fabric.planning.post import write_export
 from fabric.planning.post.stream import ExportStream
-from fabric.planning.report import Reachability
+from fabric.planning.report import Reachability, unreachable_detail
 from fabric.programs import content_id, program_artifact_pieces, program_from_artifact
 from fabric.robot.cell import Cell
 from fabric.robot.frames import xyzrpy_to_T
@@ -198,7 +198,7 @@ class PlannerService(Service):
         def program_ready(program: Program, report: Reachability) -> None:
             # the program is final: exports by job id start formatting it, and it is encoded, hashed (its
             # id) and written to the durable store while the plan goes on with the cycle time
-            handoff.program_ready(program, _first_unreachable(report), _cold_extrusion(report))
+            handoff.program_ready(program, _first_unreachable(report, program), _cold_extrusion(report))
             storing.append(self._storer.submit(self._store_program, program, name))
 
         self._forget_plans(keep=job.job_id)
@@ -215,7 +215,7 @@ class PlannerService(Service):
         while len(self.recent) > KEEP_PLANS:
             self.recent.pop(next(iter(self.recent)))
         rep = result.report
-        first = _first_unreachable(rep)
+        first = _first_unreachable(rep, program)
         cold = _cold_extrusion(rep)
         st = result.stats
         estimate = float(result.estimate_s) if np.isfinite(result.estimate_s) else -1.0
@@ -337,7 +337,7 @@ class PlannerService(Service):
         fu = summary.first_unreachable
         if fu is not None and fmt != "csv":
             raise UnreachableError(f"program is not runnable: first unreachable target at G-code line "
-                                   f"{fu.gcode_line} ({fu.reason})", gcode_line=fu.gcode_line, reason=fu.reason,
+                                   f"{fu.gcode_line} ({fu.why()})", gcode_line=fu.gcode_line, reason=fu.reason,
                                    row=fu.row)
         cold = summary.cold_extrusion
         if cold is not None and fmt != "csv":
@@ -372,11 +372,13 @@ def _material_fields(stats) -> dict:
             "warnings": list(stats.warnings)}
 
 
-def _first_unreachable(report: Reachability) -> s.UnreachableTarget | None:
+def _first_unreachable(report: Reachability, program: Program) -> s.UnreachableTarget | None:
     if report.first_unreachable is None:
         return None
     line, reason = report.first_unreachable
-    return s.UnreachableTarget(gcode_line=int(line), reason=reason, row=int(report.first_unreachable_row))
+    row = int(report.first_unreachable_row)
+    return s.UnreachableTarget(gcode_line=int(line), reason=reason, row=row,
+                               detail=unreachable_detail(program, row, reason))
 
 
 def _cold_extrusion(report: Reachability) -> s.ColdExtrusion | None:
