@@ -42,7 +42,7 @@ def report_text(r: s.CollisionReport) -> str:
 def _slice(c: Client, path: str, a: argparse.Namespace) -> s.PlanSummary:
     """Slice the model, then plan the G-code the slicer made (by its id: it stays on the fabric)."""
     req = s.SliceRequest(**model_source(c, read_input(path)), filename=Path(path).name, profile=a.profile,
-                         backend=a.backend)
+                         backend=a.backend, layers=a.layers)
     st = c.wait_job("slicer", c.slice(req).job_id)
     plan = s.PlanRequest(gcode_id=st.result_id, filename=Path(path).with_suffix(".gcode").name,
                          offset_mm=list(a.offset), speed_r=a.speed, tilt_deg=list(a.tilt), rot_step_deg=a.rot_step,
@@ -97,6 +97,8 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
                    help="bodies this close count as touching (default 0.01 mm)")
     p.add_argument("--profile", default="taz-pla-medium", help="slicing profile, for a model")
     p.add_argument("--backend", default="builtin", choices=s.pipeline.BACKENDS, help="slicer, for a model")
+    p.add_argument("--layers", default="planar", choices=s.pipeline.LAYER_MODES,
+                   help="planar, or curved layers with a tilted nozzle (a model; builtin slicer)")
     p.add_argument("--offset", nargs=3, type=float, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"))
     p.add_argument("--tilt", nargs=2, type=float, default=(0.0, 0.0), metavar=("RX_DEG", "RY_DEG"))
     p.add_argument("--speed", type=float, default=1.0, help="feed-rate factor")
