@@ -89,10 +89,10 @@ def test_an_offset_wrist_is_refused(irb: RobotModel) -> None:
     np.testing.assert_allclose(bent.fk(qs[0]), bent.fk(q), atol=1e-3)
 
 
-def test_a_seven_axis_arm_is_refused() -> None:
+def test_a_seven_axis_arm_is_neither_opw_nor_ur() -> None:
     panda = RobotModel.from_example_robot_data("panda")         # the hand's finger joints are dropped: 7 axes
     choice = detect_ik_family(panda.pin_model, panda.flange_frame_id, panda.lower_rad, panda.upper_rad)
-    assert choice.family == "numeric" and choice.arm is None
+    assert choice.family == "panda"                             # the 7-axis family (tests/test_ik_panda.py)
     assert choice.refused == {"opw": "needs 6 joints, the URDF has 7", "ur": "needs 6 joints, the URDF has 7"}
 
 

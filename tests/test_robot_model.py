@@ -174,15 +174,22 @@ def test_two_ik_solvers_one_interface(robot: RobotModel) -> None:
 
 
 def test_limits_change_rebuilds_the_numeric_solver() -> None:
-    r = RobotModel.from_example_robot_data("panda")          # 7 axes (fingers dropped): no closed-form family
+    text = IRB140_URDF.read_text().replace('<origin xyz="0.380 0 0" rpy="0 0 0"/><axis xyz="0 1 0"/>',
+                                           '<origin xyz="0.380 0.02 0" rpy="0 0 0"/><axis xyz="0 1 0"/>')
+    r = RobotModel.from_urdf(text)                           # an offset wrist: no closed-form family
     from fabric.robot.batch_dls import BatchDLSIK
     assert isinstance(r.solver, BatchDLSIK) and r.closed_form is None and r.ik_family == "numeric"
-    assert r.family_choice.refused["opw"] == "needs 6 joints, the URDF has 7"
-    assert r.joint_names == [f"panda_joint{j}" for j in range(1, 8)]
     upper = r.upper_rad.copy()
     upper[0] = 0.5
     r.with_limits(upper_rad=upper)
     np.testing.assert_allclose(r.solver.upper_rad, upper)
+
+
+def test_the_panda_has_seven_joints_and_a_closed_form() -> None:
+    r = RobotModel.from_example_robot_data("panda")          # 7 axes (fingers dropped): the Panda-type family
+    assert r.ik_family == "panda" and r.closed_form is r.solver and r.closed_form is not None
+    assert r.family_choice.refused["opw"] == "needs 6 joints, the URDF has 7"
+    assert r.joint_names == [f"panda_joint{j}" for j in range(1, 8)] and r.closed_form.nq == 7
 
 
 def test_limits_change_rebuilds_the_closed_form_solver() -> None:

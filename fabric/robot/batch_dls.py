@@ -1,4 +1,7 @@
-"""Batched numeric IK for redundant arms (the 7-axis Panda): damped least squares on every target at once, numpy.
+"""Batched numeric IK for redundant arms of no closed-form family: damped least squares on every target at once.
+
+The fallback for any revolute arm that fits no family (``ik_family.py``), such as a 7-axis arm not of the Panda
+type (``panda.py``); numpy throughout.
 
 The arm is its product-of-exponentials form read from the URDF
 (:class:`~fabric.robot.joint_axes.JointAxes`: each joint's axis line at

@@ -1,14 +1,21 @@
 """Branch selection and the closed-form IK solver over any closed-form arm family (``arm_family.ClosedFormArm``).
 
 See ``fabric/robot/kinematics.py`` for the branch-selection argument and the
-singularity holds, and ``opw.py`` / ``ur.py`` / ``kinematics.py`` for the
-geometry of each family; this module holds the solver that applies them to
-(N, 4, 4) TCP poses within joint limits, with joint continuity along the rows.
-Internally a pose is the nine numbers the IK reads (the arm's end-frame
-position, z and y axes, ``pose_cols``) and joints are per-joint rows (6, N):
-contiguous arrays. The end frame is the flange for the IRB 140 reference model;
-other families map it to the URDF flange with ``arm.flange_T``, folded into
-the TCP -> end-frame transform :attr:`ClosedFormIK.tool_inv_T`.
+singularity holds, and ``opw.py`` / ``ur.py`` / ``panda.py`` / ``kinematics.py``
+for the geometry of each family; this module holds the solver that applies
+them to (N, 4, 4) TCP poses within joint limits, with joint continuity along
+the rows. Internally a pose is the nine numbers the IK reads (the arm's
+end-frame position, z and y axes, ``pose_cols``) and joints are per-joint rows
+(nq, N): contiguous arrays. The end frame is the flange for the IRB 140
+reference model; other families map it to the URDF flange with
+``arm.flange_T``, folded into the TCP -> end-frame transform
+:attr:`ClosedFormIK.tool_inv_T`.
+
+A redundant family (the 7-axis Panda type) takes one joint as a parameter
+(``arm.free_joint``, A7): every call may give its value per row (``q_free``),
+else it is held at :attr:`ClosedFormIK.free_rad` (the cell's home value, set
+by ``RobotModel.set_posture``); ``panda.py`` says why holding it loses nothing
+for printing.
 """
 from __future__ import annotations
 
@@ -74,15 +81,17 @@ def select_branches(qb: np.ndarray, allowed: np.ndarray, q_seed: np.ndarray,
 
 
 class ClosedFormIK:
-    """Closed-form IK of a ``ClosedFormArm`` (OPW, UR, the IRB 140 reference) within joint limits (mm)."""
+    """Closed-form IK of a ``ClosedFormArm`` (OPW, UR, Panda, the IRB 140 reference) within joint limits (mm)."""
 
-    max_rows = 65536          # bound on rows per vectorised step (memory: max_rows x 8 x 6 floats)
+    max_rows = 65536          # bound on rows per vectorised step (memory: max_rows x 8 x nq floats)
     tracking = True           # False: always the full 8-branch method (reference for tests)
 
     def __init__(self, arm: ClosedFormArm, lower_rad: np.ndarray, upper_rad: np.ndarray,
-                 tool_T: np.ndarray | None = None) -> None:
+                 tool_T: np.ndarray | None = None, free_rad: float | None = None) -> None:
         self.arm = arm
         self.family = arm.family
+        self.nq = int(arm.nq)
+        self.free_joint = arm.free_joint
         self.lower_rad = np.asarray(lower_rad, dtype=float)
         self.upper_rad = np.asarray(upper_rad, dtype=float)
         self.multi = multi_turn_mask(self.lower_rad, self.upper_rad)
@@ -90,9 +99,27 @@ class ClosedFormIK:
         F = np.asarray(arm.flange_T, dtype=float)
         self._end_inv = None if np.array_equal(F, np.eye(4)) else _inv_T(F)     # flange -> end frame
         self._tool_inv = _inv_T(F @ self.tool_T)
+        self.free_rad = 0.0                # the redundancy joint's value when a call gives none
+        if self.free_joint is not None:
+            j = self.free_joint
+            mid = 0.5 * (max(self.lower_rad[j], -_PI) + min(self.upper_rad[j], _PI))
+            self.free_rad = float(mid if free_rad is None else free_rad)
+
+    def _free(self, q_free: float | np.ndarray | None, n: int) -> float | np.ndarray | None:
+        """The redundancy joint's values for ``n`` rows (None for a 6-axis arm): ``q_free`` or the held value."""
+        if self.free_joint is None:
+            return None
+        if q_free is None:
+            return self.free_rad
+        if np.ndim(q_free) == 0:
+            return float(q_free)
+        v = np.asarray(q_free, dtype=float).reshape(-1)
+        if len(v) != n:
+            raise ValueError(f"q_free needs one value per row ({n}), got {len(v)}")
+        return v
 
     def fk_flange(self, q_rad: np.ndarray) -> np.ndarray:
-        """Flange poses for joints (N, 6) or (6,)."""
+        """Flange poses for joints (N, nq) or (nq,)."""
         return self.arm.fk_flange(q_rad)
 
     @property
@@ -101,17 +128,17 @@ class ClosedFormIK:
         return self._tool_inv
 
     def wrist_sin(self, q_rad: np.ndarray) -> np.ndarray:
-        """The family's distance from its wrist singularity (``|sin|`` of the wrist bend) for joints (N, 6)."""
+        """The family's distance from its wrist singularity (``|sin|`` of the wrist bend) for joints (N, nq)."""
         return self.arm.wrist_sin(np.asarray(q_rad, dtype=float).T)
 
     def canon(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Put single-turn joints of q (..., 6), angles in [-pi, pi], in ``[lower, lower + 2*pi)``.
+        """Put single-turn joints of q (..., nq), angles in [-pi, pi], in ``[lower, lower + 2*pi)``.
 
         That representation is unique for a range under a turn; returns q
         (modified in place) and the in-limits mask (...,). Multi-turn joints
         stay in [-pi, pi] and are placed by unwrapping along the path.
         """
-        inlim = np.ones(q.shape[:-1], dtype=bool)
+        inlim = np.ones_like(q[..., 0], dtype=bool)        # in q's own memory order (the families return views)
         for j in np.flatnonzero(~self.multi).tolist():
             inlim &= self._canon_col(j, q[..., j])
         return q, inlim
@@ -119,55 +146,65 @@ class ClosedFormIK:
     def _canon_col(self, j: int, col: np.ndarray) -> np.ndarray:
         """:meth:`canon` of joint ``j``'s angles ``col`` (in place); returns its in-limits mask."""
         lo = self.lower_rad[j]
-        if lo > -_PI:
-            col[col < lo] += _TWO_PI
+        if lo > -_PI:                                   # (ufuncs with where=: no index arrays, views stay views)
+            np.add(col, _TWO_PI, out=col, where=col < lo)
         elif lo + _TWO_PI <= _PI:
-            col[col >= lo + _TWO_PI] -= _TWO_PI
+            np.subtract(col, _TWO_PI, out=col, where=col >= lo + _TWO_PI)
         return col <= self.upper_rad[j] + _LIMIT_TOL_RAD
 
-    def branches(self, T_flange: np.ndarray, q1_hold: np.ndarray | None = None
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The 8 branches in limit representation: ``q (N, 8, 6), ok, reach, singular`` (N, 8)."""
-        return self.branches_cols(pose_cols(T_flange, self._end_inv), q1_hold)
+    def branches(self, T_flange: np.ndarray, q1_hold: np.ndarray | None = None,
+                 q_free: float | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The 8 branches in limit representation: ``q (N, 8, nq), ok, reach, singular`` (N, 8)."""
+        return self.branches_cols(pose_cols(T_flange, self._end_inv), q1_hold, q_free)
 
-    def branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None
+    def branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None,
+                      q_free: float | np.ndarray | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`branches` of end-frame poses given as columns (9, N) (``fabric.robot.kinematics.pose_cols``)."""
-        qb, reach, sing = self.arm.ik_branches_cols(C, q1_hold)
+        qb, reach, sing = self.arm.ik_branches_cols(C, q1_hold, self._free(q_free, C.shape[1]))
         qb, inlim = self.canon(qb)
         return qb, reach & inlim, reach, sing
 
-    def ik_flange(self, T_flange: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Joints (N, 6) and status (N,) uint8 for flange poses (N, 4, 4), continuous from ``q_seed``."""
-        return self.ik_cols(pose_cols(T_flange, self._end_inv), q_seed)
+    def ik_flange(self, T_flange: np.ndarray, q_seed: np.ndarray, q_free: float | np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """Joints (N, nq) and status (N,) uint8 for flange poses (N, 4, 4), continuous from ``q_seed``."""
+        return self.ik_cols(pose_cols(T_flange, self._end_inv), q_seed, q_free)
 
-    def solve(self, T_tcp_mm: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def solve(self, T_tcp_mm: np.ndarray, q_seed: np.ndarray, q_free: float | np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
         """As :meth:`ik_flange` for TCP poses (``tool_T`` removed while gathering the columns).
 
         The solver interface shared with :class:`fabric.robot.numeric.NumericIK`."""
-        return self.ik_cols(pose_cols(T_tcp_mm, self._tool_inv), q_seed)
+        return self.ik_cols(pose_cols(T_tcp_mm, self._tool_inv), q_seed, q_free)
 
-    def ik_cols(self, C: np.ndarray, q_seed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def ik_cols(self, C: np.ndarray, q_seed: np.ndarray, q_free: float | np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
         """As :meth:`ik_flange` for end-frame poses given as columns ``C`` (9, N): position, z, y axes.
 
-        Everything runs on contiguous per-joint rows (6, N); the result is
-        transposed to (N, 6) once at the end.
+        ``q_free``: a redundant arm's parameter joint per row ((N,) or one value; default :attr:`free_rad`).
+        Everything runs on contiguous per-joint rows (nq, N); the result is
+        transposed to (N, nq) once at the end.
         """
-        seed = np.asarray(q_seed, dtype=float).reshape(6)
+        nq = self.nq
+        seed = np.asarray(q_seed, dtype=float).reshape(nq)
         C = np.asarray(C, dtype=float)
         n = C.shape[1]
+        free = self._free(q_free, n)
         q1, degen = self.arm.q1_free(C)                    # A1 undefined (wrist centre on its axis): hold it
         hold = _forward_fill(q1, ~degen, seed[0]) if degen.any() else None
-        q = np.empty((6, n))
+        q = np.empty((nq, n))
         row_ok, reach_any, sing = (np.empty(n, dtype=bool) for _ in range(3))
-        self._track(C, hold, seed, q, row_ok, reach_any, sing)
-        wdeg = reach_any & self.arm.wrist_degenerate(q)     # one wrist angle free: hold it, solve the rest
+        self._track(C, hold, free, seed, q, row_ok, reach_any, sing)
+        wdeg = reach_any & sing                             # one wrist angle free (a subset of the singular
+        if wdeg.any():                                      # rows): hold it, solve the rest
+            cand = np.flatnonzero(wdeg)
+            wdeg[cand] = self.arm.wrist_degenerate(q[:, cand])
         if wdeg.any():
             sel = np.flatnonzero(wdeg)
-            held = np.stack([_forward_fill(q[j], ~wdeg, seed[j])[sel] for j in range(6)])
+            held = np.stack([_forward_fill(q[j], ~wdeg, seed[j])[sel] for j in range(nq)])
             q[:, sel] = self.arm.resolve_wrist(C[:, sel], q[:, sel], held)
         if not reach_any.all():                           # unreachable rows hold the previous joints
-            for j in range(6):
+            for j in range(nq):
                 q[j] = _forward_fill(q[j], reach_any, seed[j])
         self._place_multi_turn(q, seed)
         status = np.full(n, IK_OK, dtype=np.uint8)
@@ -177,9 +214,9 @@ class ClosedFormIK:
             status[~reach_any] = IK_OUT_OF_REACH
         return np.ascontiguousarray(q.T), status
 
-    def _track(self, C: np.ndarray, hold: np.ndarray | None, seed: np.ndarray, q: np.ndarray,
-               row_ok: np.ndarray, reach_any: np.ndarray, sing: np.ndarray) -> None:
-        """Fill the chosen branch's solution per row into ``q`` (6, N) (module docstring: branch choice).
+    def _track(self, C: np.ndarray, hold: np.ndarray | None, free: float | np.ndarray | None, seed: np.ndarray,
+               q: np.ndarray, row_ok: np.ndarray, reach_any: np.ndarray, sing: np.ndarray) -> None:
+        """Fill the chosen branch's solution per row into ``q`` (nq, N) (module docstring: branch choice).
 
         Alternates two vectorised modes. *Tracking*: solve only the current
         branch for a block of rows and accept the leading rows where it stays
@@ -196,7 +233,8 @@ class ClosedFormIK:
         while i < n:
             if b < 0 or not self.tracking:
                 j = min(n, i + (window if self.tracking else self.max_rows))
-                qb, ok, reach, sg = self.branches_cols(C[:, i:j], None if hold is None else hold[i:j])
+                qb, ok, reach, sg = self.branches_cols(C[:, i:j], None if hold is None else hold[i:j],
+                                                       _rows(free, i, j))
                 allowed = np.where(ok.any(axis=1, keepdims=True), ok, reach)
                 bidx = select_branches(qb, allowed, prev, self._quiet(qb, allowed))
                 r = np.arange(j - i)
@@ -208,7 +246,8 @@ class ClosedFormIK:
                 prev, i = q[:, j - 1].copy(), j
                 continue
             j = min(n, i + block)
-            qt, reach_t, sg, gap = self.arm.ik_branch_cols(C[:, i:j], b, None if hold is None else hold[i:j])
+            qt, reach_t, sg, gap = self.arm.ik_branch_cols(C[:, i:j], b, None if hold is None else hold[i:j],
+                                                           _rows(free, i, j))
             fine = reach_t
             for jj in single:
                 fine &= self._canon_col(jj, qt[jj])
@@ -247,6 +286,12 @@ class ClosedFormIK:
         if n < 2:
             return quiet
         same = np.all(allowed[1:] == allowed[:-1], axis=1)
+        if self.family == "panda":
+            sep = self._panda_separation(qb[1:], allowed[1:])
+            step2 = _sq_dist(qb[1:], qb[:-1])
+            max_step2 = np.max(np.where(allowed[1:], step2, 0.0), axis=1)
+            quiet[1:] = same & (4.0 * max_step2 < sep * sep)
+            return quiet
         if self.family != "ur":          # spherical wrists: the wrist flip moves by exactly its partner's step
             step2 = _sq_dist(qb[1:, ::2, :], qb[:-1, ::2, :])
             step_allowed = allowed[1:, ::2] | allowed[1:, 1::2]
@@ -266,6 +311,26 @@ class ClosedFormIK:
             sep = np.where(both, np.minimum(sep, gap), sep)
         quiet[1:] = same & (4.0 * max_step2 < sep * sep)
         return quiet
+
+    @staticmethod
+    def _panda_separation(qb: np.ndarray, allowed: np.ndarray) -> np.ndarray:
+        """A lower bound (N,) on the distance between any two allowed branches of a Panda-type arm (``panda.py``).
+
+        A4 depends on the elbow alone, so branches of different elbows are at least their A4 distance apart;
+        A5 and A6 depend on the elbow and the wrist, so the two wrists of one elbow are at least the larger of
+        their A5 and A6 distances apart; the two shoulders of one elbow and wrist are pi apart in A1.
+        """
+        sep = np.full(len(qb), _PI)
+        elbow = [allowed[:, [2 * e, 2 * e + 1, 2 * e + 4, 2 * e + 5]].any(axis=1) for e in range(2)]
+        gap = np.abs(_wrap_diff(qb[:, 0, 3] - qb[:, 2, 3]))
+        sep = np.where(elbow[0] & elbow[1], np.minimum(sep, gap), sep)
+        for e in range(2):
+            w0 = allowed[:, 2 * e] | allowed[:, 2 * e + 4]
+            w1 = allowed[:, 2 * e + 1] | allowed[:, 2 * e + 5]
+            gap = np.maximum(np.abs(_wrap_diff(qb[:, 2 * e, 4] - qb[:, 2 * e + 1, 4])),
+                             np.abs(_wrap_diff(qb[:, 2 * e, 5] - qb[:, 2 * e + 1, 5])))
+            sep = np.where(w0 & w1, np.minimum(sep, gap), sep)
+        return sep
 
     def _place_multi_turn(self, q: np.ndarray, seed: np.ndarray) -> None:
         """Unwrap multi-turn joints (rows of q (6, N)) from the seed on, then shift any wind-up back into limits.
@@ -294,6 +359,11 @@ class ClosedFormIK:
                 turns += np.where(under, np.ceil((lo - col) / _TWO_PI), 0.0)
             if turns is not None:
                 q[j] = raw + _TWO_PI * turns
+
+
+def _rows(free: float | np.ndarray | None, i: int, j: int) -> float | np.ndarray | None:
+    """Rows ``i:j`` of a per-row parameter (a single value or None stands for every row)."""
+    return free[i:j] if isinstance(free, np.ndarray) else free
 
 
 def _inv_T(T: np.ndarray) -> np.ndarray:

@@ -1,7 +1,8 @@
-"""Which IK family an arm belongs to: OPW, UR-type, or none (numeric IK), detected from its URDF.
+"""Which IK family an arm belongs to: OPW, UR-type, Panda-type (7 axes), or none (numeric IK), detected from its URDF.
 
-Each closed-form family is tried in turn (``opw``, then ``ur``): its parameters
-are derived from the joint axes at zero (``opw_derive.py``, ``ur_derive.py``)
+Each closed-form family is tried in turn (``opw``, then ``ur``, then the
+7-axis ``panda``): its parameters are derived from the joint axes at zero
+(``opw_derive.py``, ``ur_derive.py``, ``panda_derive.py``)
 and the resulting model is accepted only if its flange poses equal
 Pinocchio's on random joint vectors (``FK_TOL_MM``, ``FK_TOL_ROT``). The first
 family accepted wins; otherwise the arm uses numeric IK, and the reason each
@@ -9,6 +10,7 @@ family refused it is kept for ``cell show`` / ``cell list``.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TypeVar
 
@@ -19,13 +21,15 @@ from fabric.robot.arm_family import FK_TOL_MM, FK_TOL_ROT, ClosedFormArm, IKFami
 from fabric.robot.joint_axes import JointAxes, fk_mismatch, joint_axes
 from fabric.robot.opw import OPWArm
 from fabric.robot.opw_derive import derive_opw
+from fabric.robot.panda import PandaArm
+from fabric.robot.panda_derive import derive_panda
 from fabric.robot.ur import URArm
 from fabric.robot.ur_derive import derive_ur
 
-__all__ = ["FamilyChoice", "detect_ik_family", "opw_arm", "ur_arm", "NUMERIC"]
+__all__ = ["FamilyChoice", "detect_ik_family", "opw_arm", "ur_arm", "panda_arm", "NUMERIC"]
 
 NUMERIC = "numeric"
-_Arm = TypeVar("_Arm", OPWArm, URArm)
+_Arm = TypeVar("_Arm", OPWArm, URArm, PandaArm)
 
 
 @dataclass(frozen=True)
@@ -44,6 +48,11 @@ class FamilyChoice:
             out.update({f"offset{j + 1}_deg": round(float(np.degrees(o)), 9) + 0.0
                         for j, o in enumerate(p.offsets_rad)})
             out.update({f"sign{j + 1}": float(s) for j, s in enumerate(p.signs)})
+            return out
+        if isinstance(self.arm, PandaArm):
+            pp = self.arm.params
+            out = {f"{k}_mm": round(v, 9) + 0.0 for k, v in pp.lengths_mm().items()}
+            out["offset2_deg"] = round(float(np.degrees(pp.offset2_rad)), 9) + 0.0
             return out
         return {}
 
@@ -71,12 +80,21 @@ def ur_arm(model: pin.Model, flange_frame_id: int, lower_rad: np.ndarray, upper_
     return _verified(URArm(derive_ur(ax)), "ur", model, flange_frame_id, lower_rad, upper_rad)
 
 
+def panda_arm(model: pin.Model, flange_frame_id: int, lower_rad: np.ndarray, upper_rad: np.ndarray,
+              axes: JointAxes | None = None) -> PandaArm:
+    """The verified Panda-type arm (7 axes, A7 the parameter) of a Pinocchio model, or :class:`IKFamilyMismatch`."""
+    ax = axes or joint_axes(model, flange_frame_id)
+    return _verified(PandaArm(derive_panda(ax)), "panda", model, flange_frame_id, lower_rad, upper_rad)
+
+
 def detect_ik_family(model: pin.Model, flange_frame_id: int, lower_rad: np.ndarray,
                      upper_rad: np.ndarray) -> FamilyChoice:
     """The first closed-form family that fits the arm exactly, else numeric IK (module docstring)."""
     ax = joint_axes(model, flange_frame_id)
     refused: dict[str, str] = {}
-    for family, build in (("opw", opw_arm), ("ur", ur_arm)):
+    builders: tuple[tuple[str, Callable[..., ClosedFormArm]], ...] = (
+        ("opw", opw_arm), ("ur", ur_arm), ("panda", panda_arm))
+    for family, build in builders:
         try:
             arm = build(model, flange_frame_id, lower_rad, upper_rad, ax)
         except IKFamilyMismatch as exc:

@@ -36,8 +36,11 @@ class _Nearest(NamedTuple):
     valid: np.ndarray          # (M,) bool
 
 
-def _nearest_solution(robot: RobotModel, T: np.ndarray, q_prev: np.ndarray) -> _Nearest:
-    """Per row, the IK solution of T (M, 4, 4) nearest ``q_prev`` (M, nq), and whether it is valid."""
+def _nearest_solution(robot: RobotModel, T: np.ndarray, q_prev: np.ndarray,
+                      q_free: np.ndarray | None = None) -> _Nearest:
+    """Per row, the IK solution of T (M, 4, 4) nearest ``q_prev`` (M, nq), and whether it is valid.
+
+    ``q_free``: a redundant closed form's parameter joint per row (default: the solver's held value)."""
     cf = robot.closed_form
     rows_solver = getattr(robot.solver, "solve_rows", None)
     if cf is None and rows_solver is not None:          # batched DLS: every row from its own previous joints
@@ -51,7 +54,7 @@ def _nearest_solution(robot: RobotModel, T: np.ndarray, q_prev: np.ndarray) -> _
             out[i] = qi[0]
             ok[i] = st[0] == IK_OK
         return _Nearest(out, ok)
-    qb, valid, _, _ = cf.branches_cols(pose_cols(T, cf.tool_inv_T))
+    qb, valid, _, _ = cf.branches_cols(pose_cols(T, cf.tool_inv_T), q_free=q_free)
     d = qb - q_prev[:, None, :]
     d -= 2.0 * np.pi * np.rint(d / (2.0 * np.pi))       # compare modulo 2*pi ...
     dist = np.where(valid, np.einsum("ijk,ijk->ij", d, d), np.inf)
@@ -84,7 +87,9 @@ def joint_jumps(robot: RobotModel, q: np.ndarray, T: np.ndarray | Callable[[np.n
     qb = frames.quat_from_R(Tb[:, :3, :3])
     qb *= np.where(np.sum(qa * qb, axis=1) < 0.0, -1.0, 1.0)[:, None]
     T_mid = frames.make_T(frames.R_from_quat(qa + qb), 0.5 * (Ta[:, :3, 3] + Tb[:, :3, 3]))
-    mid = _nearest_solution(robot, T_mid, q[rows - 1])
+    cf = robot.closed_form
+    free = None if cf is None or cf.free_joint is None else 0.5 * (q[rows - 1, cf.free_joint] + q[rows, cf.free_joint])
+    mid = _nearest_solution(robot, T_mid, q[rows - 1], free)       # a redundant arm's parameter: halfway too
     dev = np.max(np.abs(mid.q_rad - 0.5 * (q[rows - 1] + q[rows])), axis=1)
     jump[rows] = ~mid.valid | (dev > JUMP_RATIO * step[rows - 1] + JUMP_SLACK_RAD)
     return jump

@@ -116,6 +116,8 @@ class SphericalWristArm:
     d4_mm: float
     d6_mm: float
     family = "abb-spherical-wrist"
+    nq = 6
+    free_joint = None          # 6 axes: no redundancy parameter (``q_free`` is ignored)
 
     @property
     def flange_T(self) -> np.ndarray:
@@ -198,8 +200,8 @@ class SphericalWristArm:
         """
         return self.ik_branches_cols(pose_cols(T_flange), q1_hold)
 
-    def ik_branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def ik_branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None,
+                         q_free: float | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`ik_branches` of flange poses given as columns ``C`` (9, N) (see :func:`pose_cols`)."""
         F = self._terms(C, q1_hold)
         n = C.shape[1]
@@ -225,7 +227,8 @@ class SphericalWristArm:
         q, ok, sg, gap = self.ik_branch_cols(pose_cols(T_flange), branch, q1_hold)
         return q.T, ok, sg, gap
 
-    def ik_branch_cols(self, C: np.ndarray, branch: int, q1_hold: np.ndarray | None = None
+    def ik_branch_cols(self, C: np.ndarray, branch: int, q1_hold: np.ndarray | None = None,
+                       q_free: float | np.ndarray | None = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`ik_branch` of flange columns ``C`` (9, N); joints returned as columns ``(6, N)``."""
         cols, ok, sg, gap = self._solve(self._terms(C, q1_hold), branch // 4, (branch // 2) % 2)

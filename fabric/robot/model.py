@@ -11,14 +11,16 @@ exactly the model in use.
 
 Kinematics: the arm's IK family is detected from its URDF at load time
 (``ik_family.py``: OPW arms such as the IRB 140 and the KUKA KR6 R700,
-UR-type arms; each derived model checked against Pinocchio). For a
-closed-form family FK and IK are its vectorised closed form; any other arm of
-revolute joints (the 7-axis Panda) gets the batched damped least squares of
-``batch_dls.py`` (FK and IK on every target at once, the redundancy fixed by
-holding one joint at the cell's home, :meth:`RobotModel.set_posture`); an arm
-with other joints gets the per-target Pinocchio solver of ``numeric.py``. The
-solvers share one interface (``solve(T_tcp_mm, q_seed) -> (q, status)``) and
-the status codes of ``kinematics.py``;
+UR-type arms, and 7-axis Panda-type arms; each derived model checked against
+Pinocchio). For a closed-form family FK and IK are its vectorised closed form;
+the Panda type's redundancy parameter (A7) is held at the cell's home value
+(:meth:`RobotModel.set_posture`; ``panda.py`` says why that loses nothing for
+printing). Any other arm of revolute joints (a 7-axis arm of no family) gets
+the batched damped least squares of ``batch_dls.py`` (FK and IK on every
+target at once, the redundancy fixed by holding one joint at the cell's home);
+an arm with other joints gets the per-target Pinocchio solver of
+``numeric.py``. The solvers share one interface (``solve(T_tcp_mm, q_seed) ->
+(q, status)``) and the status codes of ``kinematics.py``;
 :attr:`RobotModel.solver` is the one in use, :attr:`RobotModel.ik_family`
 names the family.
 
@@ -242,6 +244,9 @@ class RobotModel:
         self.solver: ClosedFormIK | BatchDLSIK | NumericIK
         self.posture_rad: np.ndarray | None = None     # where a redundant arm's free parameter is pulled to
         self.hold_joint: int | None = None             # the joint a redundant arm's IK holds at the posture
+        arm = self.family_choice.arm
+        if arm is not None and arm.free_joint is not None:     # a closed form's parameter joint: held by default
+            self.hold_joint = arm.free_joint
         self._build_solver()
 
     # Construction ------------------------------------------------------
@@ -360,19 +365,20 @@ class RobotModel:
     # Internals ---------------------------------------------------------
     @property
     def ik_family(self) -> str:
-        """The IK family detected from the URDF: ``"opw"``, ``"ur"`` or ``"numeric"``."""
+        """The IK family detected from the URDF: ``"opw"``, ``"ur"``, ``"panda"`` or ``"numeric"``."""
         return self.family_choice.family
 
     def _build_solver(self) -> None:
         """The IK solver for the current limits: the detected family's closed form, else numeric."""
         arm = self.family_choice.arm
         if arm is not None:
-            self.closed_form = ClosedFormIK(arm, self.lower_rad, self.upper_rad, self.tool_T)
+            free = None if self.posture_rad is None or arm.free_joint is None else self.posture_rad[arm.free_joint]
+            self.closed_form = ClosedFormIK(arm, self.lower_rad, self.upper_rad, self.tool_T, free)
             self.solver = self.closed_form
         else:
             self.closed_form = None
             axes = joint_axes(self.pin_model, self.flange_frame_id)
-            if axes.revolute.all():             # any revolute arm (the 7-axis Panda): batched DLS on all rows
+            if axes.revolute.all():             # any revolute arm of no family (7 axes): batched DLS on all rows
                 self.solver = BatchDLSIK(axes, self.lower_rad, self.upper_rad, self.tool_T, self.posture_rad,
                                          self.hold_joint)
             else:
@@ -380,16 +386,29 @@ class RobotModel:
 
     def set_posture(self, q_rad: np.ndarray, hold_joint: str | None = None) -> None:
         """The posture a redundant arm's IK resolves its free parameter towards (a cell's home), and the
-        joint it holds there (``batch_dls.py``); no effect on a closed-form arm."""
+        joint it holds there.
+
+        A closed form with a parameter joint (the Panda type's A7) holds that joint at its posture value;
+        ``hold_joint``, if given, must name it. The batched DLS of an arm of no family holds ``hold_joint``
+        (``batch_dls.py``). No effect on a 6-axis closed form.
+        """
         q = np.asarray(q_rad, dtype=float).reshape(-1)
         if q.shape != (self.nq,):
             raise ValidationError(f"posture needs {self.nq} joints", field="posture")
         if hold_joint is not None and hold_joint not in self.joint_names:
             raise ConfigError(f"{hold_joint!r} is not a joint of {self.name}", field="robot.redundancy_joint",
                               value=hold_joint, joints=self.joint_names)
+        free = None if self.closed_form is None else self.closed_form.free_joint
+        if free is not None and hold_joint is not None and self.joint_names.index(hold_joint) != free:
+            raise ConfigError(f"the {self.ik_family} closed form takes {self.joint_names[free]} as its redundancy "
+                              f"parameter, not {hold_joint}", field="robot.redundancy_joint", value=hold_joint,
+                              expected=self.joint_names[free])
         self.posture_rad = q.copy()
-        self.hold_joint = None if hold_joint is None else self.joint_names.index(hold_joint)
-        if isinstance(self.solver, BatchDLSIK):
+        if free is not None:
+            self.hold_joint = free
+        else:
+            self.hold_joint = None if hold_joint is None else self.joint_names.index(hold_joint)
+        if isinstance(self.solver, BatchDLSIK) or free is not None:
             self._build_solver()
 
     def _add_collision_pairs(self) -> None:

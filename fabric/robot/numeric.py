@@ -4,7 +4,7 @@
 frame id, and has the interface of the closed-form solver
 (:class:`fabric.robot.closed_form.ClosedFormIK`): ``solve(T_tcp_mm, q_seed) ->
 (q, status)``. :class:`~fabric.robot.model.RobotModel` uses it when no closed
-form applies (UR5, Panda, ...).
+form applies and the arm has joints other than revolute ones.
 
 Each row starts from the previous row's solution (row 0 from the seed), so a
 smooth path stays on one configuration. The error is ``log6(T_current^-1 T_target)``

@@ -64,6 +64,8 @@ class OPWArm:
     """An OPW arm from :class:`~fabric.robot.opw_derive.OPWParams` (the ``ClosedFormArm`` interface)."""
 
     family = "opw"
+    nq = 6
+    free_joint = None          # 6 axes: no redundancy parameter (``q_free`` is ignored)
 
     def __init__(self, params: OPWParams) -> None:
         self.params = params
@@ -143,8 +145,8 @@ class OPWArm:
         degen = rho2 < 1e-12 if self.b == 0.0 else np.zeros(len(cx), dtype=bool)
         return self._q(th1, 0), degen
 
-    def ik_branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def ik_branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None,
+                         q_free: float | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """All 8 branches of end-frame columns ``C`` (9, N): ``q (N, 8, 6), reach (N, 8), singular (N, 8)``."""
         F = self._terms(self._model_cols(C), q1_hold)
         n = C.shape[1]
@@ -160,7 +162,8 @@ class OPWArm:
             sing[:, b:b + 2] = sg[:, None]
         return qt.transpose(2, 0, 1), reach, sing
 
-    def ik_branch_cols(self, C: np.ndarray, branch: int, q1_hold: np.ndarray | None = None
+    def ik_branch_cols(self, C: np.ndarray, branch: int, q1_hold: np.ndarray | None = None,
+                       q_free: float | np.ndarray | None = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """One branch for every row: ``q (6, N), reach, singular, gap_rad`` (see ``arm_family``)."""
         th, ok, sg, gap = self._solve(self._terms(self._model_cols(C), q1_hold), branch // 4, (branch // 2) % 2)

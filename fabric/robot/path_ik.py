@@ -5,7 +5,10 @@ is free (RoboDK searches +-180 deg in steps). The orientation of row i for a
 candidate theta is ``R0_i @ Rz(theta)``, where ``R0_i`` has z along the nozzle
 axis and x along ``x_ref`` (default: horizontal, pointing from the point back
 towards the A1 axis, which for a vertical nozzle is the IRB 140's natural wrist
-pose at theta = 0 and keeps A6 from winding as A1 turns).
+pose at theta = 0 and keeps A6 from winding as A1 turns). On a 7-axis arm of
+the Panda type the closed form holds A7 (its redundancy parameter) and theta
+is what moves the elbow's swivel: with the nozzle along A7 that covers every
+solution (``panda.py``).
 
 How theta is chosen, cheapest first:
 
@@ -15,8 +18,12 @@ How theta is chosen, cheapest first:
    penalty for a joint within 15 % of its range from a limit and for
    the wrist bend's ``|sin|`` under sin 15 deg (the family's wrist singularity;
    closed-form arms; a redundant arm's batched IK keeps away from limits itself).
-   Candidates feasible on the whole subsample are ranked by their worst row
-   cost, then mean cost, then ``|theta|``; the best few are verified on every
+   Candidates feasible on the whole subsample are ranked first by whether
+   their first row continues from ``q_start`` (no joint further than the jump
+   threshold: a planner solving a long path block by block keeps the previous
+   block's configuration instead of jumping at the boundary; on a 7-axis arm
+   the rotation moves the whole arm, not the wrist alone), then by their worst
+   row cost, mean cost and ``|theta|``; the best few are verified on every
    row (IK with continuity from ``q_start``, then a joint-jump test) and the
    first that passes everywhere is used: no wrist motion from the rotation.
 2. **Piecewise rotation (Viterbi).** If no constant theta works, every
@@ -57,6 +64,7 @@ __all__ = ["PathIK", "solve_path", "candidate_rotations_deg", "joint_jumps"]
 
 SAMPLE_ROWS = 2048              # subsample of step 1 (closed-form arms)
 SAMPLE_ROWS_NUMERIC = 64        # ... numeric-IK arms
+PRECHECK_EVERY = 8              # step 1 on a redundant closed form: sample rows of the all-branch pre-test
 REPAIR_MAX_ROWS = 2000          # rows step 3 repairs at most
 VERIFY_TOP = 3                  # best constant rotations verified on every row
 MAX_BLOCKS = 2000               # blocks of the Viterbi pass
@@ -93,8 +101,9 @@ class ConstantRotation(NamedTuple):
 
 
 class _Rank(NamedTuple):
-    """How step 1 ranks a feasible candidate (sorted ascending): worst row cost first."""
+    """How step 1 ranks a feasible candidate (sorted ascending): a start without a jump, then worst row cost."""
 
+    jumps_from_start: bool
     worst_cost: float
     mean_cost: float
     abs_theta_deg: float
@@ -225,7 +234,9 @@ class _PathSolver:
         span = r.upper_rad - r.lower_rad
         margin = np.min(np.minimum(q - r.lower_rad, r.upper_rad - q) / span, axis=1)
         cost = np.maximum(0.0, LIMIT_MARGIN_R - margin) / LIMIT_MARGIN_R
-        if r.closed_form is not None:          # the family's wrist singularity (theta5 = 0 for OPW and UR arms)
+        if r.closed_form is not None:
+            # the family's wrist singularity (theta5 = 0 for OPW and UR arms; for the Panda type the shoulder's
+            # gimbal lock or the two wrist solutions meeting, ``panda.py``)
             cost += np.maximum(0.0, WRIST_SIN_SOFT - r.closed_form.wrist_sin(q)) / WRIST_SIN_SOFT
         return np.where(status == IK_OK, cost, np.inf)
 
@@ -263,18 +274,39 @@ class _PathSolver:
         m = SAMPLE_ROWS if self.batched else SAMPLE_ROWS_NUMERIC
         rows = np.unique(np.linspace(0, self.n - 1, min(self.n, m)).round().astype(int))
         ranked: list[_Rank] = []
-        for k, (th, sol) in enumerate(zip(self.thetas, self.ik_candidates(rows), strict=True)):
+        for k, (th, sol) in enumerate(zip(self.thetas, self._sample_candidates(rows), strict=True)):
+            if sol is None:
+                continue
             c = self.row_cost(*sol)
             if np.all(np.isfinite(c)):
                 # costs equal but for rounding are a tie (the smallest rotation wins): a rotation about the
                 # nozzle changes only A6 on a vertical nozzle, and the same path cut into blocks must rank alike
-                ranked.append(_Rank(round(float(c.max()), 9), round(float(c.mean()), 9), abs(float(th)), k))
+                jumps = bool(np.max(np.abs(sol.q_rad[0] - self.q_start)) > self.jump_rad)
+                ranked.append(_Rank(jumps, round(float(c.max()), 9), round(float(c.mean()), 9), abs(float(th)), k))
         for rank in sorted(ranked)[:VERIFY_TOP]:
             theta = float(self.thetas[rank.candidate])
             sol = self._final(theta)
             if np.all(sol.status == IK_OK):
                 return ConstantRotation(theta, sol)
         return None
+
+    def _sample_candidates(self, rows: np.ndarray) -> list[JointSolution | None]:
+        """Step 1's IK of the sample rows for every candidate; None for a candidate some row cannot take at all.
+
+        On a redundant closed form (the Panda type) the rotation moves the whole arm and most candidates leave
+        the joint limits on many rows: an all-branch test without continuity on every ``PRECHECK_EVERY``-th
+        sample row (a row with no branch within limits and clear of singularities can have no OK status)
+        drops those, every candidate in one call, before the continuity solve, whose windows of all branches
+        cost several times more on sparse sample rows. It only saves work: a candidate it keeps is solved and
+        ranked as before.
+        """
+        cf = self.cf
+        if cf is None or cf.free_joint is None:
+            return list(self.ik_candidates(rows))
+        few = rows[::PRECHECK_EVERY]
+        _, ok, _, sing = cf.branches_cols(np.concatenate([self.flange_cols(few, th) for th in self.thetas], axis=1))
+        takes = np.all(np.any(ok & ~sing, axis=1).reshape(len(self.thetas), -1), axis=1)
+        return [self.ik(rows, th, self.q_start) if t else None for th, t in zip(self.thetas, takes, strict=True)]
 
     def _costs(self) -> np.ndarray:
         """Row costs (N, K) of every candidate (finite; infeasible = INFEASIBLE_COST)."""

@@ -68,6 +68,8 @@ class URArm:
     """A UR-type arm from :class:`~fabric.robot.ur_derive.URParams` (the ``ClosedFormArm`` interface)."""
 
     family = "ur"
+    nq = 6
+    free_joint = None          # 6 axes: no redundancy parameter (``q_free`` is ignored)
 
     def __init__(self, params: URParams) -> None:
         self.params = params
@@ -205,8 +207,8 @@ class URArm:
                     out[4 * sh_i + 2 * e + w] = (q, ok, sing, gap)
         return out
 
-    def ik_branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def ik_branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None,
+                         q_free: float | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """All 8 branches of DH frame-6 columns ``C`` (9, N): ``q (N, 8, 6), reach (N, 8), singular (N, 8)``."""
         res = self._branches(self._model_cols(C), (0, 1), (0, 1), (0, 1), q1_hold)
         n = C.shape[1]
@@ -217,7 +219,8 @@ class URArm:
             qt[b], reach[:, b], sing[:, b] = q, ok, sg
         return qt.transpose(2, 0, 1), reach, sing
 
-    def ik_branch_cols(self, C: np.ndarray, branch: int, q1_hold: np.ndarray | None = None
+    def ik_branch_cols(self, C: np.ndarray, branch: int, q1_hold: np.ndarray | None = None,
+                       q_free: float | np.ndarray | None = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """One branch for every row: ``q (6, N), reach, singular, gap_rad`` (see ``arm_family``)."""
         res = self._branches(self._model_cols(C), (branch // 4,), (branch % 2,), ((branch // 2) % 2,), q1_hold)
