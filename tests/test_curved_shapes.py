@@ -11,7 +11,6 @@ from fabric.slicing.curved import MULTIAXIS_HEADER, CurvedSlice, slice_curved, t
 from fabric.slicing.curved.options import MAX_THICKNESS_RATIO
 from fabric.slicing.curved.shapes import SHAPES
 from fabric.slicing.profile import load_profile
-from fabric.wire.errors import GcodeError
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -48,6 +47,17 @@ def test_last_layers_follow_the_top_with_less_staircase_than_planar(sliced, name
     assert r.cusp_mean_mm < 0.5 * r.planar_cusp_mean_mm, r
 
 
+@pytest.mark.parametrize("name", ["dome", "wing"])
+def test_the_largest_staircase_on_the_top_is_no_larger_than_planar(sliced, name):
+    """Core layers are thinned where they cut an upward face at a slope (their staircase stays under planar
+    layers' on the same face); the band follows the top itself. Planar's largest is its nominal layer on a
+    near-flat face, or its thicker first layer on a face near the plate (the wing's trailing edge)."""
+    r = sliced[name].report
+    assert r.planar_cusp_max_mm > 0.2
+    assert r.cusp_max_mm <= r.planar_cusp_max_mm, r
+    assert r.cusp_max_mm < PROFILE.layer_height_mm, r
+
+
 @pytest.mark.parametrize("name", sorted(SHAPES))
 def test_thickness_tilt_and_neighbour_angles_stay_in_bounds(sliced, name):
     r = sliced[name].report
@@ -80,12 +90,10 @@ def test_every_extruding_move_carries_a_unit_nozzle_axis(sliced, name):
     assert tilted.max() > 5.0, "the nozzle never tilts: the axis is not carried through"
 
 
-def test_the_gcode_reader_refuses_the_dialect_until_the_planner_tilts(sliced):
-    """Read as plain XYZ moves, the file would be planned with a vertical nozzle: another part. The reader
-    refuses it on line 1; with the header line taken away the moves themselves parse, layer by layer."""
+def test_the_gcode_reader_reads_the_dialect_with_its_nozzle_axes(sliced):
+    """The reader takes the dialect from its first line: every move keeps its nozzle axis, layer by layer."""
     out = sliced["arch"]
-    with pytest.raises(GcodeError, match="multi-axis dialect") as err:
-        parse_gcode(out.gcode)
-    assert err.value.details["line"] == 1
-    body = out.gcode.split("\n", 1)[1]
-    assert parse_gcode(body).n_layers == out.layers
+    tp = parse_gcode(out.gcode)
+    assert tp.multiaxis and tp.n_layers == out.layers
+    assert tp.axis is not None and np.allclose(np.linalg.norm(tp.axis, axis=1), 1.0, atol=2e-4)
+    assert np.degrees(np.arccos(np.clip(tp.axis[:, 2], -1.0, 1.0))).max() > 5.0

@@ -3,11 +3,11 @@ and the nozzle axis field derived from them.
 
 Two scalar fields on the volume mesh define the layers:
 
-* the *core* field ``d_base``: the heat-method distance from the plate contact,
-  measured inside the part. Its level sets grow out of the base like wave
-  fronts, so they climb along an outward-leaning wall (the wall's normal is
-  perpendicular to the front's direction: no overhang) and up both legs of an
-  arch. Layers are its level sets, ``nominal`` apart along the gradient.
+* the *core* field ``d_base``: the geodesic distance from the plate contact,
+  measured inside the part (:mod:`.heat`). Its level sets grow out of the base
+  like wave fronts, so they climb along an outward-leaning wall (the wall's
+  normal is perpendicular to the front's direction: no overhang) and up both
+  legs of an arch. Layers are its level sets, ``nominal`` apart along the gradient.
 * the *band* field ``d_top``: the distance from the top surface (faces whose
   normal is within ``top_slope_deg`` of +z). The last ``top_band_layers``
   layers are its level sets ``d_top = const`` below the top, so the part's top
@@ -18,8 +18,12 @@ Two scalar fields on the volume mesh define the layers:
   wall that leans outwards (which would be an overhang).
 
 The build direction at a node is the unit gradient of the field it belongs to
-(``+grad d_base`` in the core, ``-grad d_top`` in the band). The nozzle axis
-is that direction smoothed over the mesh (Laplacian passes over its edges,
+(``+grad d_base`` in the core, ``-grad d_top`` in the band); a layer of field
+step ``s`` is ``s / |grad|`` thick there, ``|grad|`` the mean of the adjacent
+elements' gradient lengths (the length of their mean gradient drops where two
+fronts meet: 0.17 on an arch's crown, which read the layers there as almost
+six times their step and thinned the whole layer for it). The nozzle axis is
+that direction smoothed over the mesh (Laplacian passes over its edges,
 which averages it with its neighbours in every direction, across layers too)
 and then limited to the tilt the cell reaches (rotated towards +z in the
 vertical plane that holds it).
@@ -33,7 +37,13 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from fabric.slicing.curved.heat import FemOperators, fem_operators, heat_distance, node_gradients
+from fabric.slicing.curved.heat import (
+    FemOperators,
+    fem_operators,
+    geodesic_distance,
+    node_gradient_norms,
+    node_gradients,
+)
 from fabric.slicing.curved.options import CurvedOptions
 from fabric.slicing.curved.tetmesh import TetMesh
 from fabric.wire.errors import MeshError
@@ -54,9 +64,9 @@ class LayerField:
     d_top_mm: np.ndarray         # geodesic distance from the top surface (inf without a top)
     band_mm: float               # depth of the top band (0: no band)
     core_dir: np.ndarray         # (n, 3) unit gradient of d_base
-    core_grad_r: np.ndarray      # (n,) |grad d_base| (1 for an exact distance)
+    core_grad_r: np.ndarray      # (n,) |grad d_base|, mean over the adjacent elements (1 for an exact distance)
     band_dir: np.ndarray         # (n, 3) unit -grad d_top
-    band_grad_r: np.ndarray      # (n,) |grad d_top|
+    band_grad_r: np.ndarray      # (n,) |grad d_top|, likewise
     axis: np.ndarray             # (n, 3) nozzle axis: smoothed, tilt-limited build direction
     in_band: np.ndarray          # (n,) bool
     band_clip_mm: np.ndarray     # (n,) max(d_top - band, margin - d_side): < 0 in the band, >= 0 in the core
@@ -83,12 +93,16 @@ def surface_kinds(mesh: TetMesh, top_slope_deg: float) -> tuple[np.ndarray, np.n
     return up, ~up & ~on_plate
 
 
-def _side_distance(mesh: TetMesh, side_faces: np.ndarray) -> np.ndarray:
-    """Straight distance (mm) from every node to the nearest node of a side wall (inf without walls)."""
+def _side_distance(mesh: TetMesh, side_faces: np.ndarray, reach_mm: float) -> np.ndarray:
+    """Straight distance (mm) from every node to the nearest node of a side wall (inf without walls), exact
+    up to ``reach_mm`` plus the longest mesh edge (farther nodes get that bound): enough for every edge that
+    the band's clip value crosses zero on."""
     if len(side_faces) == 0:
         return np.full(len(mesh.nodes), np.inf)
-    dist, _ = cKDTree(mesh.nodes[np.unique(side_faces.ravel())]).query(mesh.nodes)
-    return np.asarray(dist)
+    e = mesh.edges
+    bound = reach_mm + float(np.linalg.norm(mesh.nodes[e[:, 0]] - mesh.nodes[e[:, 1]], axis=1).max())
+    dist, _ = cKDTree(mesh.nodes[np.unique(side_faces.ravel())]).query(mesh.nodes, distance_upper_bound=bound)
+    return np.minimum(np.asarray(dist), bound)
 
 
 def limit_tilt(axes: np.ndarray, max_tilt_deg: float) -> np.ndarray:
@@ -139,17 +153,19 @@ def build_field(mesh: TetMesh, options: CurvedOptions, nominal_mm: float, side_m
     base = base_nodes(mesh.nodes)
     if len(base) == 0:
         raise MeshError("curved slicing: the part does not touch the plate", reason="no_base")
-    d_base = heat_distance(mesh, ops, base, options.heat_time_r)
-    core_dir, core_grad = _unit(node_gradients(ops, mesh.tets, d_base))
+    d_base = geodesic_distance(mesh, ops, base, options.heat_time_r)
+    core_dir, _norm = _unit(node_gradients(ops, mesh.tets, d_base))
+    core_grad = node_gradient_norms(ops, mesh.tets, d_base)
     n = len(mesh.nodes)
     faces, _normals = mesh.boundary_faces()
     up, side = surface_kinds(mesh, options.top_slope_deg)
     band_mm = options.top_band_layers * nominal_mm if np.any(up) else 0.0
     if band_mm > 0.0:
-        d_top = heat_distance(mesh, ops, np.unique(faces[up].ravel()), options.heat_time_r)
-        band_dir, band_grad = _unit(-node_gradients(ops, mesh.tets, d_top))
+        d_top = geodesic_distance(mesh, ops, np.unique(faces[up].ravel()), options.heat_time_r)
+        band_dir, _norm = _unit(-node_gradients(ops, mesh.tets, d_top))
+        band_grad = node_gradient_norms(ops, mesh.tets, d_top)
         margin = max(side_margin_mm, band_mm)
-        clip = np.maximum(d_top - band_mm, margin - _side_distance(mesh, faces[side]))
+        clip = np.maximum(d_top - band_mm, margin - _side_distance(mesh, faces[side], margin))
     else:
         d_top = np.full(n, np.inf)
         band_dir, band_grad = core_dir, core_grad

@@ -44,6 +44,7 @@ def _bead_areas_mm2(width_mm: float, heights_mm: np.ndarray) -> np.ndarray:
 
 
 _MOVE = "G1 X{:.3f} Y{:.3f} Z{:.3f} I{:.4f} J{:.4f} K{:.4f} E{:.5f}"
+_DECIMALS = (3, 3, 3, 4, 4, 4, 5)          # the decimals of _MOVE's fields
 
 
 def _xyz_ijk(p: np.ndarray, a: np.ndarray) -> str:
@@ -54,7 +55,8 @@ def write_multiaxis(layers: list[list[CurvedPath]], profile: Profile, header: li
                     nominal_mm: float) -> GcodeTotals:
     """G-code of the ordered paths of every layer, in the multi-axis dialect."""
     p = profile
-    out = [f"; {MULTIAXIS_HEADER}"] + [f"; {line}" for line in header + p.material_header()]
+    out: list[str | int] = [f"; {MULTIAXIS_HEADER}"]
+    out += [f"; {line}" for line in header + p.material_header()]
     out += [";TYPE:Custom", f"M140 S{p.bed_temp_c:g}", f"M104 S{p.nozzle_temp_c:g}",
             f"M190 S{p.bed_temp_c:g}", f"M109 S{p.nozzle_temp_c:g}",
             "G21 ; millimetres", "G90 ; absolute XYZ", "M83 ; relative E", "G92 E0"]
@@ -66,6 +68,8 @@ def write_multiaxis(layers: list[list[CurvedPath]], profile: Profile, header: li
     retracted = False
     here: np.ndarray | None = None
     here_axis = np.array([0.0, 0.0, 1.0])
+    blocks: list[np.ndarray] = []          # the extruding moves of each path, (k, 7) X Y Z I J K E
+    feeds: list[str] = []
     for index, paths in enumerate(layers):
         if not paths:
             continue
@@ -109,9 +113,9 @@ def write_multiaxis(layers: list[list[CurvedPath]], profile: Profile, header: li
             seg = np.linalg.norm(np.diff(path.points_mm, axis=0), axis=1)
             volumes = seg * _bead_areas_mm2(path.width_mm, 0.5 * (path.heights_mm[1:] + path.heights_mm[:-1]))
             es = volumes * area_in
-            rows = np.column_stack([path.points_mm[1:], path.axes[1:], es]).tolist()
-            out.append(_MOVE.format(*rows[0]) + feed)
-            out += [_MOVE.format(*row) for row in rows[1:]]
+            blocks.append(np.column_stack([path.points_mm[1:], path.axes[1:], es]))
+            feeds.append(feed)
+            out.append(len(blocks) - 1)          # the block's moves are formatted all at once below
             filament += float(es.sum())
             extruded += float(volumes.sum()) * p.extrusion_multiplier_r
             here, here_axis = path.points_mm[-1], path.axes[-1]
@@ -119,4 +123,63 @@ def write_multiaxis(layers: list[list[CurvedPath]], profile: Profile, header: li
         out.append(f"G1 E{-p.retract_length_mm:.5f} F{retract_f:.0f}")
         retractions += 1
     out += [";TYPE:Custom", "M104 S0", "M140 S0", ""]
-    return GcodeTotals("\n".join(out), filament, extruded, retractions, travel)
+    moves = _format_moves(np.vstack(blocks)) if blocks else []
+    first = np.r_[0, np.cumsum([len(b) for b in blocks])].tolist()
+    text: list[str] = []
+    for line in out:
+        if isinstance(line, str):
+            text.append(line)
+        else:                                   # a path's moves, the first with the path's feed rate
+            text.append(moves[first[line]] + feeds[line])
+            text += moves[first[line] + 1:first[line + 1]]
+    return GcodeTotals("\n".join(text), filament, extruded, retractions, travel)
+
+
+def _digit_table(digits: int) -> np.ndarray:
+    """ASCII codes (10^digits, digits) of every number below 10^digits, zero-padded."""
+    values = np.arange(10 ** digits)
+    return np.stack([(values // 10 ** (digits - 1 - k)) % 10 for k in range(digits)], axis=1).astype(np.uint8) \
+        + np.uint8(ord("0"))
+
+
+def _fixed_column(values: np.ndarray, decimals: int, codes: np.ndarray, used: np.ndarray) -> None:
+    """Write ``values`` with ``decimals`` decimals, as ``f"{v:.{decimals}f}"`` writes them (a minus sign on
+    negative values and negative zero), into the ASCII ``codes`` (n, w) and mark which of them ``used`` (the
+    integer part is right-aligned after the sign slot, in the width of the largest)."""
+    raw = np.abs(values) * 10.0 ** decimals
+    scaled = np.rint(raw).astype(np.int64)
+    for i in np.flatnonzero(np.abs(raw - np.floor(raw) - 0.5) < 1e-6).tolist():
+        # within rounding of a tie: the product's rounding may differ from the exact decimal value's
+        scaled[i] = int(f"{abs(float(values[i])):.{decimals}f}".replace(".", ""))
+    whole, frac = np.divmod(scaled, 10 ** decimals)
+    width = codes.shape[1] - 2 - decimals
+    codes[:, 0] = ord("-")
+    used[:, 0] = np.signbit(values)
+    codes[:, 1:1 + width] = _digit_table(width)[whole]
+    powers = 10 ** np.arange(width - 1, -1, -1)
+    used[:, 1:1 + width] = (whole[:, None] >= powers) | (powers == 1)
+    codes[:, 1 + width] = ord(".")
+    used[:, 1 + width:] = True
+    codes[:, 2 + width:] = _digit_table(decimals)[frac]
+
+
+def _format_moves(rows: np.ndarray) -> list[str]:
+    """``_MOVE.format(*row)`` for every row of (n, 7) ``X Y Z I J K E``, built as one byte array (formatting
+    millions of floats one by one took a tenth of a large part's slicing time)."""
+    n = len(rows)
+    names = ("G1 X", " Y", " Z", " I", " J", " K", " E")
+    widths = [len(str(int(np.rint(np.abs(rows[:, c]).max())))) if n else 1 for c in range(7)]
+    total = sum(len(name) + 2 + w + d for name, w, d in zip(names, widths, _DECIMALS, strict=True)) + 1
+    codes = np.empty((n, total), dtype=np.uint8)
+    used = np.empty((n, total), dtype=bool)
+    at = 0
+    for column, (name, width, decimals) in enumerate(zip(names, widths, _DECIMALS, strict=True)):
+        codes[:, at:at + len(name)] = np.frombuffer(name.encode(), dtype=np.uint8)
+        used[:, at:at + len(name)] = True
+        at += len(name)
+        span = 2 + width + decimals
+        _fixed_column(rows[:, column], decimals, codes[:, at:at + span], used[:, at:at + span])
+        at += span
+    codes[:, at] = ord("\n")
+    used[:, at] = True
+    return codes[used].tobytes().decode("ascii").split("\n")[:-1]

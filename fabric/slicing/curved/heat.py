@@ -1,15 +1,25 @@
-"""Heat-method geodesic distance on a tetrahedral mesh (linear finite elements).
+"""Geodesic distance on a tetrahedral mesh (linear finite elements), after the heat method.
 
 Crane, Weischedel and Wardetzky's heat method in three steps, all on the
-volume mesh: (1) diffuse heat from the sources for a short time ``t`` (one
-backward-Euler step of ``(M + t K) u = 0`` with ``u = 1`` held on the sources);
-(2) normalise the heat's gradient on every tetrahedron, ``X = -grad u / |grad u|``,
-which points away from the sources along shortest paths *inside* the part;
-(3) find the distance ``phi`` whose gradient best fits ``X``: the Poisson
-problem ``K phi = div X`` with ``phi = 0`` on the sources. ``K`` is the
-stiffness (cotangent) matrix of linear tetrahedra, ``M`` the lumped mass.
-Distances go around holes and up the legs of an arch, which is what makes
-them useful as a build direction.
+volume mesh: (1) a direction field that points away from the sources along
+shortest paths *inside* the part; (2) normalise it on every tetrahedron,
+``X = d / |d|``; (3) find the distance ``phi`` whose gradient best fits ``X``:
+the Poisson problem ``K phi = div X`` with ``phi = 0`` on the sources (``K``
+the stiffness, cotangent, matrix of linear tetrahedra). Distances go around
+holes and up the legs of an arch, which is what makes them useful as a build
+direction.
+
+Step (1) is by default the gradient of the shortest-path distance along the
+mesh's edges (Dijkstra; exact up to the edges' zig-zag, which step 3 smooths
+out). The heat method proper diffuses heat from the sources for a short time
+``t = time_r h^2`` (one backward-Euler step of ``(M + t K) u = 0``, ``u = 1``
+on the sources, ``M`` the lumped mass) and takes ``-grad u``; its no-flux
+walls bend ``X`` along them over a depth of about ``sqrt(t)``. On the lattice
+meshes of :mod:`.tetmesh` that flattened the distance from the plate under a
+dome's top: its gradient's length fell to 0.63 (0.72 at the 1st percentile),
+and a layer there is step / length thick; with the edge paths it stays above
+0.90 (0.96), and the distance is within 0.07 mm of the height on average
+against 0.18 mm.
 """
 from __future__ import annotations
 
@@ -23,9 +33,10 @@ from scipy.sparse import csgraph
 from fabric.slicing.curved.tetmesh import TetMesh
 from fabric.wire.errors import SlicerError
 
-__all__ = ["FemOperators", "fem_operators", "heat_distance", "tet_gradients", "node_gradients"]
+__all__ = ["FemOperators", "fem_operators", "geodesic_distance", "tet_gradients", "node_gradients",
+           "node_gradient_norms"]
 
-DIRECT_SOLVE_MAX_NODES = 60000     # above this, conjugate gradients (sparse LU fill-in grows fast in 3D)
+DIRECT_SOLVE_MAX_NODES = 60000     # the heat step's sparse LU above this would fill in too much (3D)
 
 
 @dataclass(frozen=True)
@@ -73,30 +84,65 @@ def node_gradients(ops: FemOperators, tets: np.ndarray, values: np.ndarray) -> n
     return np.asarray(ops.node_tet @ tet_gradients(ops, tets, values))
 
 
+def node_gradient_norms(ops: FemOperators, tets: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(n,) volume-weighted mean of the adjacent elements' gradient *lengths*: unlike the length of the mean
+    gradient, it does not drop where two fronts meet (an arch's crown, where the elements' gradients point
+    opposite ways)."""
+    return np.asarray(ops.node_tet @ np.linalg.norm(tet_gradients(ops, tets, values), axis=1))
+
+
 def _solve_fixed(matrix: sp.csr_matrix, rhs: np.ndarray, fixed: np.ndarray, fixed_values: np.ndarray,
                  guess: np.ndarray | None = None) -> np.ndarray:
-    """Solve ``matrix x = rhs`` with ``x[fixed] = fixed_values`` (symmetric positive definite after reduction);
-    ``guess`` starts the iterative solver on large meshes."""
+    """Solve ``matrix x = rhs`` with ``x[fixed] = fixed_values`` (symmetric positive definite after
+    reduction): by sparse LU, or by conjugate gradients started from ``guess`` when there is one."""
     n = matrix.shape[0]
     free = np.ones(n, dtype=bool)
     free[fixed] = False
     x = np.zeros(n)
     x[fixed] = fixed_values
-    a_ff = matrix[free][:, free].tocsc()
-    b = rhs[free] - matrix[free][:, fixed] @ fixed_values
-    if a_ff.shape[0] <= DIRECT_SOLVE_MAX_NODES:
+    rows = matrix[free]
+    a_ff = rows[:, free].tocsc()
+    b = rhs[free] - rows[:, fixed] @ fixed_values
+    if guess is None:
         x[free] = spla.spsolve(a_ff, b)
     else:
-        diag = a_ff.diagonal()
-        precond = spla.LinearOperator(a_ff.shape, matvec=lambda v: v / diag)
-        start = None if guess is None else guess[free]
-        sol, info = spla.cg(a_ff, b, x0=start, rtol=1e-8, maxiter=20000, M=precond)
-        if info != 0:
-            raise SlicerError("curved slicing: the field solve did not converge", reason="solver", info=int(info))
-        x[free] = sol
+        x[free] = _conjugate_gradients(a_ff.tocsr(), b, guess[free])
     if not np.all(np.isfinite(x)):
         raise SlicerError("curved slicing: the field solve gave non-finite values", reason="solver")
     return x
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.einsum("i,i->", a, b))
+
+
+def _conjugate_gradients(a: sp.csr_matrix, b: np.ndarray, x0: np.ndarray, rtol: float = 1e-8,
+                         max_iterations: int = 20000) -> np.ndarray:
+    """Jacobi-preconditioned conjugate gradients for ``a x = b`` from ``x0``, to ``|r| <= rtol |b|``.
+
+    scipy's ``cg`` does the same, but its dot products go to OpenBLAS, whose
+    threads on vectors of some 10^4 entries cost more than they add: on the
+    two shared cores the solve took 3x longer than with these einsum products.
+    """
+    inv_diag = 1.0 / a.diagonal()
+    x = x0.copy()
+    r = b - a @ x
+    z = r * inv_diag
+    p = z.copy()
+    rz = _dot(r, z)
+    stop = (rtol * np.sqrt(_dot(b, b))) ** 2
+    for _ in range(max_iterations):
+        if _dot(r, r) <= stop:
+            return x
+        ap = a @ p
+        alpha = rz / _dot(p, ap)
+        x += alpha * p
+        r -= alpha * ap
+        z = r * inv_diag
+        rz, rz_old = _dot(r, z), rz
+        p = z + (rz / rz_old) * p
+    raise SlicerError("curved slicing: the field solve did not converge", reason="solver",
+                      iterations=max_iterations)
 
 
 def _edge_distance(mesh: TetMesh, sources: np.ndarray) -> np.ndarray:
@@ -108,22 +154,21 @@ def _edge_distance(mesh: TetMesh, sources: np.ndarray) -> np.ndarray:
     return np.asarray(csgraph.dijkstra(graph, directed=False, indices=sources, min_only=True))
 
 
-def heat_distance(mesh: TetMesh, ops: FemOperators, sources: np.ndarray, time_r: float = 1.0) -> np.ndarray:
+def geodesic_distance(mesh: TetMesh, ops: FemOperators, sources: np.ndarray, time_r: float = 0.0) -> np.ndarray:
     """Geodesic distance (mm, inside the part) from the ``sources`` nodes to every node.
 
-    ``time_r`` scales the diffusion time ``t = time_r * h^2`` (``h`` the mean
-    edge): larger values give smoother, less exact distances.
+    ``time_r`` > 0 takes the directions from heat diffused for ``t = time_r * h^2``
+    (``h`` the mean edge; larger: smoother, less exact), 0 from the shortest paths
+    along the edges (see the module docstring). Meshes above
+    ``DIRECT_SOLVE_MAX_NODES`` nodes always use the edges: an iterative solver
+    cannot resolve heat that decays to 1e-20 far from the sources.
     """
     if len(sources) == 0:
         raise SlicerError("curved slicing: no source nodes for the distance field", reason="no_sources")
-    if len(mesh.nodes) > DIRECT_SOLVE_MAX_NODES:
-        # An iterative solver cannot resolve heat that decays to 1e-20 far from the sources, so on large
-        # meshes the directions come from the shortest paths along the mesh's edges instead (exact up to
-        # the edges' zig-zag, which step 3 smooths out).
-        guess = _edge_distance(mesh, sources)
+    guess = _edge_distance(mesh, sources)
+    if time_r <= 0.0 or len(mesh.nodes) > DIRECT_SOLVE_MAX_NODES:
         g = tet_gradients(ops, mesh.tets, -guess)
     else:
-        guess = None
         t = time_r * ops.mean_edge_mm ** 2
         heat_op = sp.diags(ops.mass_mm3) + t * ops.stiffness
         u = _solve_fixed(sp.csr_matrix(heat_op), np.zeros(len(mesh.nodes)), sources, np.ones(len(sources)))

@@ -12,8 +12,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
 
-__all__ = ["Surface", "iso_surface", "clip_surface", "iso_lines", "boundary_loops"]
+__all__ = ["Surface", "iso_surface", "clip_surface", "iso_lines", "iso_lines_many", "boundary_loops"]
 
 _TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
 
@@ -30,17 +32,20 @@ class Surface:
         return self.attrs[:, :3]
 
 
-def _cut_edges(a: np.ndarray, b: np.ndarray, values: np.ndarray, level: float,
-               attrs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Weld the crossings of edges (a[i], b[i]): unique vertex index per edge and the new attribute rows."""
+def _cut_edges(a: np.ndarray, b: np.ndarray, values: np.ndarray, level: float | np.ndarray,
+               attrs: np.ndarray, tag: np.ndarray | None = None, n_tags: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Weld the crossings of edges (a[i], b[i]) with ``level`` (one for all, or one per edge, then keyed by
+    ``tag`` as well): a unique vertex index per crossing and the new attribute rows."""
     lo, hi = np.minimum(a, b), np.maximum(a, b)
-    key = lo.astype(np.int64) * (int(max(attrs.shape[0], 1)) + 1) + hi
-    uniq, inverse = np.unique(key, return_inverse=True)
-    first = np.zeros(len(uniq), dtype=np.int64)
-    first[inverse] = np.arange(len(key))
+    n = np.int64(max(attrs.shape[0], 1) + 1)
+    key = lo.astype(np.int64) * n + hi
+    if tag is not None:
+        key = key * np.int64(n_tags) + tag
+    _uniq, first, inverse = np.unique(key, return_index=True, return_inverse=True)
     ua, ub = lo[first], hi[first]
     va, vb = values[ua], values[ub]
-    t = np.clip((level - va) / np.where(vb != va, vb - va, 1.0), 0.0, 1.0)
+    lvl = level[first] if isinstance(level, np.ndarray) else level
+    t = np.clip((lvl - va) / np.where(vb != va, vb - va, 1.0), 0.0, 1.0)
     rows = attrs[ua] + t[:, None] * (attrs[ub] - attrs[ua])
     return inverse.reshape(a.shape), rows
 
@@ -112,34 +117,95 @@ def clip_surface(surface: Surface, column: int, level: float, keep_above: bool =
 
 
 def _chain(segments: np.ndarray) -> list[tuple[np.ndarray, bool]]:
-    """Chain segments (k, 2) of vertex ids into polylines: (ids, closed), walking shared ids."""
+    """Chain segments (k, 2) of vertex ids into polylines: (ids, closed).
+
+    Level sets on a manifold triangle mesh meet at most two segments per
+    vertex; those are chained all at once (:func:`_chain_simple`). Where more
+    meet (two boundary loops touching at a vertex) the segments are walked one
+    by one (:func:`_chain_walk`).
+    """
     if len(segments) == 0:
         return []
-    nbrs: dict[int, list[int]] = {}
-    for i, (p, q) in enumerate(segments.tolist()):
-        nbrs.setdefault(p, []).append(i)
-        nbrs.setdefault(q, []).append(i)
-    used = np.zeros(len(segments), dtype=bool)
-    seg = segments.tolist()
+    degree = np.bincount(segments.ravel())
+    return _chain_simple(segments, degree) if degree.max() <= 2 else _chain_walk(segments, degree)
+
+
+def _chain_simple(segments: np.ndarray, degree: np.ndarray) -> list[tuple[np.ndarray, bool]]:
+    """Chains of a graph whose vertices have at most two segments, by pointer jumping.
+
+    Segment i gives two half-edges, ``2i`` (its first vertex to its second) and
+    ``2i + 1`` (back). The half-edge after ``u -> v`` is ``v``'s other one, so
+    every chain is two orbits of ``next``, one per direction. A loop's orbits
+    are cut before their smallest half-edge; then doubling ``next`` gives each
+    half-edge its orbit's last half-edge and its distance to it, in log2(longest
+    chain) vectorised steps. One direction of every chain is kept (the one whose
+    smallest, for a loop, or last, for a line, half-edge is below the other's),
+    and its half-edges in order give the vertices.
+    """
+    k = len(segments)
+    tail = segments.ravel()                                 # half-edge h runs tail[h] -> tail[h ^ 1]
+    head = tail.reshape(-1, 2)[:, ::-1].ravel()
+    half = np.arange(2 * k)
+    out_of = np.argsort(tail, kind="stable")                # the half-edges leaving each vertex, grouped
+    first = np.searchsorted(tail[out_of], np.arange(len(degree) + 1))
+    a = out_of[first[head]]                                 # the (one or two) half-edges leaving the head
+    b = np.where(degree[head] == 2, out_of[np.minimum(first[head] + 1, 2 * k - 1)], -1)
+    nxt = np.where(a != (half ^ 1), a, b)
+    nxt = np.where(nxt == (half ^ 1), -1, nxt)
+    # loops: every vertex has two segments; their orbits never end. Cut each before its smallest half-edge.
+    n = len(degree)
+    _count, label = csgraph.connected_components(sp.csr_matrix((np.ones(k), (segments[:, 0], segments[:, 1])),
+                                                               shape=(n, n)), directed=False)
+    rounds = max(int(np.ceil(np.log2(2 * np.bincount(label).max() + 1))), 1)
+    smallest, jump = half.copy(), np.where(nxt >= 0, nxt, half)
+    for _ in range(rounds):
+        smallest = np.minimum(smallest, smallest[jump])
+        jump = jump[jump]
+    in_loop = nxt[jump] >= 0                                # a line's orbit ends up at its last half-edge
+    cut = in_loop & (nxt >= 0) & (nxt == smallest)
+    nxt = np.where(cut, -1, nxt)
+    # distance to the orbit's end and its last half-edge
+    last, dist = np.where(nxt >= 0, nxt, half), (nxt >= 0).astype(np.int64)
+    for _ in range(rounds):
+        dist = dist + dist[last]
+        last = last[last]
+    keep = np.where(in_loop, smallest < smallest[half ^ 1], last < last[half ^ 1])
+    kept = half[keep]
+    order = kept[np.lexsort((-dist[kept], last[kept]))]
+    bounds = np.flatnonzero(np.diff(last[order])) + 1
     out: list[tuple[np.ndarray, bool]] = []
-    # start open chains at their ends first, then the remaining closed loops anywhere
-    starts = [v for v, s in nbrs.items() if len(s) == 1] + list(nbrs)
-    for start in starts:
-        free = [s for s in nbrs[start] if not used[s]]
-        if not free:
-            continue
+    for run in np.split(order, bounds):
+        closed = bool(in_loop[run[0]]) and len(run) >= 3
+        ids = tail[run] if closed else np.concatenate((tail[run], head[run[-1:]]))
+        out.append((ids, closed))
+    return out
+
+
+def _chain_walk(segments: np.ndarray, degree: np.ndarray) -> list[tuple[np.ndarray, bool]]:
+    """Chains of any graph: open chains from their ends (odd degree) first, then loops anywhere; a vertex
+    with more segments is walked through as often as it has them."""
+    flat = segments.ravel()
+    slots = np.argsort(flat, kind="stable")
+    ptr = np.searchsorted(flat[slots], np.arange(len(degree) + 1)).tolist()
+    seg_of = (slots // 2).tolist()
+    other = flat[slots ^ 1].tolist()
+    used = bytearray(len(segments))
+    out: list[tuple[np.ndarray, bool]] = []
+    for start in np.flatnonzero(degree % 2 == 1).tolist() + np.flatnonzero(degree > 0).tolist():
         ids, cur = [start], start
         while True:
-            nxt = [s for s in nbrs[cur] if not used[s]]
-            if not nxt:
+            j, stop = ptr[cur], ptr[cur + 1]
+            while j < stop and used[seg_of[j]]:
+                j += 1
+            if j == stop:
                 break
-            s = nxt[0]
-            used[s] = True
-            p, q = seg[s]
-            cur = q if p == cur else p
+            used[seg_of[j]] = 1
+            cur = other[j]
             ids.append(cur)
             if cur == start:
                 break
+        if len(ids) < 2:
+            continue
         closed = len(ids) > 3 and ids[0] == ids[-1]
         out.append((np.asarray(ids[:-1] if closed else ids, dtype=np.int64), closed))
     return out
@@ -147,32 +213,55 @@ def _chain(segments: np.ndarray) -> list[tuple[np.ndarray, bool]]:
 
 def iso_lines(surface: Surface, values: np.ndarray, level: float) -> list[tuple[np.ndarray, bool]]:
     """Polylines ``values == level`` on a triangle mesh: (attribute rows per point, closed)."""
-    if len(surface.tris) == 0:
-        return []
-    above = values[surface.tris] > level
-    count = above.sum(axis=1)
-    cut = (count == 1) | (count == 2)
-    tt, aa, cc = surface.tris[cut], above[cut], count[cut]
-    odd = np.where(cc[:, None] == 1, aa, ~aa)
+    return iso_lines_many(surface, values, np.array([level]))[0]
+
+
+def iso_lines_many(surface: Surface, values: np.ndarray, levels: np.ndarray) -> list[list[tuple[np.ndarray, bool]]]:
+    """The polylines of every level of ``levels`` (ascending) at once, one list per level.
+
+    Each triangle is paired with the levels that cross it (``min <= level <
+    max`` over its corners, as ``values > level`` splits them), so the work is
+    proportional to the crossings, not to triangles times levels. Crossings
+    are welded per (edge, level), and all levels are chained in one walk.
+    """
+    out: list[list[tuple[np.ndarray, bool]]] = [[] for _ in range(len(levels))]
+    if len(surface.tris) == 0 or len(levels) == 0:
+        return out
+    vals = values[surface.tris]
+    k_lo = np.searchsorted(levels, vals.min(axis=1), side="left")
+    k_hi = np.searchsorted(levels, vals.max(axis=1), side="left")
+    count = np.maximum(k_hi - k_lo, 0)
+    owner = np.repeat(np.arange(len(surface.tris)), count)
+    if len(owner) == 0:
+        return out
+    k = k_lo[owner] + np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count)
+    level = levels[k]
+    tt = surface.tris[owner]
+    above = vals[owner] > level[:, None]
+    odd = np.where(above.sum(axis=1)[:, None] == 1, above, ~above)        # the lone vertex on its side
     shift = np.argmax(odd, axis=1)
     r = np.take_along_axis(tt, (shift[:, None] + np.arange(3)[None, :]) % 3, axis=1)
-    if len(r) == 0:
-        return []
     a = np.concatenate([r[:, 0], r[:, 0]])
     b = np.concatenate([r[:, 1], r[:, 2]])
-    idx, rows = _cut_edges(a, b, values, level, surface.attrs)
+    idx, rows = _cut_edges(a, b, values, np.concatenate([level, level]), surface.attrs,
+                           np.concatenate([k, k]), len(levels))
     m = len(r)
     segments = np.stack([idx[:m], idx[m:]], axis=1)
     segments = segments[segments[:, 0] != segments[:, 1]]
-    return [(rows[ids], closed) for ids, closed in _chain(segments)]
+    vertex_level = np.zeros(len(rows), dtype=np.int64)
+    vertex_level[idx] = np.concatenate([k, k])
+    for ids, closed in _chain(segments):
+        out[int(vertex_level[ids[0]])].append((rows[ids], closed))
+    return out
 
 
 def boundary_loops(surface: Surface) -> list[tuple[np.ndarray, bool]]:
     """The boundary curves of a triangle mesh (edges used by one triangle), as attribute rows."""
     if len(surface.tris) == 0:
         return []
-    e = surface.tris[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    key = np.sort(e, axis=1)
-    uniq, counts = np.unique(key, axis=0, return_counts=True)
-    boundary = uniq[counts == 1]
+    e = np.sort(surface.tris[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    n = np.int64(len(surface.attrs))
+    uniq, counts = np.unique(e[:, 0] * n + e[:, 1], return_counts=True)
+    key = uniq[counts == 1]
+    boundary = np.column_stack([key // n, key % n])
     return [(surface.attrs[ids], closed) for ids, closed in _chain(boundary)]

@@ -22,7 +22,10 @@ class CurvedOptions:
     ``top_slope_deg`` of +z. Laplacian passes over the volume mesh (at most
     ``axis_smoothing_passes``) smooth the nozzle axis until the axes at the two
     ends of every mesh edge are within ``max_neighbour_deg``. ``interior_nodes``
-    sets the volume mesh's resolution.
+    sets the volume mesh's resolution (about that many lattice points inside
+    the part, :mod:`.tetmesh`). ``heat_time_r`` > 0 takes the distance fields'
+    directions from the heat method with that diffusion time (in squared mean
+    edges), 0 from shortest paths along the mesh's edges (:mod:`.heat`).
     """
 
     max_tilt_deg: float = 45.0
@@ -30,11 +33,11 @@ class CurvedOptions:
     top_slope_deg: float = 60.0
     axis_smoothing_passes: int = 40
     max_neighbour_deg: float = 30.0
-    interior_nodes: int = 20000
-    heat_time_r: float = 1.0
+    interior_nodes: int = 6000
+    heat_time_r: float = 0.0
 
     def __post_init__(self) -> None:
-        checks = {"max_tilt_deg": (0.0, 89.0), "top_slope_deg": (0.0, 89.0), "heat_time_r": (0.01, 100.0),
+        checks = {"max_tilt_deg": (0.0, 89.0), "top_slope_deg": (0.0, 89.0), "heat_time_r": (0.0, 100.0),
                   "max_neighbour_deg": (1.0, 90.0)}
         for key, (lo, hi) in checks.items():
             value = getattr(self, key)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fabric.slicing.curved.isosurface import Surface, boundary_loops, clip_surface, iso_lines
+from fabric.slicing.curved.isosurface import Surface, boundary_loops, clip_surface, iso_lines_many
 from fabric.slicing.flow import bead_spacing_mm
 from fabric.slicing.profile import Profile
 
@@ -57,41 +57,53 @@ class CurvedPath:
         return float(np.linalg.norm(np.diff(self.points_mm, axis=0), axis=1).sum())
 
 
-def _boundary_distance(surface: Surface, step_mm: float) -> np.ndarray:
-    """Distance (mm) from each vertex to the layer's boundary, from boundary points ``step_mm`` apart."""
-    samples = []
-    for rows, closed in boundary_loops(surface):
-        pts = rows[:, :3]
-        if closed:
-            pts = np.vstack([pts, pts[:1]])
-        seg = np.diff(pts, axis=0)
-        counts = np.maximum(np.ceil(np.linalg.norm(seg, axis=1) / step_mm).astype(np.int64), 1)
-        owner = np.repeat(np.arange(len(seg)), counts)
-        frac = (np.arange(len(owner)) - np.repeat(np.cumsum(counts) - counts, counts)) / counts[owner]
-        samples.append(pts[:-1][owner] + seg[owner] * frac[:, None])
-        samples.append(pts[-1:])
-    if not samples:
+def _boundary_distance(surface: Surface, step_mm: float, reach_mm: float) -> np.ndarray:
+    """Distance (mm) from each vertex to the layer's boundary, from boundary points ``step_mm`` apart.
+
+    Only distances up to ``reach_mm`` plus the longest edge are exact (farther
+    vertices get that bound): the callers cut level sets below ``reach_mm``, and
+    an edge crossing one has both ends within that bound.
+    """
+    loops = boundary_loops(surface)
+    if not loops:
         return np.full(len(surface.attrs), np.inf)
-    tree = cKDTree(np.vstack(samples))
-    dist, _ = tree.query(surface.points)
-    return np.asarray(dist)
+    pts = []
+    for rows, closed in loops:
+        p = rows[:, :3]
+        pts.append(np.vstack([p, p[:1]]) if closed else p)
+    starts = np.concatenate([p[:-1] for p in pts])
+    seg = np.concatenate([np.diff(p, axis=0) for p in pts])
+    counts = np.maximum(np.ceil(np.sqrt(np.einsum("ij,ij->i", seg, seg)) / step_mm).astype(np.int64), 1)
+    owner = np.repeat(np.arange(len(seg)), counts)
+    frac = (np.arange(len(owner)) - np.repeat(np.cumsum(counts) - counts, counts)) / counts[owner]
+    samples = np.vstack([starts[owner] + seg[owner] * frac[:, None]] + [p[-1:] for p in pts])
+    e = surface.points[surface.tris[:, [0, 1, 2]]] - surface.points[surface.tris[:, [1, 2, 0]]]
+    bound = reach_mm + float(np.sqrt(np.einsum("ijk,ijk->ij", e, e).max())) + step_mm
+    dist, _ = cKDTree(samples).query(surface.points, distance_upper_bound=bound)
+    return np.minimum(np.asarray(dist), bound)
 
 
 def _to_path(rows: np.ndarray, closed: bool, spec: LayerSpec, role: str, width_mm: float) -> CurvedPath | None:
     """Attribute rows of a polyline -> a path at the top of the layer, or None when too short."""
+    step = np.diff(rows[:, :3], axis=0)
     keep = np.ones(len(rows), dtype=bool)
-    keep[1:] = np.linalg.norm(np.diff(rows[:, :3], axis=0), axis=1) > MIN_STEP_MM
+    keep[1:] = np.einsum("ij,ij->i", step, step) > MIN_STEP_MM ** 2
     rows = rows[keep]
     if len(rows) < 2:
         return None
-    normal = rows[:, NORMAL] / np.maximum(np.linalg.norm(rows[:, NORMAL], axis=1, keepdims=True), 1e-12)
-    axes = rows[:, AXIS] / np.maximum(np.linalg.norm(rows[:, AXIS], axis=1, keepdims=True), 1e-12)
+    if closed:
+        rows = np.vstack([rows, rows[:1]])
+    normal = _unit_rows(rows[:, NORMAL])
     thick = rows[:, THICK]
     pts = rows[:, POS] + normal * (thick / 2.0)[:, None]
-    if closed:
-        pts, axes, thick = np.vstack([pts, pts[:1]]), np.vstack([axes, axes[:1]]), np.r_[thick, thick[:1]]
-    path = CurvedPath(spec.index, role, pts, axes, thick, width_mm, closed)
-    return path if path.length_mm() >= MIN_PATH_R * width_mm else None
+    d = np.diff(pts, axis=0)
+    if float(np.sqrt(np.einsum("ij,ij->i", d, d)).sum()) < MIN_PATH_R * width_mm:
+        return None
+    return CurvedPath(spec.index, role, pts, _unit_rows(rows[:, AXIS]), thick, width_mm, closed)
+
+
+def _unit_rows(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.sqrt(np.einsum("ij,ij->i", v, v)), 1e-12)[:, None]
 
 
 def layer_paths(surface: Surface, spec: LayerSpec, profile: Profile) -> list[CurvedPath]:
@@ -100,18 +112,16 @@ def layer_paths(surface: Surface, spec: LayerSpec, profile: Profile) -> list[Cur
         return []
     width = profile.extrusion_width_mm
     spacing = bead_spacing_mm(width, profile.layer_height_mm)
-    dist = _boundary_distance(surface, spacing / 4.0)
+    inner = max(profile.perimeters - profile.infill_overlap_r, 0.0) * spacing
+    dist = _boundary_distance(surface, spacing / 4.0, max(profile.perimeters * spacing, inner))
     with_dist = Surface(np.column_stack([surface.attrs, dist]), surface.tris)
     out: list[CurvedPath] = []
-    for i in range(profile.perimeters):
-        for rows, closed in iso_lines(with_dist, dist, (i + 0.5) * spacing):
-            path = _to_path(rows[:, :N_ATTRS], closed, spec, "perimeter", width)
-            if path is not None:
-                out.append(path)
+    levels = (np.arange(profile.perimeters) + 0.5) * spacing
+    for lines in iso_lines_many(with_dist, dist, levels):
+        out += _paths(lines, spec, "perimeter", width)
     density = 1.0 if spec.solid else profile.infill_density_r
     if density <= 0.0:
         return out
-    inner = max(profile.perimeters - profile.infill_overlap_r, 0.0) * spacing
     region = clip_surface(with_dist, N_ATTRS, inner) if profile.perimeters else with_dist
     if len(region.tris) == 0:
         return out
@@ -120,38 +130,44 @@ def layer_paths(surface: Surface, spec: LayerSpec, profile: Profile) -> list[Cur
     pitch = spacing / density
     first = math.floor(coord.min() / pitch) * pitch + pitch / 2.0
     role = "solid infill" if spec.solid else "infill"
-    for level in np.arange(first, coord.max(), pitch):
-        for rows, closed in iso_lines(region, coord, float(level)):
-            path = _to_path(rows[:, :N_ATTRS], closed, spec, role, width)
-            if path is not None:
-                out.append(path)
+    for lines in iso_lines_many(region, coord, np.arange(first, coord.max(), pitch)):
+        out += _paths(lines, spec, role, width)
     return out
+
+
+def _paths(lines: list[tuple[np.ndarray, bool]], spec: LayerSpec, role: str, width_mm: float) -> list[CurvedPath]:
+    paths = (_to_path(rows[:, :N_ATTRS], closed, spec, role, width_mm) for rows, closed in lines)
+    return [p for p in paths if p is not None]
 
 
 def order_paths(paths: list[CurvedPath], start_mm: np.ndarray) -> list[CurvedPath]:
     """Perimeters first, then infill; each next path the one that starts nearest the last end.
 
     Open paths may be reversed; closed loops are rotated to start at their
-    point nearest the nozzle.
+    point nearest the nozzle. Every candidate start point (both ends of an
+    open path, every point of a loop) is one row of an array, so each pick is
+    one vectorised nearest-point search.
     """
     ordered: list[CurvedPath] = []
     here = np.asarray(start_mm, dtype=float)
     for roles in (("perimeter",), ("solid infill", "infill")):
         todo = [p for p in paths if p.role in roles]
-        while todo:
-            best, best_d, how = 0, math.inf, 0
-            for i, p in enumerate(todo):
-                if p.closed:
-                    d = np.linalg.norm(p.points_mm[:-1] - here, axis=1)
-                    j = int(np.argmin(d))
-                    if d[j] < best_d:
-                        best, best_d, how = i, float(d[j]), j
-                else:
-                    for j, end in ((0, p.points_mm[0]), (-1, p.points_mm[-1])):
-                        d0 = float(np.linalg.norm(end - here))
-                        if d0 < best_d:
-                            best, best_d, how = i, d0, j
-            p = todo.pop(best)
+        if not todo:
+            continue
+        starts = [p.points_mm[:-1] if p.closed else p.points_mm[[0, -1]] for p in todo]
+        owner = np.repeat(np.arange(len(todo)), [len(s) for s in starts])
+        where = np.concatenate([np.arange(len(s)) if p.closed else np.array([0, -1])
+                                for p, s in zip(todo, starts, strict=True)])
+        pts = np.vstack(starts)
+        alive = np.ones(len(pts), dtype=bool)
+        first_row = np.r_[0, np.cumsum([len(s) for s in starts])]
+        for _ in range(len(todo)):
+            d = pts - here
+            d2 = np.where(alive, np.einsum("ij,ij->i", d, d), np.inf)
+            row = int(np.argmin(d2))
+            i, how = int(owner[row]), int(where[row])
+            alive[first_row[i]:first_row[i + 1]] = False
+            p = todo[i]
             if p.closed and how:
                 k = len(p.points_mm) - 1
                 idx = np.r_[np.arange(how, k), np.arange(0, how), how]

@@ -3,9 +3,11 @@
 Steps: tetrahedralise the part (:mod:`.tetmesh`); solve the core and top-band
 fields and the nozzle axes (:mod:`.field`); cut the core field's level sets
 one layer apart (the first at the first-layer height), each clipped to below
-the top band, then the band's level sets (:mod:`.isosurface`); lay perimeters
-and infill on each (:mod:`.paths`); write the multi-axis dialect
-(:mod:`.gcode`); measure the result against planar slicing (:mod:`.metrics`).
+the top band and thinned where it would leave a larger staircase on an upward
+face than planar layers do, then the band's level sets (:mod:`.isosurface`);
+lay perimeters and infill on each (:mod:`.paths`); write the multi-axis
+dialect (:mod:`.gcode`); measure the result against planar slicing
+(:mod:`.metrics`).
 """
 from __future__ import annotations
 
@@ -20,17 +22,29 @@ import trimesh
 from fabric.slicing.curved.field import LayerField, build_field
 from fabric.slicing.curved.gcode import write_multiaxis
 from fabric.slicing.curved.isosurface import Surface, clip_surface, iso_surface
-from fabric.slicing.curved.metrics import CurvedReport, measure
+from fabric.slicing.curved.metrics import (
+    SIN45,
+    TOP_MIN_NZ,
+    CurvedReport,
+    Layering,
+    measure,
+    planar_thickness_mm,
+    surface_faces,
+)
 from fabric.slicing.curved.options import CurvedOptions, ThicknessBounds, thickness_bounds
 from fabric.slicing.curved.paths import CLIP, THICK, CurvedPath, LayerSpec, layer_paths, order_paths
 from fabric.slicing.curved.tetmesh import tetrahedralise
 from fabric.slicing.profile import Profile
 from fabric.wire.errors import SlicerError
 
-__all__ = ["CurvedSlice", "slice_curved", "MAX_LAYERS"]
+__all__ = ["CurvedSlice", "slice_curved", "MAX_LAYERS", "PROGRESS_STAGES"]
 
 MAX_LAYERS = 20000
 REFITS = 4                  # field-step refits per layer to keep its thickness within bounds
+# the progress fraction reported when each step is done (the toolpaths go up layer by layer in between)
+PROGRESS_STAGES = (("volume mesh", 0.15), ("fields", 0.35), ("layer surfaces", 0.45), ("toolpaths", 0.90),
+                   ("figures", 0.93), ("G-code", 1.0))
+CUSP_MARGIN_R = 0.95        # core layers aim this far under planar's staircase: the field is linear per element
 
 
 @dataclass
@@ -66,13 +80,40 @@ def _core_layer(fld: LayerField, attrs: np.ndarray, level: float) -> Surface:
     return clip_surface(s, CLIP, 0.0) if fld.band_mm > 0 else s
 
 
-def _layer_surfaces(fld: LayerField, first_mm: float, bounds: ThicknessBounds) -> list[tuple[Surface, bool]]:
-    """Mid-surfaces of every layer, bottom to top: (surface, in the top band).
+def _cusp_caps(fld: LayerField, nominal_mm: float, first_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For every upward face that core layers cut: its core field range (lo, hi) and the largest field step
+    that keeps its staircase error within planar slicing's on a face of the same tilt (of 45 degrees if it is
+    steeper: planar layers leave next to nothing on a near-vertical wall, which no tilted layer could match).
+
+    A core layer of field step ``s`` is ``s / |grad|`` thick at a corner, so its
+    step there is ``s |n . d| / |grad|``; planar layers leave ``t_planar n_z``
+    (:func:`.metrics.planar_thickness_mm`). Where the field is weak (``|grad| < 1``:
+    the layers are thicker than their step) or tilted towards the face's
+    normal, the cap is below the nominal step.
+    """
+    surface = surface_faces(fld.mesh)
+    faces, normals = surface.faces, surface.normals
+    core = ~fld.in_band[faces]
+    cut = (normals[:, 2] > TOP_MIN_NZ) & surface.off_plate & core.any(axis=1)
+    planar = planar_thickness_mm(surface, fld.mesh.nodes, nominal_mm, first_mm) * np.maximum(normals[:, 2], SIN45)
+    planar *= CUSP_MARGIN_R
+    slope = np.abs(np.einsum("fk,fck->fc", normals, fld.core_dir[faces]))
+    allowed = planar[:, None] * fld.core_grad_r[faces] / np.maximum(slope, 1e-9)
+    allowed = np.where(core, allowed, np.inf).min(axis=1)
+    d = fld.d_base_mm[faces]
+    return d.min(axis=1)[cut], d.max(axis=1)[cut], allowed[cut]
+
+
+def _layer_surfaces(fld: LayerField, first_mm: float, bounds: ThicknessBounds,
+                    ) -> tuple[list[tuple[Surface, bool]], Layering]:
+    """Mid-surfaces of every layer, bottom to top: (surface, in the top band), and where they lie.
 
     Core layers are ``nominal`` apart in the field (the first one
-    ``first_mm``), each step shortened where the field's gradient is weak
-    enough to make the layer thicker than the bounds allow. The band's layers
-    split its depth evenly into layers that fit the bounds everywhere in it.
+    ``first_mm``), each step shortened where an upward face it cuts would get
+    a larger staircase than planar layers give it (:func:`_cusp_caps`), and where
+    the field's gradient is weak enough to make the layer thicker than the
+    bounds allow. The band's layers split its depth evenly into layers that fit
+    the bounds everywhere in it.
     """
     nodes = fld.mesh.nodes
     core_attrs = np.column_stack([nodes, fld.core_dir, fld.axis, 1.0 / np.maximum(fld.core_grad_r, 1e-6),
@@ -80,10 +121,15 @@ def _layer_surfaces(fld: LayerField, first_mm: float, bounds: ThicknessBounds) -
     core = fld.d_base_mm if fld.band_mm <= 0 else np.where(fld.in_band, -np.inf, fld.d_base_mm)
     top = float(core[np.isfinite(core)].max()) if np.any(np.isfinite(core)) else 0.0
     out: list[tuple[Surface, bool]] = []
+    cap_lo, cap_hi, cap_step = _cusp_caps(fld, bounds.nominal_mm, first_mm)
+    steps: list[tuple[float, float]] = []
     lo, want = 0.0, first_mm
     for _ in range(MAX_LAYERS):
         if lo >= top:
             break
+        cut = (cap_hi >= lo) & (cap_lo <= lo + want)
+        if np.any(cut):                 # below the thinnest layer the bounds allow, the bounds win (_fit_step)
+            want = max(min(want, float(cap_step[cut].min())), bounds.min_mm)
         s = _core_layer(fld, core_attrs, lo + 0.5 * want)
         step = want
         for _refit in range(REFITS):               # the shorter step's level set may be weaker still
@@ -95,23 +141,26 @@ def _layer_surfaces(fld: LayerField, first_mm: float, bounds: ThicknessBounds) -
         s.attrs[:, THICK] *= step
         if len(s.tris):
             out.append((s, False))
+        steps.append((lo, step))
         lo, want = lo + step, bounds.nominal_mm
     else:
         raise SlicerError(f"curved slicing: more than {MAX_LAYERS} layers", reason="too_many_layers")
+    band_step = 0.0
     if fld.band_mm > 0:
         band_attrs = np.column_stack([nodes, fld.band_dir, fld.axis, 1.0 / np.maximum(fld.band_grad_r, 1e-6),
                                       fld.band_clip_mm])
         weakest = float(band_attrs[fld.in_band, THICK].max()) if np.any(fld.in_band) else 1.0
         k = max(int(round(fld.band_mm / bounds.nominal_mm)),
                 int(np.ceil(fld.band_mm * weakest / bounds.max_mm - 1e-9)), 1)
-        step = fld.band_mm / k
+        band_step = step = fld.band_mm / k
         for j in range(k):
             s = clip_surface(iso_surface(fld.mesh.tets, fld.d_top_mm, fld.band_mm - (j + 0.5) * step, band_attrs),
                              CLIP, 0.0, keep_above=False)
             s.attrs[:, THICK] *= step
             if len(s.tris):
                 out.append((s, True))
-    return out
+    core_lo, core_step = np.array(steps).reshape(-1, 2).T
+    return out, Layering(core_lo, core_step, band_step)
 
 
 def slice_curved(part: trimesh.Trimesh, profile: Profile, options: CurvedOptions | None = None,
@@ -125,11 +174,12 @@ def slice_curved(part: trimesh.Trimesh, profile: Profile, options: CurvedOptions
     report = progress or (lambda _f: None)
     bounds = thickness_bounds(profile)
     tet = tetrahedralise(part, opts.interior_nodes)
-    report(0.15)
+    done = dict(PROGRESS_STAGES)
+    report(done["volume mesh"])
     fld = build_field(tet, opts, bounds.nominal_mm, side_margin_mm=profile.extrusion_width_mm)
-    report(0.35)
-    surfaces = _layer_surfaces(fld, profile.first_layer_height_mm, bounds)
-    report(0.45)
+    report(done["fields"])
+    surfaces, layering = _layer_surfaces(fld, profile.first_layer_height_mm, bounds)
+    report(done["layer surfaces"])
     layers: list[list[CurvedPath]] = []
     here = np.array([0.0, 0.0, 0.0])
     for i, (surface, in_band) in enumerate(surfaces):
@@ -141,12 +191,14 @@ def slice_curved(part: trimesh.Trimesh, profile: Profile, options: CurvedOptions
             for path in ordered:
                 path.layer = len(layers)
             layers.append(ordered)
-        report(0.45 + 0.45 * (i + 1) / max(len(surfaces), 1))
+        step_r = (done["toolpaths"] - done["layer surfaces"]) / max(len(surfaces), 1)
+        report(done["layer surfaces"] + step_r * (i + 1))
     flat = [p for layer in layers for p in layer]
     if not flat:
         raise SlicerError("curved slicing produced no toolpaths (part thinner than a bead?)", reason="empty")
-    figures = measure(fld, flat, len(layers), bounds.nominal_mm, profile.first_layer_height_mm,
+    figures = measure(fld, flat, len(layers), layering, bounds.nominal_mm, profile.first_layer_height_mm,
                       opts.top_slope_deg)
+    report(done["figures"])
     warnings = []
     if figures.thickness_min_mm < bounds.min_mm - 1e-9 or figures.thickness_max_mm > bounds.max_mm + 1e-9:
         warnings.append(f"curved: layer thickness {figures.thickness_min_mm:.3f}..{figures.thickness_max_mm:.3f} mm "
@@ -154,7 +206,7 @@ def slice_curved(part: trimesh.Trimesh, profile: Profile, options: CurvedOptions
     header = ["generated by am-fabric builtin curved-layer slicer", f"profile: {profile.name}",
               f"curved: max_tilt_deg = {opts.max_tilt_deg:g}"] + figures.header_lines()
     totals = write_multiaxis(layers, profile, header, bounds.nominal_mm)
-    report(1.0)
+    report(done["G-code"])
     elapsed = time.perf_counter() - t0
     figures = dataclasses.replace(figures, elapsed_s=elapsed)
     return CurvedSlice(gcode=totals.gcode, layers=len(layers), extruded_mm3=totals.extruded_mm3,
