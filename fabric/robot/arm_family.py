@@ -31,7 +31,8 @@ import numpy as np
 
 from fabric.wire.errors import ConfigError
 
-__all__ = ["ClosedFormArm", "IKFamilyMismatch", "cols_in_frame", "ANG_TOL", "DIST_TOL_MM", "FK_TOL_MM", "FK_TOL_ROT"]
+__all__ = ["ClosedFormArm", "IKFamilyMismatch", "cols_in_frame", "stack_branches", "ANG_TOL", "DIST_TOL_MM",
+           "FK_TOL_MM", "FK_TOL_ROT"]
 
 ANG_TOL = 1e-7            # |cos| for "perpendicular", |sin| for "parallel" axes
 DIST_TOL_MM = 1e-6        # "the axes meet"
@@ -104,6 +105,18 @@ class ClosedFormArm(Protocol):
     def resolve_wrist(self, C: np.ndarray, q: np.ndarray, held: np.ndarray) -> np.ndarray:
         """Joints (nq, M) of wrist-degenerate rows with the free angle taken from ``held`` (nq, M), still exact."""
         ...
+
+
+def stack_branches(res: dict[int, tuple[np.ndarray, ...]], nq: int, n: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A family's branches as ``ik_branches_cols`` returns them: from ``{branch: (q (nq, N), reach (N,),
+    singular (N,), ...)}`` for all 8 branches to ``q (N, 8, nq), reach (N, 8), singular (N, 8)``."""
+    qt = np.empty((8, nq, n))
+    reach = np.empty((n, 8), dtype=bool)
+    sing = np.empty((n, 8), dtype=bool)
+    for b, (q, ok, sg, _) in res.items():
+        qt[b], reach[:, b], sing[:, b] = q, ok, sg
+    return qt.transpose(2, 0, 1), reach, sing
 
 
 def cols_in_frame(frame_T: np.ndarray | None, C: np.ndarray) -> np.ndarray:

@@ -83,7 +83,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fabric.robot.arm_family import cols_in_frame
+from fabric.robot.arm_family import cols_in_frame, stack_branches
 from fabric.robot.kinematics import ELBOW_SING_COS, WRIST_SING_SIN, _flip, _wrap
 from fabric.robot.panda_derive import PandaParams
 
@@ -363,13 +363,7 @@ class PandaArm:
         """All 8 branches of end-frame columns ``C`` (9, N) for A7 = ``q_free`` ((N,) or a number; default 0):
         ``q (N, 8, 7), reach (N, 8), singular (N, 8)``."""
         res = self._branches(self._model_cols(C), (0, 1), (0, 1), (0, 1), q1_hold, 0.0 if q_free is None else q_free)
-        n = C.shape[1]
-        qt = np.empty((8, 7, n))
-        reach = np.empty((n, 8), dtype=bool)
-        sing = np.empty((n, 8), dtype=bool)
-        for b, (q, ok, sg, _) in res.items():
-            qt[b], reach[:, b], sing[:, b] = q, ok, sg
-        return qt.transpose(2, 0, 1), reach, sing
+        return stack_branches(res, 7, C.shape[1])
 
     def ik_branch_cols(self, C: np.ndarray, branch: int, q1_hold: np.ndarray | None = None,
                        q_free: _Num | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

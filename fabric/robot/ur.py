@@ -36,7 +36,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fabric.robot.arm_family import cols_in_frame
+from fabric.robot.arm_family import cols_in_frame, stack_branches
 from fabric.robot.kinematics import ELBOW_SING_COS, SHOULDER_SING_MM, WRIST_SING_SIN, _flip, _wrap
 from fabric.robot.ur_derive import URParams, ur_dh_frames
 
@@ -211,13 +211,7 @@ class URArm:
                          q_free: float | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """All 8 branches of DH frame-6 columns ``C`` (9, N): ``q (N, 8, 6), reach (N, 8), singular (N, 8)``."""
         res = self._branches(self._model_cols(C), (0, 1), (0, 1), (0, 1), q1_hold)
-        n = C.shape[1]
-        qt = np.empty((8, 6, n))
-        reach = np.empty((n, 8), dtype=bool)
-        sing = np.empty((n, 8), dtype=bool)
-        for b, (q, ok, sg, _) in res.items():
-            qt[b], reach[:, b], sing[:, b] = q, ok, sg
-        return qt.transpose(2, 0, 1), reach, sing
+        return stack_branches(res, 6, C.shape[1])
 
     def ik_branch_cols(self, C: np.ndarray, branch: int, q1_hold: np.ndarray | None = None,
                        q_free: float | np.ndarray | None = None
