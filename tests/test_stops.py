@@ -9,6 +9,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import uuid
 from dataclasses import replace
@@ -19,6 +20,7 @@ import pytest
 from fabric.cli import up as launcher
 from fabric.client import Client
 from fabric.server.service import _lock_dir
+from fabric.signals import on_signals
 from fabric.wire.config import SessionSettings
 from fabric.wire.errors import StateError
 from fabric.wire.keys import SERVICES
@@ -109,6 +111,66 @@ def test_every_service_exits_within_5_s_of_a_signal_with_the_hub_gone(tmp_path, 
             if hub.poll() is None:
                 hub.send_signal(signal.SIGCONT)
         _reap(*(h for h, _, _ in hubs.values()), *procs.values())
+
+
+# --- a burst of signals ---------------------------------------------------------------------------
+
+def _burst(proc: subprocess.Popen, n: int = 300) -> None:
+    """Signals back to back, as when Ctrl-C is pressed twice and the terminal hangs up on top."""
+    for k in range(n):
+        try:
+            os.kill(proc.pid, signal.SIGTERM if k % 2 else signal.SIGINT)
+        except ProcessLookupError:
+            return
+
+
+def test_a_handler_sets_the_event_even_where_the_event_holds_its_own_lock():
+    """Where a signal can land: inside the main thread's own ``Event.set()`` or ``Event.wait()``, which hold the
+    event's (non-reentrant) lock. A handler calling ``set()`` there waited for that lock forever."""
+    stop = threading.Event()
+    on_signals(lambda: stop, (signal.SIGUSR1,))
+    try:
+        handler = signal.getsignal(signal.SIGUSR1)
+        assert callable(handler)
+        with stop._cond:                              # (the event's lock, held as set() and wait() hold it)
+            handler(signal.SIGUSR1, None)             # returns at once instead of waiting for the lock
+            assert not stop.is_set()
+        assert stop.wait(5.0)                         # and the event is set once the lock is free
+    finally:
+        signal.signal(signal.SIGUSR1, signal.SIG_DFL)
+
+
+def test_a_burst_of_signals_never_freezes_a_service_or_the_hub(tmp_path):
+    """A handler that set the stop event itself ran between the bytecodes of the event's own lock and waited
+    for it forever: a service was found alive an hour after its launcher was stopped. Services and the hub
+    end within the 5 s deadline however many signals arrive at once."""
+    endpoint, cell = f"tcp/127.0.0.1:{free_port()}", f"s{uuid.uuid4().hex[:8]}"
+    hub = _router(endpoint)
+    procs = {}
+    try:
+        for name in ("slicer", "supervisor"):
+            with open(tmp_path / f"{name}.log", "ab") as log:
+                procs[name] = subprocess.Popen([*CLI, "serve", name, "--connect", endpoint, "--cell", cell,
+                                                "--data-dir", str(tmp_path / "data")], stdout=log,
+                                               stderr=subprocess.STDOUT)
+        settings = SessionSettings(connect=[endpoint], cell=cell, mode="client")
+        with Client.connect(settings) as client:
+            client.wait_alive(tuple(procs), deadline_s=60)
+        for _round in range(3):                      # three bursts on each: each must end it
+            for proc in procs.values():
+                _burst(proc, 100)
+        for name, proc in procs.items():
+            try:
+                proc.wait(timeout=8.0)
+            except subprocess.TimeoutExpired:
+                raise AssertionError(f"{name} still running 8 s after a burst of signals") from None
+        _burst(hub)
+        try:
+            hub.wait(timeout=8.0)
+        except subprocess.TimeoutExpired:
+            raise AssertionError("the hub still running 8 s after a burst of signals") from None
+    finally:
+        _reap(hub, *procs.values())
 
 
 # --- nothing outlives up ---------------------------------------------------------------------------

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import signal
 import sys
 import threading
 from pathlib import Path
@@ -182,9 +181,10 @@ def _run_router(conf, what: str, on_open=None) -> int:
     """Open router session ``conf``, say ``what`` it is, and serve until SIGINT or SIGTERM (``on_open(session)``
     first: what it declares lives as long as the session)."""
     import zenoh
+
+    from fabric.signals import on_signals
     stop = threading.Event()
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop.set())
+    on_signals(lambda: stop)
     try:
         session = zenoh.open(conf)
     except zenoh.ZError as exc:             # e.g. the port is taken: say so in one line, not a traceback

@@ -15,6 +15,7 @@ from typing import Any
 
 from fabric.cli.output import emit
 from fabric.client import Client
+from fabric.signals import on_signals
 from fabric.wire.errors import BadRequest, FabricError
 
 __all__ = ["register", "sample_row", "write_table", "read_table", "RECORD_TOPICS"]
@@ -138,7 +139,7 @@ def cmd_record(c: Client, a: argparse.Namespace) -> int:
     for r in readers:
         r.start()
     if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+        on_signals(lambda: stop, (signal.SIGTERM,))
     print(f"recording {' '.join(topics)} to {out} (Ctrl-C stops)", file=sys.stderr, flush=True)
     rows: list[dict[str, Any]] = []
     counts: dict[str, int] = {t: 0 for t in topics}

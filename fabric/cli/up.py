@@ -41,6 +41,7 @@ from fabric.client import Client
 from fabric.security.credentials import Credentials
 from fabric.security.hub import hub_zenoh_config, role_settings
 from fabric.services.host import EXIT_NO_RESTART, EXIT_NOTE_ENV, LAUNCHER_PID_ENV, STOP_DEADLINE_S
+from fabric.signals import on_signals
 from fabric.wire.config import SessionSettings, service_data_dir, zenoh_config
 from fabric.wire.errors import ConfigError, FabricError, ServiceUnavailable, StateError
 from fabric.wire.keys import SERVICES, Keys
@@ -402,11 +403,7 @@ def run_up(settings: SessionSettings, services: tuple[str, ...], host_hub: bool,
     cell = CellProcesses(settings, services, host_hub, log_dir, extra_args, data_dir, secure)
     stop, hurry = threading.Event(), threading.Event()
 
-    def on_signal(*_: object) -> None:
-        (hurry if stop.is_set() else stop).set()
-
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, on_signal)
+    on_signals(lambda: hurry if stop.is_set() else stop)      # the first signal stops, the second hurries
     t0 = time.monotonic()
     try:
         cell.launch()

@@ -188,6 +188,10 @@ def _die_with_launcher(log: logging.Logger) -> bool:
     return True
 
 
+def _noted(_signum: int, _frame: object) -> None:
+    """The Python-level handler of SIGTERM and SIGINT in a service process: nothing (see _StopGuard.install)."""
+
+
 class _StopGuard:
     """SIGTERM/SIGINT in a service process (see the module docstring). The C-level handler writes the
     signal's number to a socket; a thread reading it sets ``stop`` and arms the deadline, so neither
@@ -206,7 +210,11 @@ class _StopGuard:
         self._r, self._w = socket.socketpair()
         self._w.setblocking(False)
         for sig in (signal.SIGTERM, signal.SIGINT):
-            signal.signal(sig, lambda *_: self.stop.set())
+            # a Python handler that does nothing: the C-level handler still writes the signal to the socket,
+            # and the watcher thread does the rest. (A handler that set ``stop`` itself deadlocked under a
+            # burst of signals: one run between the bytecodes of ``stop.set()`` or of the main thread's
+            # ``stop.wait()``, which hold the event's lock, and waited for that lock forever.)
+            signal.signal(sig, _noted)
         signal.set_wakeup_fd(self._w.fileno(), warn_on_full_buffer=False)
         threading.Thread(target=self._watch, name=f"{self.name}:signals", daemon=True).start()
         previous = threading.excepthook
@@ -239,8 +247,8 @@ class _StopGuard:
             first = self._signals == 1
         if first:
             self.log.info("%s: %s: stopping (within %g s)", self.name, what, self.deadline_s)
+            self.arm()                  # the deadline first: nothing after it can keep the process alive
             self.stop.set()
-            self.arm()
         else:
             self.log.warning("%s: %s again: exiting now", self.name, what)
             self._exit()
