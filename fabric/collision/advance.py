@@ -29,13 +29,17 @@ clearance reported means something); a sample at the tolerance or closer, or
 a piece whose motion is down to the tolerance and still not certified, is a
 hit, and the walk of that item stops there.
 
-Distances come from the broad phase (:mod:`fabric.collision.trees`): the layer
-boxes, then the beads, each a lower bound of the next. They hold every bead
-laid before the stretch's end, a superset for each row in it; where they say
+Distances come from the broad phase (:mod:`fabric.collision.trees`): the
+part's boxes, then the beads' chains (for the tip, without its two exempt
+layers), each a lower bound of the next. The boxes hold every bead laid
+before the stretch's end, the chains every bead laid before the row asked
+about (they follow the path), a superset for each row; where they say
 touching, the exact distance is taken: the table, the plate and exactly the
 beads laid before the row (for the tip, not its two exempt layers), found by
-their bounding boxes, each measured with coal. An exact distance holds for
-its own row only, so it certifies its own segment and no further.
+their bounding boxes in a grid, nearest first (those within
+``EXACT_NEAR_MM`` first: if one is nearer than that, no other can be), each
+measured with coal. An exact distance holds for its own row only, so it
+certifies its own segment and no further.
 """
 from __future__ import annotations
 
@@ -54,6 +58,7 @@ from fabric.collision.trees import PartTrees
 __all__ = ["Advancer", "Item", "Probe", "SweepHit", "GJK_EPS_MM", "EXACT_MARGIN_MM"]
 
 EXACT_MARGIN_MM = 2.0        # an exact query looks this far around a body for beads
+EXACT_NEAR_MM = 0.5          # first this far: where a bead is nearer, no farther one can be
 FINE_BELOW_MM = 5.0          # the beads' tree is asked only when the layer boxes are this close
 FINE_TREE_MAX_BEADS = 200_000   # above this, exact queries (by bounding boxes) stand in for the beads' tree
 _MAX_DEPTH = 60              # bisections of one segment
@@ -120,6 +125,7 @@ class Advancer:
         self._req = coal.DistanceRequest()
         self._res = coal.DistanceResult()
         self._cb = coal.DistanceCallBackDefault()
+        self._collide_cb = coal.CollisionCallBackDefault()
         self._a = 0
         self._parts: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
@@ -344,27 +350,59 @@ class Advancer:
         tree.distance(obj, cb)
         return float(cb.data.result.min_distance) / MM - GJK_EPS_MM
 
-    def _query(self, item: Item, q: np.ndarray, need_mm: float = 0.0) -> Probe:
+    def cylinder_distance(self, tree: coal.BroadPhaseCollisionManager, centre: np.ndarray, rotation: np.ndarray,
+                          radius_mm: float, half_mm: float) -> float:
+        """The distance (mm, a lower bound) from a cylinder (centre, rotation whose z is its axis, radius,
+        half-length; mm) to what ``tree`` holds: a cover of the tool's sweep
+        (:func:`fabric.collision.hull.piece_covers`)."""
+        obj = coal.CollisionObject(coal.Cylinder(radius_mm * MM, 2.0 * half_mm * MM), rotation, centre * MM)
+        obj.computeAABB()
+        return self._tree_distance(tree, obj)
+
+    def cylinder_clear(self, tree: coal.BroadPhaseCollisionManager, centre: np.ndarray, rotation: np.ndarray,
+                       radius_mm: float, half_mm: float, margin_mm: float) -> bool:
+        """Whether a cylinder (as :meth:`cylinder_distance`) is farther than ``margin_mm`` from everything
+        ``tree`` holds: the cylinder grown by the margin (and coal's tolerance) along and across touches
+        nothing. Cheaper than the distance: coal stops at the first contact, or sees none."""
+        grow = margin_mm + GJK_EPS_MM
+        obj = coal.CollisionObject(coal.Cylinder((radius_mm + grow) * MM, 2.0 * (half_mm + grow) * MM), rotation,
+                                   centre * MM)
+        obj.computeAABB()
+        cb = self._collide_cb
+        cb.data.clear()
+        tree.collide(obj, cb)
+        return not cb.data.result.isCollision()
+
+    def upto(self, k: int) -> int:
+        """How many beads are laid before the row of segment ``k``."""
+        row = int(self.segs.row[k])
+        return len(self.beads) if row >= LIVE_ROW else int(np.searchsorted(self.beads.row, row, "left"))
+
+    def upto_many(self, k: np.ndarray) -> np.ndarray:
+        """:meth:`upto` of segments ``k``."""
+        row = self.segs.row[k]
+        return np.where(row >= LIVE_ROW, len(self.beads), np.searchsorted(self.beads.row, row, "left"))
+
+    def _query(self, item: Item, k: int, q: np.ndarray, need_mm: float = 0.0) -> Probe:
         """A distance lower bound at ``q``: a pair's distance; a body's to the layer boxes, and to the beads
         when the boxes are not far enough for ``need_mm``."""
         self._place(q)
         if item.other is not None:
             return Probe(self._pair(item.body, item.other), item.other.name, exact=True)
         obj = self.bodies.placed_object(item.body)
-        if item.tip:                                # no bead tree without its layers: the boxes, then exactly
-            d = self._tree_distance(self.trees.coarse_tip, obj)
-            return Probe(d) if d > need_mm or d > FINE_BELOW_MM else Probe(-1.0)
-        d = self._tree_distance(self.trees.coarse, obj)
+        d = self._tree_distance(self.trees.coarse_tip if item.tip else self.trees.coarse, obj)
         if d > need_mm or d > FINE_BELOW_MM:       # far from the layer boxes: bisecting is cheaper than beads
             return Probe(d)
         if self.trees.count > FINE_TREE_MAX_BEADS:  # a tree that big takes longer to build than to go exact
             return Probe(-1.0)
-        return Probe(self._tree_distance(self.trees.fine_tree(), obj))
+        upto = self.upto(k)
+        fine = self.trees.fine_tip_tree(upto) if item.tip else self.trees.fine_tree(upto)
+        return Probe(self._tree_distance(fine, obj))
 
     def probe(self, item: Item, k: int, q: np.ndarray, need_mm: float = float("inf")) -> Probe:
         """A distance lower bound at ``q`` for segment ``k``: from the trees; where they say touching, the
         exact distance (a bead laid later in the stretch, or an exempt one, may be what is close)."""
-        p = self._query(item, q, need_mm)
+        p = self._query(item, k, q, need_mm)
         if item.other is not None or p.d > 2.0 * self.tol:
             return p
         margin = EXACT_MARGIN_MM if not np.isfinite(need_mm) else max(EXACT_MARGIN_MM, need_mm)
@@ -388,22 +426,28 @@ class Advancer:
                 best = Probe(d - GJK_EPS_MM, name, exact=True, row_only=True)
         beads = self.beads
         if len(beads):
-            row = int(self.segs.row[k])
-            upto = len(beads) if row >= LIVE_ROW else int(np.searchsorted(beads.row, row, "left"))
+            upto = self.upto(k)
             aabb = bodies.placed_object(body).getAABB()
             lo, hi = np.asarray(aabb.min_) / MM, np.asarray(aabb.max_) / MM
-            mask = None
             layer = int(self.segs.tip_layer[k])
-            if item.tip and layer != NO_LAYER:
-                mask = (beads.layer[:upto] != layer) & (beads.layer[:upto] != layer - 1)
-            near = beads.near(lo, hi, margin_mm, mask, upto)
+            skip = (layer, layer - 1) if item.tip and layer != NO_LAYER else ()
+            for m in (EXACT_NEAR_MM, margin_mm) if margin_mm > EXACT_NEAR_MM else (margin_mm,):
+                # nearest bounding box first: a bead whose box is no nearer than the best so far is not nearer
+                near = beads.near(lo, hi, m, upto, skip)
+                gap = np.linalg.norm(np.maximum(np.maximum(beads.lo[near] - hi, lo - beads.hi[near]), 0.0), axis=1)
+                order = np.argsort(gap, kind="stable")
+                for i, g in zip(near[order].tolist(), gap[order].tolist(), strict=True):
+                    if g >= best.d:
+                        break
+                    obj = beads.object(i)
+                    res.clear()
+                    d = coal.distance(body.geometry, tf, obj.collisionGeometry(), obj.getTransform(), req, res) / MM
+                    if d - GJK_EPS_MM < best.d:
+                        best = Probe(d - GJK_EPS_MM, "part", i, exact=True, row_only=True)
+                if best.d <= m:                             # every other bead is farther than m
+                    break
             if best.d > margin_mm:
                 best = Probe(margin_mm, "part", exact=True, row_only=True)
-            for i, obj in zip(near.tolist(), beads.objects(near), strict=True):
-                res.clear()
-                d = coal.distance(body.geometry, tf, obj.collisionGeometry(), obj.getTransform(), req, res) / MM
-                if d - GJK_EPS_MM < best.d:
-                    best = Probe(d - GJK_EPS_MM, "part", i, exact=True, row_only=True)
         return best
 
     def hit(self, item: Item, k: int, s: float, q: np.ndarray, probe: Probe) -> SweepHit:

@@ -14,7 +14,11 @@ beads laid before it), their layer and the G-code line.
 
 Coal objects are made lazily, once per bead, and shared by the broad-phase
 trees that hold them; the arrays answer the exact queries of the refinement
-(which beads lie near a body, were laid before a row, are not exempt).
+(which beads lie near a body, were laid before a row, are not exempt), many
+beads through a grid of their bounding boxes. The broad phase's beads go by
+chains (:meth:`BeadSolids.chains`): boxes around runs of consecutive beads,
+where those are tight (a curved slicer's many short moves along a smooth
+path), fewer objects for the trees to hold and search.
 """
 from __future__ import annotations
 
@@ -30,6 +34,12 @@ from fabric.sim.deposition import UP, Deposition, bead_frames, nozzle_axes
 __all__ = ["BeadSolids", "BEAD_ARRAYS"]
 
 BEAD_ARRAYS = ("start_mm", "end_mm", "width_mm", "height_mm", "layer", "row", "axis")
+CHAIN_BEADS = 8              # consecutive beads of a layer boxed together for the broad phase
+CHAIN_TIGHT_R = 1.5          # where that box is at most this much larger than the beads
+GRID_MIN_BEADS = 4096        # fewer beads are scanned to find those near a body; more go in a grid
+GRID_AFTER_SCANS = 16        # once they have been scanned this often
+GRID_CELL_R = 2.0            # whose cell is this many times the typical bead's size
+GRID_MAX_CELLS = 64          # a bead over more cells than this is always looked at
 _MIN_LEN_MM = 1e-6
 
 
@@ -49,6 +59,8 @@ class BeadSolids:
         self.lo = self.centre - ext[:, :, 0]
         self.hi = self.centre + ext[:, :, 0]
         self._objects: list[coal.CollisionObject | None] = [None] * len(self)
+        self._grid: _Grid | None = None
+        self._scans = 0
 
     def __len__(self) -> int:
         return len(self.row)
@@ -142,28 +154,146 @@ class BeadSolids:
 
     def objects(self, idx: np.ndarray) -> list[coal.CollisionObject]:
         """Coal objects of beads ``idx`` (metres), made on first use and kept."""
-        out = []
-        objs = self._objects
-        for i in np.asarray(idx, dtype=np.int64).tolist():
-            o = objs[i]
-            if o is None:
-                h = self.half[i] * (2.0 * MM)
-                o = coal.CollisionObject(coal.Box(float(h[0]), float(h[1]), float(h[2])), self.axes[i],
-                                         self.centre[i] * MM)
-                o.computeAABB()
-                objs[i] = o
-            out.append(o)
-        return out
+        return [self.object(i) for i in np.asarray(idx, dtype=np.int64).tolist()]
+
+    def object(self, i: int) -> coal.CollisionObject:
+        """The coal object of bead ``i`` (metres), made on first use and kept."""
+        o = self._objects[i]
+        if o is None:
+            h = self.half[i] * (2.0 * MM)
+            o = coal.CollisionObject(coal.Box(float(h[0]), float(h[1]), float(h[2])), self.axes[i],
+                                     self.centre[i] * MM)
+            o.computeAABB()
+            self._objects[i] = o
+        return o
+
+    # --- chains: consecutive beads boxed together ------------------------------------------------
+
+    def chains(self) -> tuple[BeadSolids, np.ndarray]:
+        """Boxes around runs of consecutive beads of one layer, for the broad phase: (the boxes, as beads
+        whose row is their first bead's, and the index of each one's first bead). A run of ``CHAIN_BEADS``
+        (else 4, else 2, aligned within its layer) goes in one box along it, turned with the beads' mean
+        axis, where that box is no more than ``CHAIN_TIGHT_R`` times their volume (a curved layer's many
+        short beads along a smooth path); any other bead is its own box. Each box holds every corner of its
+        beads, so a distance to it is a lower bound of the distance to them."""
+        n = len(self)
+        if n == 0:
+            return BeadSolids.empty(), np.zeros(0, np.int64)
+        cut = np.concatenate([[0], np.flatnonzero(np.diff(self.layer) != 0) + 1])
+        length = np.diff(np.append(cut, n))
+        run = np.repeat(np.arange(len(cut)), length)
+        pos = np.arange(n) - cut[run]
+        room = length[run] - pos                                  # beads left in its layer's run from each
+        volume = np.prod(2.0 * self.half, axis=1)
+        signs = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)])
+        corners = self.centre[:, None, :] + (signs[None] * self.half[:, None, :]) @ np.swapaxes(self.axes, 1, 2)
+        taken = np.zeros(n, bool)
+        firsts: list[np.ndarray] = []
+        boxes: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        for size in (CHAIN_BEADS, 4, 2):
+            first = np.flatnonzero((pos % size == 0) & (room >= size))
+            members = first[:, None] + np.arange(size)
+            free = ~taken[members].any(axis=1)
+            first, members = first[free], members[free]
+            if len(first) == 0:
+                continue
+            centre, axes, half = _chain_boxes(self, members, corners)
+            tight = np.prod(2.0 * half, axis=1) <= CHAIN_TIGHT_R * volume[members].sum(axis=1)
+            firsts.append(first[tight])
+            boxes.append((centre[tight], axes[tight], half[tight]))
+            taken[members[tight].ravel()] = True
+        single = np.flatnonzero(~taken)
+        firsts.append(single)
+        boxes.append((self.centre[single], self.axes[single], self.half[single]))
+        first = np.concatenate(firsts)
+        order = np.argsort(first, kind="stable")
+        first = first[order]
+        centre, axes, half = (np.concatenate([b[f] for b in boxes])[order] for f in range(3))
+        out = BeadSolids(centre, axes, half, self.layer[first], self.row[first], self.gcode_line[first])
+        return out, first
 
     # --- exact queries ----------------------------------------------------------------------
 
-    def near(self, lo_mm: np.ndarray, hi_mm: np.ndarray, margin_mm: float, mask: np.ndarray | None = None,
-             upto: int | None = None) -> np.ndarray:
-        """Indices among the first ``upto`` beads (all by default; and where ``mask``) whose box's bounding
-        box comes within ``margin_mm`` of the box [lo, hi] (mm)."""
+    def near(self, lo_mm: np.ndarray, hi_mm: np.ndarray, margin_mm: float, upto: int | None = None,
+             skip_layers: tuple[int, ...] = ()) -> np.ndarray:
+        """Indices among the first ``upto`` beads (all by default), but those of layers ``skip_layers``, whose
+        box's bounding box comes within ``margin_mm`` of the box [lo, hi] (mm), in order. Many beads asked
+        about often are looked up in a grid of their bounding boxes, a few scanned."""
         n = len(self) if upto is None else upto
         lo, hi = np.asarray(lo_mm) - margin_mm, np.asarray(hi_mm) + margin_mm
-        hit = np.all((self.lo[:n] <= hi) & (self.hi[:n] >= lo), axis=1)
-        if mask is not None:
-            hit &= mask
-        return np.flatnonzero(hit)
+        if self._grid is None and n >= GRID_MIN_BEADS and self._scans >= GRID_AFTER_SCANS:
+            self._grid = _Grid(self.lo, self.hi)                # asked often enough to pay for it
+        if n < GRID_MIN_BEADS or self._grid is None:
+            self._scans += 1
+            idx = np.flatnonzero(np.all((self.lo[:n] <= hi) & (self.hi[:n] >= lo), axis=1))
+        else:
+            idx = self._grid.query(lo, hi)
+            idx = idx[idx < n]
+            idx = idx[np.all((self.lo[idx] <= hi) & (self.hi[idx] >= lo), axis=1)]
+        return idx[~np.isin(self.layer[idx], skip_layers)] if skip_layers else idx
+
+
+def _chain_boxes(beads: BeadSolids, members: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Boxes (centre (G, 3), axes (G, 3, 3), half (G, 3)) around the beads ``members`` (G, k): along the chord
+    from the first bead's centre to the last's, up the beads' mean axis made normal to it, holding every
+    corner (``corners`` (n, 8, 3))."""
+    along = beads.centre[members[:, -1]] - beads.centre[members[:, 0]]
+    norm = np.linalg.norm(along, axis=1)
+    along = np.where(norm[:, None] > 1e-9, along / np.maximum(norm, 1e-9)[:, None], beads.axes[members[:, 0], :, 0])
+    up = beads.axes[members, :, 2].sum(axis=1)
+    up -= np.sum(up * along, axis=1)[:, None] * along
+    un = np.linalg.norm(up, axis=1)
+    ref = np.where((np.abs(along[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    up = np.where(un[:, None] > 1e-6, up, np.cross(along, ref))      # no mean axis across the chord: any normal
+    up /= np.linalg.norm(up, axis=1)[:, None]
+    axes = np.stack([along, np.cross(up, along), up], axis=2)         # (along, side, up): a proper rotation
+    local = (corners[members] @ axes[:, None]).reshape(len(members), -1, 3)   # every corner in the chain's frame
+    lo, hi = local.min(axis=1), local.max(axis=1)
+    return (axes @ ((lo + hi) / 2.0)[:, :, None])[:, :, 0], axes, (hi - lo) / 2.0
+
+
+class _Grid:
+    """Beads by the cells of a uniform grid that their bounding boxes overlap (cells ``GRID_CELL_R`` times the
+    median bead's longest side, 1 to 10 mm): the beads near a box are those of the cells it overlaps (and
+    the few too large for cells), found in time independent of the number of beads."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        self.origin = lo.min(axis=0)
+        self.cell = float(np.clip(GRID_CELL_R * np.median(np.max(hi - lo, axis=1)), 1.0, 10.0))
+        c0 = np.floor((lo - self.origin) / self.cell).astype(np.int64)
+        c1 = np.floor((hi - self.origin) / self.cell).astype(np.int64)
+        self.shape = c1.max(axis=0) + 1
+        ext = c1 - c0 + 1
+        cells = np.prod(ext, axis=1)
+        self.big = np.flatnonzero(cells > GRID_MAX_CELLS)
+        small = np.flatnonzero(cells <= GRID_MAX_CELLS)
+        count = cells[small]
+        bead = np.repeat(small, count)
+        k = np.arange(len(bead)) - np.repeat(np.cumsum(count) - count, count)   # which of its cells
+        e = ext[bead]
+        ix = c0[bead, 0] + k // (e[:, 1] * e[:, 2])
+        iy = c0[bead, 1] + (k // e[:, 2]) % e[:, 1]
+        iz = c0[bead, 2] + k % e[:, 2]
+        key = self._key(ix, iy, iz)
+        order = np.argsort(key, kind="stable")
+        self.keys, first = np.unique(key[order], return_index=True)
+        self.edges = np.append(first, len(order))
+        self.beads = bead[order]
+
+    def _key(self, ix: np.ndarray, iy: np.ndarray, iz: np.ndarray) -> np.ndarray:
+        return (ix * self.shape[1] + iy) * self.shape[2] + iz
+
+    def query(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Every bead (once, in order) whose cells meet the box [lo, hi] (mm), and every large one."""
+        c0 = np.maximum(np.floor((lo - self.origin) / self.cell).astype(np.int64), 0)
+        c1 = np.minimum(np.floor((hi - self.origin) / self.cell).astype(np.int64), self.shape - 1)
+        if np.any(c1 < c0):
+            return self.big
+        ix, iy, iz = (np.arange(c0[a], c1[a] + 1) for a in range(3))
+        keys = self._key(ix[:, None, None], iy[None, :, None], iz[None, None, :]).ravel()
+        pos = np.searchsorted(self.keys, keys)
+        pos = pos[(pos < len(self.keys)) & (self.keys[np.minimum(pos, len(self.keys) - 1)] == keys)]
+        a, b = self.edges[pos], self.edges[pos + 1]
+        size = b - a
+        at = np.repeat(a - np.cumsum(size) + size, size) + np.arange(int(size.sum()))
+        return np.unique(np.concatenate([self.beads[at], self.big]))

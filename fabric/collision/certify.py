@@ -30,17 +30,25 @@ laid up to its last row go into the broad phase (:mod:`fabric.collision.trees`).
 For a batch of stretches at a time:
 
 1. the tool's cylinders on the TCP axis (the tip, the nozzle, and the tool
-   body when the TCP is on the flange axis) along linear moves: swept hulls,
-   measured against the layer boxes a stretch at a time, in numpy
+   body when the TCP is on the flange axis; where it is tilted, a long
+   slender nozzle as its foot, ``FOOT_MM`` long, and the rest) along linear
+   moves: swept hulls,
+   measured against one box per layer a stretch at a time, in numpy
    (:mod:`fabric.collision.hull`);
 2. every other body, the tool's along joint moves, and every pair of robot
    bodies: conservative advancement (:mod:`fabric.collision.advance`), with a
    vectorised first pass of bounding spheres and coal where that runs out,
    bisecting where the clearance is small.
 
-Hull pieces that come within the tolerance are refined by the second, with
-exact distances. The certified clearance is the smallest lower bound of all;
-the first hit is the earliest along the path, and ends the sweep.
+A multi-axis program tilts the nozzle over curved layers, whose boxes hold
+the empty space beside a curved surface, where the tool is: hull covers that
+come within the tolerance of the boxes are measured as the cylinders they are
+against the beads, covers then pieces then halves (:mod:`fabric.collision.narrow`),
+and only what is left goes to the second's bisection with exact distances.
+A tilted tool's box distance is not its clearance: where it would be the
+smallest so far, the beads give it (within a factor two). The certified
+clearance is the smallest lower bound of all; the first hit is the earliest
+along the path, and ends the sweep (and every tool's refinement after it).
 """
 from __future__ import annotations
 
@@ -52,7 +60,8 @@ import numpy as np
 from fabric.collision.advance import Advancer, Item, SweepHit
 from fabric.collision.beads import BeadSolids
 from fabric.collision.bodies import TIP, Body, RobotBodies
-from fabric.collision.hull import ToolCylinder, cover_distances, hull_covers
+from fabric.collision.hull import ToolCylinder, cover_distances, hull_covers, vertical_covers
+from fabric.collision.narrow import narrow
 from fabric.collision.path import LIVE_ROW, NO_LAYER, START_LAYER, Segments, move_segments, program_segments
 from fabric.collision.trees import PartTrees
 from fabric.motion.program import Program
@@ -62,6 +71,9 @@ __all__ = ["Certifier", "SweepHit", "SweepResult", "TOLERANCE_MM", "exemption_te
 
 TOLERANCE_MM = 0.01          # two bodies this close count as touching
 BATCH_SEGMENTS = 20_000      # stretches are prepared (vectorised bounds, hull covers) this many segments at a time
+FOOT_MM = 4.0                # a slender tool longer than twice this is covered as its foot and the rest
+LOOSE_BELOW_MM = 5.0         # a tilted tool's box distance below this (and the clearance) is no clearance of its own
+BLOCK_COVERS = 64            # the covers near the part are refined this many at a time, every tool's, in path order
 
 
 def exemption_text(bodies: RobotBodies) -> str:
@@ -97,6 +109,7 @@ class Certifier:
         # the part for bounding spheres, and walks
         self.tools = [ToolCylinder(b, r, h, off) for b, r, h, off in self.bodies.axial_cylinders()
                       if b.name.startswith("tool_")]
+        self._tilted_tools = [part for tool in self.tools for part in _split(tool)]
         self._hulled = {t.body.name for t in self.tools}
 
     @property
@@ -159,7 +172,7 @@ class Certifier:
         layer[resting & descent] = START_LAYER - 1
         layer[~resting & descent] = START_LAYER - 2
         out = BeadSolids(beads.centre, beads.axes, beads.half, layer, beads.row, beads.gcode_line)
-        out._objects = beads._objects
+        out._objects, out._grid = beads._objects, beads._grid
         return out, joint_tip, down_tip
 
     def _resting(self, beads: BeadSolids, q: np.ndarray, tip_layer: int) -> np.ndarray:
@@ -193,7 +206,8 @@ class Certifier:
             vert = self._stretch[np.minimum(np.arange(a, b + 1), b - 1)]
             adv.set_batch(a, b, part_lo[vert], part_hi[vert])
             idx = a + np.flatnonzero(~segs.joint[a:b])
-            self._covers = hull_covers(self.bodies, segs, idx, self._stretch[idx], self.tools)
+            self._tools, self._covers = hull_covers(self.bodies, segs, idx, self._stretch[idx], self.tools,
+                                                    self._tilted_tools)
             hits = adv.walk(a, b, self._work(a, b), self._enter, self._stretch[a:b])
             if hits:
                 hit = min(hits, key=lambda h: (h.segment, h.s))
@@ -233,34 +247,51 @@ class Certifier:
     # --- entering a stretch: the broad phase, then the tool's swept hulls -------------------------
 
     def _enter(self, s: int) -> list[SweepHit]:
-        segs, adv = self.segs, self.adv
+        segs, adv, touch = self.segs, self.adv, 2.0 * self.tol
         self.trees.advance(int(self._counts[s]), int(segs.tip_layer[self._starts[s]]))
         hits: list[SweepHit] = []
         if self._covers is None:
             return hits
-        for t, (tool, covers) in enumerate(zip(self.tools, self._covers, strict=True)):
-            g0, g1 = np.searchsorted(covers.stretch, [s, s + 1])
-            if g0 == g1:
-                continue
+        g0, g1 = (int(g) for g in np.searchsorted(self._covers[0].stretch, [s, s + 1]))   # the tools share
+        if g0 == g1:                                                                       # their covers
+            return hits
+        self.pieces += int(self._covers[0].edges[g1] - self._covers[0].edges[g0])
+        near, box = [], []
+        for tool, covers in zip(self._tools, self._covers, strict=True):
             lo, hi = self.trees.layer_boxes(tool.body.name == TIP)
-            dist = cover_distances(covers, slice(g0, g1), lo, hi, 2.0 * self.tol)
-            if t == 0:                                      # the tools share their pieces
-                self.pieces += int(covers.edges[g1] - covers.edges[g0])
-            clear = np.where(dist > 2.0 * self.tol, dist, np.inf)
+            dist = cover_distances(covers, slice(g0, g1), lo, hi, touch)
+            # a tilted tool near a box may be far from the beads in it: its box distance is no clearance, and
+            # where it would be the smallest so far, the beads say how far it is (at least)
+            loose = (dist > touch) & (dist < min(adv.clearance, LOOSE_BELOW_MM)) & ~vertical_covers(covers,
+                                                                                                 slice(g0, g1))
+            clear = np.where((dist > touch) & ~loose, dist, np.inf)
             if np.isfinite(clear).any():
                 g = int(np.argmin(clear))
                 adv.bound(float(clear[g]), tool.body.name, int(covers.segment[covers.edges[g0 + g]]))
-            item = self._body_item(tool.body)
-            for g in (g0 + np.flatnonzero(dist <= 2.0 * self.tol)).tolist():
-                h = None
-                for k, s0, s1 in covers.pieces_of(g):       # in path order: the first hit of this body ends it
+            at = np.flatnonzero((dist <= touch) | loose)
+            near.append(g0 + at)
+            box.append(dist[at])
+        # those, every tool's a block at a time in path order: the first hit of a body ends its part, and
+        # nothing after the earliest hit matters
+        best, done = np.inf, set()
+        for b0 in range(g0, g1, BLOCK_COVERS):
+            if self._covers[0].segment[self._covers[0].edges[b0]] > best:
+                break
+            for t, (tool, covers) in enumerate(zip(self._tools, self._covers, strict=True)):
+                sel = (near[t] >= b0) & (near[t] < b0 + BLOCK_COVERS)
+                if t in done or not sel.any():
+                    continue
+                item = self._body_item(tool.body)
+                for k, s0, s1 in narrow(adv, self.trees, segs, tool, item, covers, near[t][sel], box[t][sel], touch):
+                    if k > best:
+                        break
                     qa, qb = segs.q_at(k, s0), segs.q_at(k, s1)
                     h = adv.refine(item, k, s0, qa, adv.probe(item, k, qa), s1, qb, adv.probe(item, k, qb))
                     if h is not None:
                         hits.append(h)
+                        best = min(best, h.segment)
+                        done.add(t)
                         break
-                if h is not None:
-                    break
         return hits
 
     # --- every item's walk ---------------------------------------------------------------------------
@@ -284,6 +315,19 @@ class Certifier:
                 x, y = y, x
             out.append((Item(f"{x.name} <-> {y.name}", x, y, self.bodies.pair_rate_mm(x, y)), whole))
         return out
+
+
+def _split(tool: ToolCylinder) -> list[ToolCylinder]:
+    """A long, slender tool cylinder (the nozzle) as its end near the part (``FOOT_MM`` long) and the rest: the
+    covers of a turning tool grow by its half-length times the turn, which the end near the beads is then
+    spared."""
+    length = 2.0 * tool.half_mm
+    if length <= 2.0 * FOOT_MM or tool.radius_mm > FOOT_MM:
+        return [tool]
+    end = tool.offset_mm + tool.half_mm                         # the end towards the tip (TCP z points out of it)
+    foot = ToolCylinder(tool.body, tool.radius_mm, FOOT_MM / 2.0, end - FOOT_MM / 2.0)
+    rest = ToolCylinder(tool.body, tool.radius_mm, (length - FOOT_MM) / 2.0, end - FOOT_MM - (length - FOOT_MM) / 2.0)
+    return [foot, rest]
 
 
 def _runs(mask: np.ndarray, cuts: np.ndarray) -> list[tuple[int, int]]:

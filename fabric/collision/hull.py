@@ -23,10 +23,16 @@ measured against the obstacles' boxes (the layer boxes of
 :mod:`fabric.collision.trees`, the table's, the plate's) in numpy: a cover on
 the z axis is a disk times an interval and a box a rectangle times an
 interval, so their distance is exactly ``hypot(gap across, gap along)``;
-any other cover counts by its bounding box. A layer is flat, so over a
-layer's box the tool's clearance comes out exact: the certified clearance of
-a print is what the nozzle and the tip really keep. Covers closer than the
-tolerance hand their pieces to the exact refinement.
+any other cover counts by the bounding box of the tool at every piece end
+(each end's cylinder on its own axis: the hull of two ends lies in the box
+around both, so the box, grown by the chord error alone, holds the sweep;
+a tilted tool's lowest point is exact, whatever its covers' spread). A
+planar layer is flat, so over a layer's box the tool's clearance comes out
+exact: the certified clearance of a print is what the nozzle and the tip
+really keep. Covers closer than the tolerance hand their pieces to the
+refinement (:mod:`fabric.collision.narrow`, then the walk's exact
+bisection); :func:`piece_covers` makes the covers of any run of pieces, as
+cylinders, for it.
 """
 from __future__ import annotations
 
@@ -37,8 +43,8 @@ import numpy as np
 from fabric.collision.bodies import GJK_EPS_MM, Body, RobotBodies
 from fabric.collision.path import Segments
 
-__all__ = ["ToolCylinder", "HullCovers", "hull_covers", "cover_distances", "CHORD_TARGET_MM", "PIECE_MAX_MM",
-           "GROUP_RADIUS_MM"]
+__all__ = ["ToolCylinder", "HullCovers", "hull_covers", "piece_covers", "frames", "vertical_covers", "cover_distances",
+           "CHORD_TARGET_MM", "PIECE_MAX_MM", "GROUP_RADIUS_MM"]
 
 CHORD_TARGET_MM = 0.02       # chord error allowed per piece
 GROUP_RADIUS_MM = 6.0        # consecutive pieces share a cover when they fit this much wider than the tool
@@ -64,28 +70,33 @@ class HullCovers:
     radius: np.ndarray           # (G,)
     half: np.ndarray             # (G,)
     grow: np.ndarray             # (G,)
+    box_lo: np.ndarray           # (G, 3) the bounding box of the tool at every piece end of the cover
+    box_hi: np.ndarray           # (G, 3) (both (0, 3) when every cover is on the z axis)
+    box_grow: np.ndarray         # (G,) what that box is grown by (the chord error)
     stretch: np.ndarray          # (G,) the stretch each cover belongs to
     edges: np.ndarray            # (G + 1,) pieces edges[g] .. edges[g + 1] - 1 are under cover g
     segment: np.ndarray          # (P,) per piece: its segment
     s0: np.ndarray               # (P,) and its fractions of the segment's row
     s1: np.ndarray
 
-    def pieces_of(self, g: int) -> list[tuple[int, float, float]]:
-        return [(int(self.segment[i]), float(self.s0[i]), float(self.s1[i]))
-                for i in range(int(self.edges[g]), int(self.edges[g + 1]))]
-
 
 def hull_covers(bodies: RobotBodies, segs: Segments, idx: np.ndarray, stretch: np.ndarray,
-                tools: list[ToolCylinder]) -> list[HullCovers] | None:
+                tools: list[ToolCylinder], tilted_tools: list[ToolCylinder] | None = None,
+                ) -> tuple[list[ToolCylinder], list[HullCovers] | None]:
     """Covers of every tool along linear segments ``idx`` (in path order) whose stretches are ``stretch``
-    (per segment of ``idx``); no cover spans two stretches. None when there is no linear segment."""
+    (per segment of ``idx``); no cover spans two stretches. The tools are ``tools``, or ``tilted_tools``
+    (the same bodies, cut differently) where the TCP axis is not vertical everywhere along them. Returns the
+    tools and their covers (None when there is no linear segment)."""
     if len(idx) == 0:
-        return None
+        return tools, None
     robot = bodies.cell.robot
-    dq = segs.dq_abs[idx]
-    errors = [bodies.chord_error_mm(dq, tool.body) for tool in tools]
     tcp0 = robot.fk(segs.q0[idx])
     tcp1 = robot.fk(segs.q1[idx])
+    upright = bool(np.all(np.abs(tcp0[:, 2, 2]) > 1.0 - 1e-12) and np.all(np.abs(tcp1[:, 2, 2]) > 1.0 - 1e-12))
+    if not upright and tilted_tools is not None:
+        tools = tilted_tools
+    dq = segs.dq_abs[idx]
+    errors = [bodies.chord_error_mm(dq, tool.body) for tool in tools]
     length = np.linalg.norm(tcp1[:, :3, 3] - tcp0[:, :3, 3], axis=1)
     n = np.maximum(np.ceil(np.sqrt(np.max(errors, axis=0) / CHORD_TARGET_MM)), np.ceil(length / PIECE_MAX_MM))
     n = np.maximum(n, 1).astype(np.int64)
@@ -114,9 +125,55 @@ def hull_covers(bodies: RobotBodies, segs: Segments, idx: np.ndarray, stretch: n
         worst = np.maximum.reduceat(error[seg] / n[seg] ** 2, edges[:-1])     # chord error ~ travel squared
         rho = float(np.hypot(tool.radius_mm, tool.half_mm))
         grow = worst + (rho + abs(shift)) * turn + GJK_EPS_MM
+        box_lo, box_hi = (np.zeros((0, 3)),) * 2 if upright else _end_boxes(Ta, Tb, tool, edges)
         out.append(HullCovers(centre + axis * shift, axis, tool.radius_mm + spread, tool.half_mm + along, grow,
-                              piece_stretch[edges[:-1]], edges, glob, s0, s1))
-    return out
+                              box_lo, box_hi, worst + GJK_EPS_MM, piece_stretch[edges[:-1]], edges, glob, s0, s1))
+    return tools, out
+
+
+def _end_boxes(Ta: np.ndarray, Tb: np.ndarray, tool: ToolCylinder, edges: np.ndarray,
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Per group of pieces (``edges``): the bounding box of the tool's cylinder at every piece end, each
+    with its own axis (a cylinder of radius ``r`` and half-length ``h`` on a unit axis ``a`` reaches
+    ``h |a_k| + r sqrt(1 - a_k^2)`` along coordinate ``k``). The hull of the tool at a piece's two ends lies
+    in the box around both, so the group's sweep lies in this box grown by the chord error, whatever the
+    axes do: no turn to pay, and a tilted tool's lowest point is exact."""
+    lo, hi = [], []
+    for T in (Ta, Tb):
+        a = T[:, :3, 2]
+        c = T[:, :3, 3] + a * tool.offset_mm
+        ext = tool.half_mm * np.abs(a) + tool.radius_mm * np.sqrt(np.maximum(1.0 - a ** 2, 0.0))
+        lo.append(c - ext)
+        hi.append(c + ext)
+    return (np.minimum.reduceat(np.minimum(*lo), edges[:-1], axis=0),
+            np.maximum.reduceat(np.maximum(*hi), edges[:-1], axis=0))
+
+
+def piece_covers(bodies: RobotBodies, tool: ToolCylinder, Ta: np.ndarray, Tb: np.ndarray, dq: np.ndarray,
+                 per: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Covers of pieces of linear moves, the TCP at ``Ta`` and ``Tb`` (N, 4, 4) at their ends and the joints
+    travelling ``dq`` (N, nq) along each, ``per`` consecutive pieces to a cover (see the module docstring):
+    (centre (G, 3), rotation (G, 3, 3) whose z is the axis, radius (G,), half-length (G,), grow (G,)), mm.
+    A cylinder, as the tool is: measured against the beads where boxes are not enough (a tilted nozzle over
+    a curved layer)."""
+    n = len(Ta)
+    pad = np.minimum(np.arange(-(-n // per) * per), n - 1)          # the last cover's room: its last piece again
+    ends = np.stack([Ta[:, :3, 3] + Ta[:, :3, 2] * tool.offset_mm, Tb[:, :3, 3] + Tb[:, :3, 2] * tool.offset_mm], 1)
+    axes = np.stack([Ta[:, :3, 2], Tb[:, :3, 2]], axis=1)
+    centre, axis, spread, along, turn = _cover(ends[pad].reshape(-1, 2 * per, 3), axes[pad].reshape(-1, 2 * per, 3))
+    error = bodies.chord_error_mm(np.abs(dq), tool.body)[pad].reshape(-1, per).max(axis=1)
+    grow = error + float(np.hypot(tool.radius_mm, tool.half_mm)) * turn + GJK_EPS_MM
+    return centre, frames(axis), tool.radius_mm + spread, tool.half_mm + along, grow
+
+
+def frames(z: np.ndarray) -> np.ndarray:
+    """Rotations (N, 3, 3) whose third columns are the unit vectors ``z`` (N, 3)."""
+    z0, z1, z2 = z[:, 0], z[:, 1], z[:, 2]
+    off = np.abs(z0) < 0.9                                        # z x (1, 0, 0), else z x (0, 1, 0)
+    x = np.stack([np.where(off, 0.0, -z2), np.where(off, z2, 0.0), np.where(off, -z1, z0)], axis=1)
+    x /= np.linalg.norm(x, axis=1)[:, None]
+    y = np.stack([z1 * x[:, 2] - z2 * x[:, 1], z2 * x[:, 0] - z0 * x[:, 2], z0 * x[:, 1] - z1 * x[:, 0]], axis=1)
+    return np.stack([x, y, z], axis=2)
 
 
 def _groups(Ta: np.ndarray, Tb: np.ndarray, tool: ToolCylinder, stretch: np.ndarray,
@@ -168,25 +225,35 @@ def _cover(ends: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, ...]:
     return centre, axis, spread, (hi - lo) / 2.0, turn
 
 
+def vertical_covers(c: HullCovers, sel: slice) -> np.ndarray:
+    """Per cover of ``sel``: is it on the z axis (its distance to a box is exact: see the module docstring)?"""
+    return np.abs(c.axis[sel, 2]) > 1.0 - 1e-12
+
+
 def cover_distances(c: HullCovers, sel: slice, lo: np.ndarray, hi: np.ndarray, touch_mm: float) -> np.ndarray:
     """Distance lower bound (mm) of covers ``sel`` to the boxes (lo, hi) (B, 3) (see the module docstring):
     exact for every cover within ``touch_mm`` of a box, and for the nearest cover; for the others, a
     distance at least as large as the smallest. Boxes are taken nearest first (by their distance to the
     bounding box of all the covers), and only while they can still be nearer than what is found."""
     centre, axis, radius = c.centre[sel], c.axis[sel], c.radius[sel]
-    half, grow = c.half[sel], c.grow[sel]
     out = np.full(len(centre), np.inf)
     if len(lo) == 0 or len(centre) == 0:
         return out
-    vertical = np.abs(axis[:, 2]) > 1.0 - 1e-12
-    ext = half[:, None] * np.abs(axis) + radius[:, None] * np.sqrt(np.maximum(1.0 - axis ** 2, 0.0))
-    all_lo = (centre - ext - grow[:, None]).min(axis=0)
-    all_hi = (centre + ext + grow[:, None]).max(axis=0)
+    # a cover on the z axis: the disk times the interval; any other: the box of the tool at its piece ends
+    vertical = vertical_covers(c, sel)
+    ext = c.half[sel, None] * np.abs(axis) + radius[:, None] * np.sqrt(np.maximum(1.0 - axis ** 2, 0.0))
+    clo, chi, grow = centre - ext, centre + ext, c.grow[sel]
+    if not vertical.all():
+        clo = np.where(vertical[:, None], clo, c.box_lo[sel])
+        chi = np.where(vertical[:, None], chi, c.box_hi[sel])
+        grow = np.where(vertical, grow, c.box_grow[sel])
+    all_lo = (clo - grow[:, None]).min(axis=0)
+    all_hi = (chi + grow[:, None]).max(axis=0)
     reach = np.linalg.norm(np.maximum(np.maximum(lo - all_hi, all_lo - hi), 0.0), axis=1)
     for b in np.argsort(reach, kind="stable").tolist():
         if reach[b] > max(float(out.min()), touch_mm):
             break
-        gap = np.maximum(np.maximum(lo[b] - (centre + ext), (centre - ext) - hi[b]), 0.0)          # (G, 3)
+        gap = np.maximum(np.maximum(lo[b] - chi, clo - hi[b]), 0.0)                                 # (G, 3)
         xy = np.maximum(np.maximum(lo[b, :2] - centre[:, :2], centre[:, :2] - hi[b, :2]), 0.0)
         across = np.maximum(np.linalg.norm(xy, axis=1) - radius, 0.0)
         d = np.where(vertical, np.hypot(across, gap[:, 2]), np.linalg.norm(gap, axis=1)) - grow

@@ -221,6 +221,9 @@ A raster of {big['moves']:,} moves ({big['rows']:,} program rows, {big['beads']:
 
 Certified / sampled time: **{1 / big['speedup']:.2f}x** (the certified sweep is {big['speedup']:.1f}x faster).
 Peak resident memory of the benchmark process: {big['peak_rss_mb']:,.0f} MB.
+
+Multi-axis programs (curved layers, a tilted nozzle) against this sample part: `tools/bench/collision_curved_bench.py`,
+[collision_curved.md](collision_curved.md).
 """
     (out / "collision.md").write_text(md)
 
