@@ -51,11 +51,13 @@ def test_last_layers_follow_the_top_with_less_staircase_than_planar(sliced, name
 def test_the_largest_staircase_on_the_top_is_no_larger_than_planar(sliced, name):
     """Core layers are thinned where they cut an upward face at a slope (their staircase stays under planar
     layers' on the same face); the band follows the top itself. Planar's largest is its nominal layer on a
-    near-flat face, or its thicker first layer on a face near the plate (the wing's trailing edge)."""
+    near-flat face, or its thicker first layer on a face near the plate (the wing's trailing edge). The curved
+    slice's first layer is planar too (the nozzle is vertical on the plate), so its largest stays under the
+    first layer's thickness."""
     r = sliced[name].report
     assert r.planar_cusp_max_mm > 0.2
     assert r.cusp_max_mm <= r.planar_cusp_max_mm, r
-    assert r.cusp_max_mm < PROFILE.layer_height_mm, r
+    assert r.cusp_max_mm < PROFILE.first_layer_height_mm, r
 
 
 @pytest.mark.parametrize("name", sorted(SHAPES))

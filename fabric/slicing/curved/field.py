@@ -35,8 +35,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.spatial import cKDTree
 
+from fabric.slicing.curved.axis import limit_deviation, limit_tilt, plate_tilt_deg
+from fabric.slicing.curved.band import build_band
 from fabric.slicing.curved.heat import (
     FemOperators,
     fem_operators,
@@ -48,10 +49,11 @@ from fabric.slicing.curved.options import CurvedOptions
 from fabric.slicing.curved.tetmesh import TetMesh
 from fabric.wire.errors import MeshError
 
-__all__ = ["LayerField", "build_field", "limit_tilt", "base_nodes", "surface_kinds"]
+__all__ = ["LayerField", "build_field", "limit_tilt", "base_nodes", "plate_blend"]
 
 BASE_TOL_MM = 0.02       # a vertex this close to the lowest point touches the plate
 MIN_SMOOTHING_PASSES = 2
+CREASE_RINGS = 2         # rings of nodes round a crease of the layers where the axis may leave their normal
 
 
 @dataclass(frozen=True)
@@ -61,7 +63,7 @@ class LayerField:
     mesh: TetMesh
     ops: FemOperators
     d_base_mm: np.ndarray        # geodesic distance from the plate contact
-    d_top_mm: np.ndarray         # geodesic distance from the top surface (inf without a top)
+    d_top_mm: np.ndarray         # the band field: 0 on the followed top faces (inf without a band, :mod:`.band`)
     band_mm: float               # depth of the top band (0: no band)
     core_dir: np.ndarray         # (n, 3) unit gradient of d_base
     core_grad_r: np.ndarray      # (n,) |grad d_base|, mean over the adjacent elements (1 for an exact distance)
@@ -69,7 +71,8 @@ class LayerField:
     band_grad_r: np.ndarray      # (n,) |grad d_top|, likewise
     axis: np.ndarray             # (n, 3) nozzle axis: smoothed, tilt-limited build direction
     in_band: np.ndarray          # (n,) bool
-    band_clip_mm: np.ndarray     # (n,) max(d_top - band, margin - d_side): < 0 in the band, >= 0 in the core
+    band_clip_mm: np.ndarray     # (n,) d_top - band: < 0 in the band, >= 0 in the core
+    followed: np.ndarray         # (f,) bool over mesh.boundary_faces(): the top faces the band follows
 
     @property
     def build_dir(self) -> np.ndarray:
@@ -83,96 +86,89 @@ def base_nodes(nodes: np.ndarray) -> np.ndarray:
     return np.flatnonzero(z <= z.min() + BASE_TOL_MM)
 
 
-def surface_kinds(mesh: TetMesh, top_slope_deg: float) -> tuple[np.ndarray, np.ndarray]:
-    """(top, side) masks over the boundary faces: facing up within ``top_slope_deg`` and off the plate, or
-    neither top nor on the plate. Every surface node counts, the ones TetGen added too."""
-    faces, normals = mesh.boundary_faces()
-    zmin = float(mesh.nodes[:, 2].min())
-    on_plate = np.all(mesh.nodes[faces][:, :, 2] <= zmin + BASE_TOL_MM, axis=1)
-    up = (normals[:, 2] >= math.cos(math.radians(top_slope_deg))) & ~on_plate
-    return up, ~up & ~on_plate
-
-
-def _side_distance(mesh: TetMesh, side_faces: np.ndarray, reach_mm: float) -> np.ndarray:
-    """Straight distance (mm) from every node to the nearest node of a side wall (inf without walls), exact
-    up to ``reach_mm`` plus the longest mesh edge (farther nodes get that bound): enough for every edge that
-    the band's clip value crosses zero on."""
-    if len(side_faces) == 0:
-        return np.full(len(mesh.nodes), np.inf)
-    e = mesh.edges
-    bound = reach_mm + float(np.linalg.norm(mesh.nodes[e[:, 0]] - mesh.nodes[e[:, 1]], axis=1).max())
-    dist, _ = cKDTree(mesh.nodes[np.unique(side_faces.ravel())]).query(mesh.nodes, distance_upper_bound=bound)
-    return np.minimum(np.asarray(dist), bound)
-
-
-def limit_tilt(axes: np.ndarray, max_tilt_deg: float) -> np.ndarray:
-    """Unit axes rotated towards +z (in their vertical plane) so none is tilted more than ``max_tilt_deg``."""
-    a = axes / np.maximum(np.linalg.norm(axes, axis=1, keepdims=True), 1e-12)
-    cos_max = math.cos(math.radians(max_tilt_deg))
-    over = a[:, 2] < cos_max
-    if np.any(over):
-        horiz = a[over].copy()
-        horiz[:, 2] = 0.0
-        hn = np.linalg.norm(horiz, axis=1, keepdims=True)
-        horiz = np.where(hn > 1e-9, horiz / np.maximum(hn, 1e-12), np.array([1.0, 0.0, 0.0]))
-        s = math.sin(math.radians(max_tilt_deg))
-        a[over] = horiz * s + np.array([0.0, 0.0, cos_max])
-    return a
-
-
 def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     norm = np.linalg.norm(v, axis=1)
     return v / np.maximum(norm, 1e-12)[:, None], norm
 
 
-def _nozzle_axes(build: np.ndarray, edges: np.ndarray, options: CurvedOptions) -> np.ndarray:
+def _crease_half_angles_deg(build: np.ndarray, edges: np.ndarray, adj: sp.csr_matrix) -> np.ndarray:
+    """(n,) half the largest turn of the build direction across each node's edges, spread :data:`CREASE_RINGS`
+    rings of edges out. Where layers meet at a crease (an arch's crown, where the layers that climbed both
+    legs join) the layer normal itself turns by up to twice the tilt limit between two nodes; no axis close to
+    both sides' normals exists there, so the axis may leave the normal by half the turn, over a few rings of
+    nodes, and turn smoothly from one side to the other."""
+    cos = np.clip(np.einsum("ij,ij->i", build[edges[:, 0]], build[edges[:, 1]]), -1.0, 1.0)
+    half = 0.5 * np.degrees(np.arccos(cos))
+    out = np.zeros(len(build))
+    np.maximum.at(out, edges[:, 0], half)
+    np.maximum.at(out, edges[:, 1], half)
+    for _ring in range(CREASE_RINGS):
+        out = np.maximum(out, np.asarray(adj.multiply(out[None, :]).max(axis=1).todense()).ravel())
+    return out
+
+
+def _nozzle_axes(build: np.ndarray, edges: np.ndarray, max_tilt_deg: np.ndarray, options: CurvedOptions,
+                 ) -> np.ndarray:
     """Tilt-limited nozzle axes: the build direction smoothed over the mesh edges (Laplacian passes,
-    renormalised), as few passes as bring every edge's two axes within ``max_neighbour_deg`` (at least
-    ``MIN_SMOOTHING_PASSES``, at most ``axis_smoothing_passes``), so the nozzle stays as close to the
-    layer normal as the neighbour limit allows."""
+    renormalised, each kept within ``max_axis_deviation_deg`` of the node's build direction), as few passes
+    as bring every edge's two axes within ``max_neighbour_deg`` (at least ``MIN_SMOOTHING_PASSES``, at most
+    ``axis_smoothing_passes``), then limited to each node's ``max_tilt_deg``."""
     n = len(build)
     adj = sp.csr_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
                         shape=(n, n))
     deg = np.asarray(adj.sum(axis=1))
     cos_limit = math.cos(math.radians(options.max_neighbour_deg))
     out = build
-    axes = limit_tilt(out, options.max_tilt_deg)
+    axes = limit_tilt(out, max_tilt_deg)
+    allowed = np.maximum(options.max_axis_deviation_deg, _crease_half_angles_deg(build, edges, adj))
     for k in range(options.axis_smoothing_passes):
         out = 0.5 * out + 0.5 * (adj @ out) / np.maximum(deg, 1.0)
-        out, _norm = _unit(out)
-        axes = limit_tilt(out, options.max_tilt_deg)
+        out = limit_deviation(out, build, allowed)
+        axes = limit_tilt(out, max_tilt_deg)
         if k + 1 >= MIN_SMOOTHING_PASSES and np.einsum("ij,ij->i", axes[edges[:, 0]], axes[edges[:, 1]]).min() \
                 >= cos_limit:
             break
     return axes
 
 
-def build_field(mesh: TetMesh, options: CurvedOptions, nominal_mm: float, side_margin_mm: float) -> LayerField:
+def plate_blend(height_mm: np.ndarray, first_layer_mm: float, blend_mm: float) -> np.ndarray:
+    """The weight of the curved field at each height over the plate: 0 up to the first layer's top (which is
+    then a plane), 1 from ``blend_mm`` up, a smoothstep between (its slope is 0 at both ends, so the layers
+    bend gently)."""
+    if blend_mm <= first_layer_mm:
+        return np.where(height_mm <= first_layer_mm, 0.0, 1.0) if blend_mm > 0.0 else np.ones_like(height_mm)
+    t = np.clip((height_mm - first_layer_mm) / (blend_mm - first_layer_mm), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def build_field(mesh: TetMesh, options: CurvedOptions, nominal_mm: float, side_margin_mm: float,
+                first_layer_mm: float) -> LayerField:
     """Solve the core and band fields on ``mesh`` (a tetrahedralised part) and derive the nozzle axes."""
     ops = fem_operators(mesh)
     base = base_nodes(mesh.nodes)
     if len(base) == 0:
         raise MeshError("curved slicing: the part does not touch the plate", reason="no_base")
-    d_base = geodesic_distance(mesh, ops, base, options.heat_time_r)
+    height = mesh.nodes[:, 2] - float(mesh.nodes[:, 2].min())
+    w = plate_blend(height, first_layer_mm, options.plate_blend_mm)
+    d_base = w * geodesic_distance(mesh, ops, base, options.heat_time_r) + (1.0 - w) * height
     core_dir, _norm = _unit(node_gradients(ops, mesh.tets, d_base))
     core_grad = node_gradient_norms(ops, mesh.tets, d_base)
     n = len(mesh.nodes)
-    faces, _normals = mesh.boundary_faces()
-    up, side = surface_kinds(mesh, options.top_slope_deg)
-    band_mm = options.top_band_layers * nominal_mm if np.any(up) else 0.0
-    if band_mm > 0.0:
-        d_top = geodesic_distance(mesh, ops, np.unique(faces[up].ravel()), options.heat_time_r)
-        band_dir, _norm = _unit(-node_gradients(ops, mesh.tets, d_top))
-        band_grad = node_gradient_norms(ops, mesh.tets, d_top)
-        margin = max(side_margin_mm, band_mm)
-        clip = np.maximum(d_top - band_mm, margin - _side_distance(mesh, faces[side], margin))
+    band = build_band(mesh, ops, d_base, options, first_layer_mm, margin_mm=max(side_margin_mm, 2.0 * nominal_mm *
+                                                                                  options.top_band_layers))
+    band_mm = options.top_band_layers * nominal_mm if band is not None else 0.0
+    if band is not None and band_mm > 0.0:
+        d_top, band_dir, band_grad, followed = band.g_mm, band.direction, band.grad_r, band.followed
+        clip = d_top - band_mm
     else:
         d_top = np.full(n, np.inf)
         band_dir, band_grad = core_dir, core_grad
         clip = np.full(n, np.inf)
+        followed = np.zeros(len(mesh.boundary_faces()[0]), dtype=bool)
     in_band = clip < 0.0
     build = np.where(in_band[:, None], band_dir, core_dir)
-    axis = _nozzle_axes(build, mesh.edges, options)
+    tilt = plate_tilt_deg(height, first_layer_mm, options.tip_radius_mm, options.max_tilt_deg)
+    axis = _nozzle_axes(build, mesh.edges, tilt, options)
     return LayerField(mesh=mesh, ops=ops, d_base_mm=d_base, d_top_mm=d_top, band_mm=band_mm, core_dir=core_dir,
                       core_grad_r=core_grad, band_dir=band_dir, band_grad_r=band_grad, axis=axis, in_band=in_band,
-                      band_clip_mm=clip)
+                      band_clip_mm=clip, followed=followed)

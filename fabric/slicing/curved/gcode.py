@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fabric.slicing.curved.paths import CurvedPath
+from fabric.slicing.curved.travel import HeightMap, crossing
 from fabric.slicing.profile import Profile
 
 __all__ = ["MULTIAXIS_HEADER", "GcodeTotals", "write_multiaxis"]
@@ -25,6 +26,10 @@ __all__ = ["MULTIAXIS_HEADER", "GcodeTotals", "write_multiaxis"]
 MULTIAXIS_HEADER = "multiaxis: nozzle axis in I J K"
 TYPE_NAMES = {"perimeter": "Perimeter", "solid infill": "Solid infill", "infill": "Internal infill"}
 TRAVEL_LIFT_MM = 1.0          # travels that retract leave and approach along the nozzle axis by this much
+# no move turns the nozzle more than this: the twin (and a controller's joint interpolation) moves the joints
+# linearly between two targets, and the tip strays from the straight line the more the nozzle turns (0.05 mm
+# for 1 degree, 0.3 mm for 5 on the multi-axis cell): a move that turns more is written in equal pieces
+MAX_TURN_DEG = 1.0
 
 
 @dataclass
@@ -52,8 +57,9 @@ def _xyz_ijk(p: np.ndarray, a: np.ndarray) -> str:
 
 
 def write_multiaxis(layers: list[list[CurvedPath]], profile: Profile, header: list[str],
-                    nominal_mm: float) -> GcodeTotals:
-    """G-code of the ordered paths of every layer, in the multi-axis dialect."""
+                    nominal_mm: float, tip_radius_mm: float = 0.0) -> GcodeTotals:
+    """G-code of the ordered paths of every layer, in the multi-axis dialect. Travels cross over the part as
+    printed so far with a nozzle tip of ``tip_radius_mm`` clear of it (:mod:`.travel`)."""
     p = profile
     out: list[str | int] = [f"; {MULTIAXIS_HEADER}"]
     out += [f"; {line}" for line in header + p.material_header()]
@@ -70,35 +76,64 @@ def write_multiaxis(layers: list[list[CurvedPath]], profile: Profile, header: li
     here_axis = np.array([0.0, 0.0, 1.0])
     blocks: list[np.ndarray] = []          # the extruding moves of each path, (k, 7) X Y Z I J K E
     feeds: list[str] = []
+    ends = np.vstack([np.zeros((0, 3))] + [np.vstack([path.points_mm.min(axis=0), path.points_mm.max(axis=0)])
+                                           for layer in layers for path in layer])
+    heights = HeightMap(ends.min(axis=0), ends.max(axis=0)) if len(ends) else HeightMap(np.zeros(3), np.zeros(3))
+    at: np.ndarray | None = None            # where the nozzle tip is, and its axis
+    at_axis = np.array([0.0, 0.0, 1.0])
+
+    def go(point: np.ndarray, axis: np.ndarray) -> None:
+        """A travel move to ``point`` with the nozzle along ``axis`` (in pieces that turn it little)."""
+        nonlocal at, at_axis, travel
+        if at is None:
+            out.append(f"G0 {_xyz_ijk(point, axis)} F{travel_f:.0f}")
+        else:
+            pieces, piece_axes, _share = _turn_pieces(np.vstack([at, point]), np.vstack([at_axis, axis]))
+            for q, a in zip(pieces, piece_axes, strict=True):
+                out.append(f"G0 {_xyz_ijk(q, a)} F{travel_f:.0f}")
+            travel += float(np.linalg.norm(point - at))
+        at, at_axis = point, axis
+
+    def retract() -> None:
+        nonlocal retracted, retractions
+        if not retracted and p.retract_length_mm > 0:
+            out.append(f"G1 E{-p.retract_length_mm:.5f} F{retract_f:.0f}")
+            retractions += 1
+            retracted = True
+
     for index, paths in enumerate(layers):
         if not paths:
             continue
         top = max(float(path.points_mm[:, 2].max()) for path in paths)
+        lifted = False
+        if here is not None:
+            # leave the last layer along the nozzle axis before the next one begins: the tip's edge may reach
+            # into the layer under the one it laid, which the next layer's moves may no longer touch
+            if float(np.linalg.norm(paths[0].points_mm[0] - here)) > p.retract_min_travel_mm:
+                retract()
+            go(here + here_axis * lift, here_axis)
+            lifted = True
         out += [";LAYER_CHANGE", f";Z:{top:.3f}", f";HEIGHT:{nominal_mm:.3f}"]
         kind = ""
         for path in paths:
             start, axis0 = path.points_mm[0], path.axes[0]
             above = start + axis0 * lift
             if here is None:                    # the first bead: come down onto it along its axis
-                out.append(f"G0 {_xyz_ijk(above, axis0)} F{travel_f:.0f}")
-                out.append(f"G0 {_xyz_ijk(start, axis0)} F{travel_f:.0f}")
-                hop = 0.0
-            else:
-                hop = float(np.linalg.norm(start - here))
-            if hop > p.retract_min_travel_mm and here is not None:
-                # retract, leave along the nozzle axis, cross, come down along the next axis
-                if not retracted and p.retract_length_mm > 0:
-                    out.append(f"G1 E{-p.retract_length_mm:.5f} F{retract_f:.0f}")
-                    retractions += 1
-                    retracted = True
-                up = here + here_axis * lift
-                out.append(f"G0 {_xyz_ijk(up, here_axis)} F{travel_f:.0f}")
-                out.append(f"G0 {_xyz_ijk(above, axis0)} F{travel_f:.0f}")
-                out.append(f"G0 {_xyz_ijk(start, axis0)} F{travel_f:.0f}")
-                travel += 2.0 * lift + float(np.linalg.norm(above - up))
-            elif hop > 0.0:
-                out.append(f"G0 {_xyz_ijk(start, axis0)} F{travel_f:.0f}")
-                travel += hop
+                go(above, axis0)
+                go(start, axis0)
+            elif lifted or float(np.linalg.norm(start - here)) > p.retract_min_travel_mm:
+                # (retract,) leave along the nozzle axis, cross clear of the part, come down along the next axis
+                if not lifted:
+                    retract()
+                    go(here + here_axis * lift, here_axis)
+                assert at is not None
+                for point, axis in crossing(at, here_axis, above, axis0, heights, tip_radius_mm):
+                    go(point, axis)
+                go(above, axis0)
+                go(start, axis0)
+                lifted = False
+            elif float(np.linalg.norm(start - here)) > 0.0:
+                go(start, axis0)
             if retracted:
                 out.append(f"G1 E{p.retract_length_mm:.5f} F{retract_f:.0f}")
                 retracted = False
@@ -113,12 +148,15 @@ def write_multiaxis(layers: list[list[CurvedPath]], profile: Profile, header: li
             seg = np.linalg.norm(np.diff(path.points_mm, axis=0), axis=1)
             volumes = seg * _bead_areas_mm2(path.width_mm, 0.5 * (path.heights_mm[1:] + path.heights_mm[:-1]))
             es = volumes * area_in
-            blocks.append(np.column_stack([path.points_mm[1:], path.axes[1:], es]))
+            pts, axes, share = _turn_pieces(path.points_mm, path.axes)
+            blocks.append(np.column_stack([pts, axes, es[share[0]] * share[1]]))
             feeds.append(feed)
             out.append(len(blocks) - 1)          # the block's moves are formatted all at once below
             filament += float(es.sum())
             extruded += float(volumes.sum()) * p.extrusion_multiplier_r
             here, here_axis = path.points_mm[-1], path.axes[-1]
+            at, at_axis = here, here_axis
+            heights.add(path.points_mm)
     if not retracted and p.retract_length_mm > 0 and here is not None:
         out.append(f"G1 E{-p.retract_length_mm:.5f} F{retract_f:.0f}")
         retractions += 1
@@ -133,6 +171,21 @@ def write_multiaxis(layers: list[list[CurvedPath]], profile: Profile, header: li
             text.append(moves[first[line]] + feeds[line])
             text += moves[first[line] + 1:first[line + 1]]
     return GcodeTotals("\n".join(text), filament, extruded, retractions, travel)
+
+
+def _turn_pieces(points_mm: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray,
+                                                                                                np.ndarray]]:
+    """The moves through ``points_mm`` (n, 3) with ``axes`` (n, 3), each of the n - 1 cut into equal pieces that
+    turn the axis at most :data:`MAX_TURN_DEG`: their end points (m, 3), axes (m, 3), and for each piece the
+    move it is part of and the share of it (to split the move's extrusion)."""
+    cos = np.clip(np.einsum("ij,ij->i", axes[1:], axes[:-1]), -1.0, 1.0)
+    count = np.maximum(np.ceil(np.degrees(np.arccos(cos)) / MAX_TURN_DEG - 1e-9), 1).astype(np.int64)
+    move = np.repeat(np.arange(len(count)), count)
+    frac = (np.arange(len(move)) - np.repeat(np.cumsum(count) - count, count) + 1) / count[move]
+    pts = points_mm[move] + frac[:, None] * (points_mm[move + 1] - points_mm[move])
+    ax = axes[move] + frac[:, None] * (axes[move + 1] - axes[move])
+    ax /= np.maximum(np.linalg.norm(ax, axis=1, keepdims=True), 1e-12)
+    return pts, ax, (move, 1.0 / count[move])
 
 
 def _digit_table(digits: int) -> np.ndarray:

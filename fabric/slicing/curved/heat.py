@@ -33,8 +33,8 @@ from scipy.sparse import csgraph
 from fabric.slicing.curved.tetmesh import TetMesh
 from fabric.wire.errors import SlicerError
 
-__all__ = ["FemOperators", "fem_operators", "geodesic_distance", "tet_gradients", "node_gradients",
-           "node_gradient_norms"]
+__all__ = ["FemOperators", "fem_operators", "geodesic_distance", "fit_potential", "edge_distance", "tet_gradients",
+           "node_gradients", "node_gradient_norms"]
 
 DIRECT_SOLVE_MAX_NODES = 60000     # the heat step's sparse LU above this would fill in too much (3D)
 
@@ -145,7 +145,7 @@ def _conjugate_gradients(a: sp.csr_matrix, b: np.ndarray, x0: np.ndarray, rtol: 
                       iterations=max_iterations)
 
 
-def _edge_distance(mesh: TetMesh, sources: np.ndarray) -> np.ndarray:
+def edge_distance(mesh: TetMesh, sources: np.ndarray) -> np.ndarray:
     """Shortest-path distance (mm) along the mesh's edges from the nearest source."""
     e = mesh.edges
     w = np.linalg.norm(mesh.nodes[e[:, 0]] - mesh.nodes[e[:, 1]], axis=1)
@@ -165,7 +165,7 @@ def geodesic_distance(mesh: TetMesh, ops: FemOperators, sources: np.ndarray, tim
     """
     if len(sources) == 0:
         raise SlicerError("curved slicing: no source nodes for the distance field", reason="no_sources")
-    guess = _edge_distance(mesh, sources)
+    guess = edge_distance(mesh, sources)
     if time_r <= 0.0 or len(mesh.nodes) > DIRECT_SOLVE_MAX_NODES:
         g = tet_gradients(ops, mesh.tets, -guess)
     else:
@@ -176,7 +176,14 @@ def geodesic_distance(mesh: TetMesh, ops: FemOperators, sources: np.ndarray, tim
     norm = np.linalg.norm(g, axis=1, keepdims=True)
     x = -g / np.maximum(norm, 1e-300)
     x[norm[:, 0] < 1e-300] = 0.0
+    return fit_potential(mesh, ops, x, sources, guess)
+
+
+def fit_potential(mesh: TetMesh, ops: FemOperators, x_tet: np.ndarray, sources: np.ndarray,
+                  guess: np.ndarray) -> np.ndarray:
+    """The node field ``phi`` (0 on ``sources``) whose gradient fits the direction field ``x_tet`` (m, 3) best
+    in the least-squares sense: the Poisson problem ``K phi = div X`` (conjugate gradients from ``guess``)."""
     # divergence of X tested against every hat function: sum over tets of vol * X . grad(hat)
-    div = np.einsum("mk,mik->mi", x, ops.grad_basis) * ops.volume_mm3[:, None]
+    div = np.einsum("mk,mik->mi", x_tet, ops.grad_basis) * ops.volume_mm3[:, None]
     rhs = np.bincount(mesh.tets.ravel(), weights=div.ravel(), minlength=len(mesh.nodes))
     return _solve_fixed(ops.stiffness, rhs, sources, np.zeros(len(sources)), guess)

@@ -62,6 +62,7 @@ class CurvedReport:
     planar_cusp_max_mm: float
     tet_nodes: int
     tets: int
+    max_axis_deviation_deg: float = 0.0      # largest angle between the nozzle axis and the layer normal
     elapsed_s: float = 0.0
 
     def as_dict(self) -> dict[str, float | int]:
@@ -129,17 +130,15 @@ def planar_thickness_mm(surface: SurfaceFaces, nodes: np.ndarray, nominal_mm: fl
     return np.maximum(np.where(reaches_first, first_layer_mm, 0.0), np.where(above_first, nominal_mm, 0.0))
 
 
-def corner_cusps_mm(field: LayerField, surface: SurfaceFaces, layering: Layering,
-                    top_slope_deg: float) -> np.ndarray:
+def corner_cusps_mm(field: LayerField, surface: SurfaceFaces, layering: Layering) -> np.ndarray:
     """(f, 3) the staircase error of each face at each corner, with that corner's field: 0 in the band on a
     face the band follows (top surface), else ``t |n . d|`` with the corner's layer thickness and direction."""
     faces, normals = surface.faces, surface.normals
-    up = (normals[:, 2] >= math.cos(math.radians(top_slope_deg))) & surface.off_plate
     t_core = layering.core_step(field.d_base_mm) / np.maximum(field.core_grad_r, 1e-6)
     c_core = t_core[faces] * np.abs(np.einsum("fk,fck->fc", normals, field.core_dir[faces]))
     t_band = layering.band_step_mm / np.maximum(field.band_grad_r, 1e-6)
     c_band = t_band[faces] * np.abs(np.einsum("fk,fck->fc", normals, field.band_dir[faces]))
-    c_band = np.where(up[:, None], 0.0, c_band)
+    c_band = np.where(field.followed[:, None], 0.0, c_band)
     return np.where(field.in_band[faces], c_band, c_core)
 
 
@@ -160,19 +159,20 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def measure(field: LayerField, paths: list[CurvedPath], layers: int, layering: Layering, nominal_mm: float,
-            first_layer_mm: float, top_slope_deg: float) -> CurvedReport:
+            first_layer_mm: float) -> CurvedReport:
     """Every figure of :class:`CurvedReport` for a curved slice (``field`` on the part's volume mesh)."""
     z = np.array([0.0, 0.0, 1.0])
     surface = surface_faces(field.mesh)
     face_dirs = _face_dirs(surface, field.build_dir)
     over_c = overhang_area_mm2(surface, face_dirs)
     over_p = overhang_area_mm2(surface, z)
-    cusp_c = cusp_error_mm(surface, corner_cusps_mm(field, surface, layering, top_slope_deg))
+    cusp_c = cusp_error_mm(surface, corner_cusps_mm(field, surface, layering))
     planar_t = planar_thickness_mm(surface, field.mesh.nodes, nominal_mm, first_layer_mm)
     cusp_p = cusp_error_mm(surface, np.where(surface.normals[:, 2] > FLAT_R, 0.0,
                                              planar_t * np.abs(surface.normals[:, 2])))
     heights = np.concatenate([p.heights_mm for p in paths]) if paths else np.zeros(1)
     axes = np.concatenate([p.axes for p in paths]) if paths else z[None, :]
+    normals = np.concatenate([p.normals for p in paths]) if paths else z[None, :]
     steps = np.zeros(0)
     if paths:
         within = np.ones(len(axes) - 1, dtype=bool)      # consecutive points of one path, not across paths
@@ -191,4 +191,5 @@ def measure(field: LayerField, paths: list[CurvedPath], layers: int, layering: L
         max_neighbour_deg=float(steps.max()) if len(steps) else 0.0,
         max_field_neighbour_deg=float(field_steps.max()) if len(field_steps) else 0.0,
         cusp_mean_mm=cusp_c[0], planar_cusp_mean_mm=cusp_p[0], cusp_max_mm=cusp_c[1], planar_cusp_max_mm=cusp_p[1],
-        tet_nodes=int(len(field.mesh.nodes)), tets=int(len(field.mesh.tets)))
+        tet_nodes=int(len(field.mesh.nodes)), tets=int(len(field.mesh.tets)),
+        max_axis_deviation_deg=float(_angle_deg(axes, normals).max()))

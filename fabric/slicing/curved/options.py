@@ -35,10 +35,16 @@ class CurvedOptions:
     max_neighbour_deg: float = 30.0
     interior_nodes: int = 6000
     heat_time_r: float = 0.0
+    plate_blend_mm: float = 3.0
+    tip_radius_mm: float = 4.0
+    max_axis_deviation_deg: float = 5.0
+    path_axis_window_mm: float = 2.0
 
     def __post_init__(self) -> None:
         checks = {"max_tilt_deg": (0.0, 89.0), "top_slope_deg": (0.0, 89.0), "heat_time_r": (0.0, 100.0),
-                  "max_neighbour_deg": (1.0, 90.0)}
+                  "max_neighbour_deg": (1.0, 90.0), "plate_blend_mm": (0.0, 1000.0),
+                  "tip_radius_mm": (0.0, 100.0), "max_axis_deviation_deg": (0.0, 90.0),
+                  "path_axis_window_mm": (0.0, 100.0)}
         for key, (lo, hi) in checks.items():
             value = getattr(self, key)
             if not (math.isfinite(value) and lo <= value <= hi):

@@ -49,12 +49,18 @@ class CurvedPath:
     role: str                  # "perimeter", "solid infill" or "infill"
     points_mm: np.ndarray      # (n, 3) nozzle tip, plate frame
     axes: np.ndarray           # (n, 3) unit nozzle axis, tip towards the nozzle
+    normals: np.ndarray        # (n, 3) unit layer normal (the build direction) under each point
     heights_mm: np.ndarray     # (n,) layer thickness under each point
     width_mm: float
     closed: bool
 
     def length_mm(self) -> float:
         return float(np.linalg.norm(np.diff(self.points_mm, axis=0), axis=1).sum())
+
+    def taken(self, idx: np.ndarray, closed: bool) -> CurvedPath:
+        """The path through points ``idx`` (reordered, reversed)."""
+        return CurvedPath(self.layer, self.role, self.points_mm[idx], self.axes[idx], self.normals[idx],
+                          self.heights_mm[idx], self.width_mm, closed)
 
 
 def _boundary_distance(surface: Surface, step_mm: float, reach_mm: float) -> np.ndarray:
@@ -99,7 +105,7 @@ def _to_path(rows: np.ndarray, closed: bool, spec: LayerSpec, role: str, width_m
     d = np.diff(pts, axis=0)
     if float(np.sqrt(np.einsum("ij,ij->i", d, d)).sum()) < MIN_PATH_R * width_mm:
         return None
-    return CurvedPath(spec.index, role, pts, _unit_rows(rows[:, AXIS]), thick, width_mm, closed)
+    return CurvedPath(spec.index, role, pts, _unit_rows(rows[:, AXIS]), normal, thick, width_mm, closed)
 
 
 def _unit_rows(v: np.ndarray) -> np.ndarray:
@@ -171,10 +177,9 @@ def order_paths(paths: list[CurvedPath], start_mm: np.ndarray) -> list[CurvedPat
             if p.closed and how:
                 k = len(p.points_mm) - 1
                 idx = np.r_[np.arange(how, k), np.arange(0, how), how]
-                p = CurvedPath(p.layer, p.role, p.points_mm[idx], p.axes[idx], p.heights_mm[idx], p.width_mm, True)
+                p = p.taken(idx, True)
             elif not p.closed and how == -1:
-                p = CurvedPath(p.layer, p.role, p.points_mm[::-1], p.axes[::-1], p.heights_mm[::-1], p.width_mm,
-                               False)
+                p = p.taken(np.arange(len(p.points_mm))[::-1], False)
             ordered.append(p)
             here = p.points_mm[-1]
     return ordered

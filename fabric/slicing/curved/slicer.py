@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import trimesh
 
+from fabric.slicing.curved.axis import limit_deviation, limit_tilt, plate_tilt_deg, smooth_along
 from fabric.slicing.curved.field import LayerField, build_field
 from fabric.slicing.curved.gcode import write_multiaxis
 from fabric.slicing.curved.isosurface import Surface, clip_surface, iso_surface
@@ -45,6 +46,8 @@ REFITS = 4                  # field-step refits per layer to keep its thickness 
 PROGRESS_STAGES = (("volume mesh", 0.15), ("fields", 0.35), ("layer surfaces", 0.45), ("toolpaths", 0.90),
                    ("figures", 0.93), ("G-code", 1.0))
 CUSP_MARGIN_R = 0.95        # core layers aim this far under planar's staircase: the field is linear per element
+CORE_TUCK_MM = 0.05              # the core's beads end this far under the band's bottom (:func:`_core_layer`)
+BAND_BASE_DEVIATION_DEG = 2.0     # the nozzle axis off the layer normal on the band's first layer, at most
 
 
 @dataclass
@@ -75,9 +78,28 @@ def _fit_step(surface: Surface, want_mm: float, bounds: ThicknessBounds) -> floa
     return max(step, min(floor, bounds.max_mm / float(inv.max())), 1e-3)
 
 
-def _core_layer(fld: LayerField, attrs: np.ndarray, level: float) -> Surface:
+def _held_axes(paths: list[CurvedPath], plate_z: float, profile: Profile, opts: CurvedOptions,
+               max_deviation_deg: float) -> list[CurvedPath]:
+    """The axis rules (:mod:`.axis`) held exactly at every point of ``paths``, where the tip rides: the field's
+    axes are interpolated between mesh nodes, which hold them only at the nodes."""
+    for path in paths:
+        axes = smooth_along(path.points_mm, path.axes, path.closed, opts.path_axis_window_mm)
+        axes = limit_deviation(axes, path.normals, max_deviation_deg)
+        tilt = plate_tilt_deg(path.points_mm[:, 2] - plate_z, profile.first_layer_height_mm,
+                              opts.tip_radius_mm, opts.max_tilt_deg)
+        path.axes = limit_tilt(axes, tilt)
+    return paths
+
+
+def _core_layer(fld: LayerField, attrs: np.ndarray, level: float, step: float) -> Surface:
+    """The core's level set ``level`` (a layer ``step`` of field thick), clipped where it meets the band: a core
+    bead stands half its layer over the layer's mid-surface, so the mid-surface ends that much (and
+    :data:`CORE_TUCK_MM`) under the band's bottom (``attrs``' CLIP column: the distance under it)."""
     s = iso_surface(fld.mesh.tets, fld.d_base_mm, level, attrs)
-    return clip_surface(s, CLIP, 0.0) if fld.band_mm > 0 else s
+    if fld.band_mm <= 0 or len(s.tris) == 0:
+        return s
+    s.attrs[:, CLIP] -= 0.5 * step * s.attrs[:, THICK] + CORE_TUCK_MM
+    return clip_surface(s, CLIP, 0.0)
 
 
 def _cusp_caps(fld: LayerField, nominal_mm: float, first_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -116,8 +138,9 @@ def _layer_surfaces(fld: LayerField, first_mm: float, bounds: ThicknessBounds,
     the bounds everywhere in it.
     """
     nodes = fld.mesh.nodes
+    under_band = fld.band_clip_mm / np.maximum(fld.band_grad_r, 1e-6)       # about the distance under its bottom
     core_attrs = np.column_stack([nodes, fld.core_dir, fld.axis, 1.0 / np.maximum(fld.core_grad_r, 1e-6),
-                                  np.minimum(fld.band_clip_mm, 1e9)])
+                                  np.minimum(under_band, 1e9)])
     core = fld.d_base_mm if fld.band_mm <= 0 else np.where(fld.in_band, -np.inf, fld.d_base_mm)
     top = float(core[np.isfinite(core)].max()) if np.any(np.isfinite(core)) else 0.0
     out: list[tuple[Surface, bool]] = []
@@ -130,14 +153,14 @@ def _layer_surfaces(fld: LayerField, first_mm: float, bounds: ThicknessBounds,
         cut = (cap_hi >= lo) & (cap_lo <= lo + want)
         if np.any(cut):                 # below the thinnest layer the bounds allow, the bounds win (_fit_step)
             want = max(min(want, float(cap_step[cut].min())), bounds.min_mm)
-        s = _core_layer(fld, core_attrs, lo + 0.5 * want)
+        s = _core_layer(fld, core_attrs, lo + 0.5 * want, want)
         step = want
         for _refit in range(REFITS):               # the shorter step's level set may be weaker still
             fitted = _fit_step(s, step, bounds) if len(s.tris) else step
             if fitted >= step * 0.999:
                 break
             step = fitted
-            s = _core_layer(fld, core_attrs, lo + 0.5 * step)
+            s = _core_layer(fld, core_attrs, lo + 0.5 * step, step)
         s.attrs[:, THICK] *= step
         if len(s.tris):
             out.append((s, False))
@@ -176,16 +199,23 @@ def slice_curved(part: trimesh.Trimesh, profile: Profile, options: CurvedOptions
     tet = tetrahedralise(part, opts.interior_nodes)
     done = dict(PROGRESS_STAGES)
     report(done["volume mesh"])
-    fld = build_field(tet, opts, bounds.nominal_mm, side_margin_mm=profile.extrusion_width_mm)
+    fld = build_field(tet, opts, bounds.nominal_mm, side_margin_mm=profile.extrusion_width_mm,
+                      first_layer_mm=profile.first_layer_height_mm)
     report(done["fields"])
     surfaces, layering = _layer_surfaces(fld, profile.first_layer_height_mm, bounds)
     report(done["layer surfaces"])
     layers: list[list[CurvedPath]] = []
     here = np.array([0.0, 0.0, 0.0])
+    plate_z = float(tet.nodes[:, 2].min())
+    first_band = next((i for i, (_s, in_band) in enumerate(surfaces) if in_band), -1)
     for i, (surface, in_band) in enumerate(surfaces):
         spec = LayerSpec(index=i, solid=in_band or i < profile.bottom_solid_layers,
                          infill_angle_deg=profile.infill_angle_deg + 90.0 * (i % 2))
-        ordered = order_paths(layer_paths(surface, spec, profile), here)
+        # the band's first layer lies on the ends of many core layers, not on one layer: its tip must not dig
+        deviation = min(opts.max_axis_deviation_deg, BAND_BASE_DEVIATION_DEG) if i == first_band else \
+            opts.max_axis_deviation_deg
+        paths = _held_axes(layer_paths(surface, spec, profile), plate_z, profile, opts, deviation)
+        ordered = order_paths(paths, here)
         if ordered:                         # a sliver of a level set too small for a bead prints nothing
             here = ordered[-1].points_mm[-1]
             for path in ordered:
@@ -196,8 +226,7 @@ def slice_curved(part: trimesh.Trimesh, profile: Profile, options: CurvedOptions
     flat = [p for layer in layers for p in layer]
     if not flat:
         raise SlicerError("curved slicing produced no toolpaths (part thinner than a bead?)", reason="empty")
-    figures = measure(fld, flat, len(layers), layering, bounds.nominal_mm, profile.first_layer_height_mm,
-                      opts.top_slope_deg)
+    figures = measure(fld, flat, len(layers), layering, bounds.nominal_mm, profile.first_layer_height_mm)
     report(done["figures"])
     warnings = []
     if figures.thickness_min_mm < bounds.min_mm - 1e-9 or figures.thickness_max_mm > bounds.max_mm + 1e-9:
@@ -205,7 +234,7 @@ def slice_curved(part: trimesh.Trimesh, profile: Profile, options: CurvedOptions
                         f"leaves the profile's bounds {bounds.min_mm:.3f}..{bounds.max_mm:.3f} mm")
     header = ["generated by am-fabric builtin curved-layer slicer", f"profile: {profile.name}",
               f"curved: max_tilt_deg = {opts.max_tilt_deg:g}"] + figures.header_lines()
-    totals = write_multiaxis(layers, profile, header, bounds.nominal_mm)
+    totals = write_multiaxis(layers, profile, header, bounds.nominal_mm, opts.tip_radius_mm)
     report(done["G-code"])
     elapsed = time.perf_counter() - t0
     figures = dataclasses.replace(figures, elapsed_s=elapsed)
