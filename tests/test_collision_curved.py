@@ -197,3 +197,21 @@ def test_a_planar_layer_keeps_one_box_and_a_curved_one_is_cut_into_flat_runs(cel
     for b in runs.tolist():                                     # each run holds its beads
         start = int(trees._box_first[b])
         assert np.all(beads.lo[start] >= lo[b] - 1e-9) and np.all(beads.hi[start] <= hi[b] + 1e-9)
+
+
+def test_covers_of_an_upright_batch_whose_mean_axis_rounds_off_vertical_still_measure():
+    """Every piece end vertical to 1e-12 (the batch keeps no end boxes), yet a cover's mean axis 2e-12 off
+    the z axis (a 7-axis arm's nozzle, summed and normalised): the distance is the vertical one, no error
+    (the Panda's sample print once failed its check on exactly this)."""
+    from fabric.collision.hull import HullCovers, cover_distances
+
+    axis = np.array([[0.0, 2e-6, 1.0]])
+    axis /= np.linalg.norm(axis)
+    assert abs(axis[0, 2]) <= 1.0 - 1e-12
+    covers = HullCovers(centre=np.array([[0.0, 0.0, 10.0]]), axis=axis, radius=np.array([1.0]),
+                        half=np.array([2.0]), grow=np.array([0.0]), box_lo=np.zeros((0, 3)), box_hi=np.zeros((0, 3)),
+                        box_grow=np.zeros(0), stretch=np.zeros(1, dtype=np.int64), edges=np.array([0, 1]),
+                        segment=np.zeros(1, dtype=np.int64), s0=np.zeros(1), s1=np.ones(1))
+    lo, hi = np.array([[-5.0, -5.0, 0.0]]), np.array([[5.0, 5.0, 3.0]])
+    d = cover_distances(covers, slice(0, 1), lo, hi, touch_mm=0.01)
+    assert d == pytest.approx([5.0], abs=1e-5)      # the cylinder's bottom (z 8) over the box's top (z 3)

@@ -95,3 +95,26 @@ def test_status_wait_waits_for_a_secured_hub_still_starting(tmp_path) -> None:
     said = out + err
     assert "refused" not in said and "cannot reach" not in said, said
     assert json.loads(out)["error"]["message"].startswith("not alive after 5 s"), said   # admitted; no service
+
+
+def test_a_service_started_before_its_hub_joins_it_once_it_is_up(tmp_path) -> None:
+    """Units started together (the deployment guide's ``systemctl enable --now``): a service whose hub is not
+    listening yet is not told "the hub refused the user name or password"; it tries again for a few seconds
+    and serves once the hub is up."""
+    creds = Credentials.init(tmp_path / "creds", hub=f"tls/127.0.0.1:{free_port()}")
+    cell = f"h{uuid.uuid4().hex[:8]}"
+    log = tmp_path / "planner.log"
+    with open(log, "wb") as out:
+        svc = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "serve", "planner", "--config",
+                                str(creds.config("service")), "--cell", cell], stdout=out, stderr=subprocess.STDOUT)
+    time.sleep(2.0)
+    hub = start_hub(creds)
+    try:
+        wait_for(lambda: b"serving" in log.read_bytes() or svc.poll() is not None, 30.0, "the planner serving")
+        said = log.read_text(errors="replace")
+        assert svc.poll() is None and "refused" not in said, said
+    finally:
+        svc.terminate()
+        svc.wait(timeout=15)
+        hub.kill()
+        hub.wait()

@@ -226,7 +226,11 @@ def _cover(ends: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 def vertical_covers(c: HullCovers, sel: slice) -> np.ndarray:
-    """Per cover of ``sel``: is it on the z axis (its distance to a box is exact: see the module docstring)?"""
+    """Per cover of ``sel``: is it on the z axis (its distance to a box is exact: see the module docstring)?
+    Every cover of an upright batch is (:func:`hull_covers` keeps no end boxes for one): the mean of axes that
+    are each vertical to 1e-12 may round off it by as much again."""
+    if len(c.box_lo) == 0:
+        return np.ones(len(c.axis[sel]), dtype=bool)
     return np.abs(c.axis[sel, 2]) > 1.0 - 1e-12
 
 
