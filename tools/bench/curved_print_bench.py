@@ -95,10 +95,17 @@ def print_curved(stl: Path, settings: SessionSettings) -> dict[str, object]:
             rec = client.wait_print_job(acc.job_id, lambda r: False, timeout=30)
         except Exception as exc:  # noqa: BLE001 - the bench reports a failed job and goes on
             return {"state": "failed", "error": str(exc), "wall_s": time.perf_counter() - t0}
-        page = client.call("station", "beads", s.BeadsQuery(first=0, limit=s.pipeline.MAX_BEADS_PAGE))
-        tilt = np.degrees(np.arccos(np.clip(page.axis[:, 2], -1.0, 1.0))) if len(page.axis) else np.zeros(1)
+        tilt, total, first = np.zeros(1), 0, 0
+        while True:                         # every page of the part's beads (the first are the flat base's)
+            page = client.call("station", "beads", s.BeadsQuery(first=first, limit=s.pipeline.MAX_BEADS_PAGE))
+            total = page.total
+            if len(page.axis):
+                tilt = np.r_[tilt, np.degrees(np.arccos(np.clip(page.axis[:, 2], -1.0, 1.0)))]
+            first += len(page.axis)
+            if not len(page.axis) or first >= total:
+                break
         out = {"state": rec.state, "end": end.kind, "deposited_mm3": rec.deposited_mm3,
-               "planned_mm3": rec.plan.extruded_mm3 if rec.plan else None, "beads": page.total,
+               "planned_mm3": rec.plan.extruded_mm3 if rec.plan else None, "beads": total,
                "max_bead_tilt_deg": float(tilt.max()), "sim_s": rec.sim_elapsed_s,
                "wall_s": time.perf_counter() - t0}
         client.clear_plate()
