@@ -124,20 +124,25 @@ def _burst(proc: subprocess.Popen, n: int = 300) -> None:
             return
 
 
-def test_a_handler_sets_the_event_even_where_the_event_holds_its_own_lock():
+def test_a_signal_sets_the_event_even_where_the_event_holds_its_own_lock():
     """Where a signal can land: inside the main thread's own ``Event.set()`` or ``Event.wait()``, which hold the
-    event's (non-reentrant) lock. A handler calling ``set()`` there waited for that lock forever."""
+    event's (non-reentrant) lock, or inside ``Thread.start()``, which holds threading's own lock. A handler
+    calling ``set()`` (or starting a thread) there waited for that lock forever; now no handler takes a lock."""
     stop = threading.Event()
-    on_signals(lambda: stop, (signal.SIGUSR1,))
+    events = on_signals(lambda: stop, (signal.SIGUSR1,))
     try:
-        handler = signal.getsignal(signal.SIGUSR1)
-        assert callable(handler)
         with stop._cond:                              # (the event's lock, held as set() and wait() hold it)
-            handler(signal.SIGUSR1, None)             # returns at once instead of waiting for the lock
+            os.kill(os.getpid(), signal.SIGUSR1)      # the handler runs here, in this thread, and returns
+            time.sleep(0.2)
             assert not stop.is_set()
         assert stop.wait(5.0)                         # and the event is set once the lock is free
+        with threading._active_limbo_lock:            # (Thread.start()'s lock)
+            stop.clear()
+            os.kill(os.getpid(), signal.SIGUSR1)
+            time.sleep(0.2)
+        assert stop.wait(5.0)
     finally:
-        signal.signal(signal.SIGUSR1, signal.SIG_DFL)
+        events.close()
 
 
 def test_a_burst_of_signals_never_freezes_a_service_or_the_hub(tmp_path):
