@@ -31,10 +31,10 @@ def _noted(_signum: int, _frame: object) -> None:
 
 
 class SignalEvents:
-    """Signals ``signals`` set the event ``choose()`` names at each of them, from a watcher thread."""
+    """Each of ``signals`` calls ``act(signal)`` on a watcher thread (module docstring)."""
 
-    def __init__(self, choose: Callable[[], threading.Event], signals: Iterable[signal.Signals]) -> None:
-        self.choose = choose
+    def __init__(self, act: Callable[[signal.Signals], None], signals: Iterable[signal.Signals]) -> None:
+        self.act = act
         self.signals = tuple(signals)
         self._r, self._w = socket.socketpair()
         self._w.setblocking(False)
@@ -67,11 +67,11 @@ class SignalEvents:
                 return
             for signum in data:
                 if signum in wanted:
-                    self.choose().set()
+                    self.act(signal.Signals(signum))
 
 
 def on_signals(choose: Callable[[], threading.Event],
                signals: Iterable[signal.Signals] = (signal.SIGTERM, signal.SIGINT)) -> SignalEvents:
     """Handle ``signals`` (main thread only) by setting the event ``choose()`` names at each signal (e.g. a
     stop the first time, a hurry the second), from a watcher thread (module docstring)."""
-    return SignalEvents(choose, signals).install()
+    return SignalEvents(lambda _sig: choose().set(), signals).install()

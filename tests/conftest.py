@@ -95,3 +95,10 @@ def running_cell(tmp_path_factory):
     cell.start(deadline_s=90.0)
     yield cell
     cell.stop()
+
+
+@pytest.fixture(scope="module")
+def cert(cell):
+    """The collision certifier of the test module's ``cell`` fixture."""
+    from fabric.collision.certify import Certifier
+    return Certifier(cell)

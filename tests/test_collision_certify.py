@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from certify_cells import plan_reachable
 
 from fabric.collision.beads import BeadSolids
 from fabric.collision.certify import Certifier
@@ -48,15 +49,8 @@ def cell() -> Cell:
     return Cell.builtin("irb140")
 
 
-@pytest.fixture(scope="module")
-def cert(cell) -> Certifier:
-    return Certifier(cell)
-
-
 def plan(cell: Cell, gcode: str):
-    result = plan_gcode(gcode.encode(), cell, PlanOptions())
-    assert result.report.reachable
-    return result.program
+    return plan_reachable(cell, gcode)
 
 
 def report(cert: Certifier, program):

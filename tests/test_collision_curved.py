@@ -8,6 +8,7 @@ from __future__ import annotations
 import coal
 import numpy as np
 import pytest
+from certify_cells import plan_reachable
 
 from fabric.collision.advance import Item
 from fabric.collision.beads import BeadSolids
@@ -15,7 +16,6 @@ from fabric.collision.bodies import MM, TIP
 from fabric.collision.certify import Certifier
 from fabric.collision.path import MOVE_KINDS
 from fabric.collision.trees import PartTrees
-from fabric.planning import PlanOptions, plan_gcode
 from fabric.robot.cell import Cell
 
 pytestmark = pytest.mark.timeout(300)
@@ -62,16 +62,10 @@ def cell() -> Cell:
     return Cell.builtin("irb140-multiaxis")
 
 
-@pytest.fixture(scope="module")
-def cert(cell) -> Certifier:
-    return Certifier(cell)
-
-
 def plan(cell: Cell, gcode: str):
-    result = plan_gcode(gcode.encode(), cell, PlanOptions())
-    assert result.report.reachable
-    assert result.program.meta.get("multiaxis")
-    return result.program
+    program = plan_reachable(cell, gcode)
+    assert program.meta.get("multiaxis")
+    return program
 
 
 def sampled(cert: Certifier, names=(TIP, "tool_nozzle"), fractions=(0.0, 0.5), upto: int | None = None,

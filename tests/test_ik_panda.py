@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from ik_checks import assert_tracking_equals_full_rule
 
 from fabric.robot.arm_family import IKFamilyMismatch
 from fabric.robot.batch_dls import BatchDLSIK
@@ -122,15 +123,7 @@ def test_branch_tracking_equals_the_full_8_branch_rule(panda: Cell) -> None:
     scattered = np.random.default_rng(103).uniform(r.lower_rad, r.upper_rad, (3000, 7))
     scattered[:, 6] = panda.home_q_rad[6]                      # A7 held, as the planner does
     T = r.fk(np.concatenate([smooth, scattered, smooth[::-1]]))
-    assert r.closed_form is not None
-    fast = ClosedFormIK(r.closed_form.arm, r.lower_rad, r.upper_rad, r.tool_T, panda.home_q_rad[6])
-    full = ClosedFormIK(r.closed_form.arm, r.lower_rad, r.upper_rad, r.tool_T, panda.home_q_rad[6])
-    full.tracking = False
-    qa, sa = fast.solve(T, smooth[0])
-    qb, sb = full.solve(T, smooth[0])
-    np.testing.assert_array_equal(sa, sb)
-    np.testing.assert_allclose(qa, qb, atol=1e-12)
-    np.testing.assert_allclose(qa[:3000], smooth, atol=1e-8)  # the smooth path keeps its configuration
+    assert_tracking_equals_full_rule(r, T, smooth, panda.home_q_rad[6])
 
 
 def test_a7_is_an_explicit_per_row_input(panda: Cell) -> None:

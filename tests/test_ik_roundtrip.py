@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from ik_checks import assert_tracking_equals_full_rule
 
 from fabric.robot.cell import Cell
 from fabric.robot.closed_form import ClosedFormIK
@@ -81,11 +82,4 @@ def test_tracking_mode_equals_the_full_8_branch_rule(cell: Cell) -> None:
     smooth = np.clip(smooth, r.lower_rad, r.upper_rad)
     scattered = _random_q(cell, 103)[:3000]
     T = r.fk(np.concatenate([smooth, scattered, smooth[::-1]]))
-    fast = ClosedFormIK(r.closed_form.arm, r.lower_rad, r.upper_rad, r.tool_T)       # type: ignore[union-attr]
-    full = ClosedFormIK(r.closed_form.arm, r.lower_rad, r.upper_rad, r.tool_T)       # type: ignore[union-attr]
-    full.tracking = False
-    qa, sa = fast.solve(T, smooth[0])
-    qb, sb = full.solve(T, smooth[0])
-    np.testing.assert_array_equal(sa, sb)
-    np.testing.assert_allclose(qa, qb, atol=1e-12)
-    np.testing.assert_allclose(qa[:3000], smooth, atol=1e-8)     # the smooth path keeps its configuration
+    assert_tracking_equals_full_rule(r, T, smooth)

@@ -31,7 +31,6 @@ import json
 import logging
 import os
 import signal
-import socket
 import sqlite3
 import sys
 import threading
@@ -41,6 +40,7 @@ from pathlib import Path
 import zenoh
 
 from fabric.services import SERVICE_MODULES
+from fabric.signals import SignalEvents
 from fabric.wire.config import SessionSettings, zenoh_config
 from fabric.wire.errors import ConfigError, FabricError, StoreError
 
@@ -208,10 +208,6 @@ def _die_with_launcher(log: logging.Logger) -> bool:
     return True
 
 
-def _noted(_signum: int, _frame: object) -> None:
-    """The Python-level handler of SIGTERM and SIGINT in a service process: nothing (see _StopGuard.install)."""
-
-
 class _StopGuard:
     """SIGTERM/SIGINT in a service process (see the module docstring). The C-level handler writes the
     signal's number to a socket; a thread reading it sets ``stop`` and arms the deadline, so neither
@@ -227,16 +223,10 @@ class _StopGuard:
         self._lock = threading.Lock()
 
     def install(self) -> None:
-        self._r, self._w = socket.socketpair()
-        self._w.setblocking(False)
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            # a Python handler that does nothing: the C-level handler still writes the signal to the socket,
-            # and the watcher thread does the rest. (A handler that set ``stop`` itself deadlocked under a
-            # burst of signals: one run between the bytecodes of ``stop.set()`` or of the main thread's
-            # ``stop.wait()``, which hold the event's lock, and waited for that lock forever.)
-            signal.signal(sig, _noted)
-        signal.set_wakeup_fd(self._w.fileno(), warn_on_full_buffer=False)
-        threading.Thread(target=self._watch, name=f"{self.name}:signals", daemon=True).start()
+        # the handlers take no lock (fabric.signals): a handler that set ``stop`` itself deadlocked under a
+        # burst of signals (one ran between the bytecodes of ``stop.set()`` or of the main thread's
+        # ``stop.wait()``, which hold the event's lock, and waited for that lock forever)
+        SignalEvents(lambda sig: self._on_signal(sig.name), (signal.SIGTERM, signal.SIGINT)).install()
         previous = threading.excepthook
 
         def quiet_after_stop(args: threading.ExceptHookArgs) -> None:
@@ -248,18 +238,6 @@ class _StopGuard:
                 previous(args)
 
         threading.excepthook = quiet_after_stop
-
-    def _watch(self) -> None:
-        while True:
-            try:
-                data = self._r.recv(64)
-            except OSError:
-                return
-            if not data:
-                return
-            for signum in data:
-                if signum in (signal.SIGTERM, signal.SIGINT):
-                    self._on_signal(signal.Signals(signum).name)
 
     def _on_signal(self, what: str) -> None:
         with self._lock:
