@@ -193,19 +193,28 @@ def test_a_planar_layer_keeps_one_box_and_a_curved_one_is_cut_into_flat_runs(cel
         assert np.all(beads.lo[start] >= lo[b] - 1e-9) and np.all(beads.hi[start] <= hi[b] + 1e-9)
 
 
-def test_covers_of_an_upright_batch_whose_mean_axis_rounds_off_vertical_still_measure():
-    """Every piece end vertical to 1e-12 (the batch keeps no end boxes), yet a cover's mean axis 2e-12 off
-    the z axis (a 7-axis arm's nozzle, summed and normalised): the distance is the vertical one, no error
-    (the Panda's sample print once failed its check on exactly this)."""
-    from fabric.collision.hull import HullCovers, cover_distances
+def test_a_nozzle_vertical_at_its_targets_but_tilted_between_them_is_measured_as_tilted():
+    """The Panda's joint interpolation tilts its nozzle mid-move though it is vertical at every target of a
+    square print: the batch is judged by its pieces' ends, not its segments', so it is not taken as upright
+    (the sample print's check once failed there on arrays an upright batch does not keep), and the covers
+    off the z axis are measured by the boxes of the tool at their piece ends."""
+    from fabric.collision.hull import cover_distances, hull_covers
+    from fabric.collision.path import program_segments
+    from fabric.motion.testprog import square_program
 
-    axis = np.array([[0.0, 2e-6, 1.0]])
-    axis /= np.linalg.norm(axis)
-    assert abs(axis[0, 2]) <= 1.0 - 1e-12
-    covers = HullCovers(centre=np.array([[0.0, 0.0, 10.0]]), axis=axis, radius=np.array([1.0]),
-                        half=np.array([2.0]), grow=np.array([0.0]), box_lo=np.zeros((0, 3)), box_hi=np.zeros((0, 3)),
-                        box_grow=np.zeros(0), stretch=np.zeros(1, dtype=np.int64), edges=np.array([0, 1]),
-                        segment=np.zeros(1, dtype=np.int64), s0=np.zeros(1), s1=np.ones(1))
-    lo, hi = np.array([[-5.0, -5.0, 0.0]]), np.array([[5.0, 5.0, 3.0]])
-    d = cover_distances(covers, slice(0, 1), lo, hi, touch_mm=0.01)
-    assert d == pytest.approx([5.0], abs=1e-5)      # the cylinder's bottom (z 8) over the box's top (z 3)
+    panda = Cell.builtin("panda")
+    cert = Certifier(panda)
+    program = square_program(panda)
+    segs = program_segments(program, panda.robot, panda.home_q_rad)
+    idx = np.flatnonzero(~segs.joint)
+    ends = np.concatenate([panda.robot.fk(segs.q0[idx]), panda.robot.fk(segs.q1[idx])])
+    assert np.all(np.abs(ends[:, 2, 2]) > 1.0 - 1e-12), "vertical at every target"
+    _tools, covers = hull_covers(cert.bodies, segs, idx, np.zeros(len(idx), np.int64), cert.tools, cert._tilted_tools)
+    assert covers is not None
+    tip = covers[0]
+    assert not tip.vertical.all() and len(tip.box_lo) == len(tip.axis)
+    # a box 5 mm under the lowest point of every cover: measured, and no farther than that
+    top = float(np.where(tip.vertical, tip.centre[:, 2] - tip.half, tip.box_lo[:, 2]).min()) - 5.0
+    d = cover_distances(tip, slice(0, len(tip.axis)), np.array([[-1e4, -1e4, -1e4]]), np.array([[1e4, 1e4, top]]),
+                        touch_mm=0.01)
+    assert 4.9 < d.min() <= 5.0

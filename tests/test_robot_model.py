@@ -144,6 +144,7 @@ def test_frame_helpers_round_trip() -> None:
         np.testing.assert_allclose(frames.R_from_quat(frames.quat_from_R(Rs)), Rs, atol=1e-12)
     T = frames.xyzrpy_to_T(rng.normal(size=(500, 3)) * 100, np.degrees(rpy))
     np.testing.assert_allclose(frames.inv_T(T) @ T, np.broadcast_to(np.eye(4), T.shape), atol=1e-12)
+    assert frames.frame_from_z_axis(np.zeros((0, 3)), np.array([1.0, 0.0, 0.0])).shape == (0, 3, 3)
     Rz = frames.frame_from_z_axis(np.array([0.0, 0.0, -1.0]), np.array([[0.0, 0.0, 1.0], [2.0, 1.0, 5.0]]))
     np.testing.assert_allclose(Rz[:, :, 2], [[0, 0, -1], [0, 0, -1]], atol=1e-12)   # x_ref parallel: fallback
     np.testing.assert_allclose(Rz[1, :, 0], np.array([2.0, 1.0, 0.0]) / np.sqrt(5.0), atol=1e-12)

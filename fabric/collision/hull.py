@@ -42,11 +42,13 @@ import numpy as np
 
 from fabric.collision.bodies import GJK_EPS_MM, Body, RobotBodies
 from fabric.collision.path import Segments
+from fabric.robot.frames import frame_from_z_axis
 
-__all__ = ["ToolCylinder", "HullCovers", "hull_covers", "piece_covers", "frames", "vertical_covers", "cover_distances",
+__all__ = ["ToolCylinder", "HullCovers", "hull_covers", "piece_covers", "vertical_covers", "cover_distances",
            "CHORD_TARGET_MM", "PIECE_MAX_MM", "GROUP_RADIUS_MM"]
 
 CHORD_TARGET_MM = 0.02       # chord error allowed per piece
+X_REF = np.array([1.0, 0.0, 0.0])   # any x will do for a cylinder's frame
 GROUP_RADIUS_MM = 6.0        # consecutive pieces share a cover when they fit this much wider than the tool
 PIECE_MAX_MM = 10.0          # longest piece
 
@@ -70,6 +72,7 @@ class HullCovers:
     radius: np.ndarray           # (G,)
     half: np.ndarray             # (G,)
     grow: np.ndarray             # (G,)
+    vertical: np.ndarray         # (G,) bool: on the z axis (its distance to a box is exact)
     box_lo: np.ndarray           # (G, 3) the bounding box of the tool at every piece end of the cover
     box_hi: np.ndarray           # (G, 3) (both (0, 3) when every cover is on the z axis)
     box_grow: np.ndarray         # (G,) what that box is grown by (the chord error)
@@ -92,13 +95,12 @@ def hull_covers(bodies: RobotBodies, segs: Segments, idx: np.ndarray, stretch: n
     robot = bodies.cell.robot
     tcp0 = robot.fk(segs.q0[idx])
     tcp1 = robot.fk(segs.q1[idx])
-    upright = bool(np.all(np.abs(tcp0[:, 2, 2]) > 1.0 - 1e-12) and np.all(np.abs(tcp1[:, 2, 2]) > 1.0 - 1e-12))
-    if not upright and tilted_tools is not None:
-        tools = tilted_tools
     dq = segs.dq_abs[idx]
-    errors = [bodies.chord_error_mm(dq, tool.body) for tool in tools]
+    # the chord error is a body's (the tilted tools cut the same bodies differently)
+    error_of = {tool.body.name: bodies.chord_error_mm(dq, tool.body) for tool in tools}
     length = np.linalg.norm(tcp1[:, :3, 3] - tcp0[:, :3, 3], axis=1)
-    n = np.maximum(np.ceil(np.sqrt(np.max(errors, axis=0) / CHORD_TARGET_MM)), np.ceil(length / PIECE_MAX_MM))
+    n = np.maximum(np.ceil(np.sqrt(np.max(list(error_of.values()), axis=0) / CHORD_TARGET_MM)),
+                   np.ceil(length / PIECE_MAX_MM))
     n = np.maximum(n, 1).astype(np.int64)
     # the pieces: segment, fractions of it, TCP at both ends
     seg = np.repeat(np.arange(len(idx)), n)
@@ -112,6 +114,12 @@ def hull_covers(bodies: RobotBodies, segs: Segments, idx: np.ndarray, stretch: n
         base = segs.q0[idx][seg[split]]
         Ta[split] = robot.fk(base + dq_full * f0[split, None])
         Tb[split] = robot.fk(base + dq_full * f1[split, None])
+    # upright where the nozzle is vertical at every piece end (between them the chord error holds the tool):
+    # a segment's ends are not enough, a 7-axis arm's joint interpolation tilts it by 0.6 deg mid-move
+    upright = bool(np.all(np.abs(Ta[:, 2, 2]) > 1.0 - 1e-12) and np.all(np.abs(Tb[:, 2, 2]) > 1.0 - 1e-12))
+    if not upright and tilted_tools is not None:
+        tools = tilted_tools
+    errors = [error_of[tool.body.name] for tool in tools]
     glob = idx[seg]
     span = segs.s1[glob] - segs.s0[glob]
     s0, s1 = segs.s0[glob] + span * f0, segs.s0[glob] + span * f1
@@ -119,6 +127,10 @@ def hull_covers(bodies: RobotBodies, segs: Segments, idx: np.ndarray, stretch: n
     # one grouping for every tool: they share the axis, so their centres differ only along it
     ref = tools[0]
     edges, centre, axis, spread, along, turn = _groups(Ta, Tb, ref, piece_stretch)
+    # judged once, with the end boxes: in an upright batch every cover is vertical (a mean of axes vertical to
+    # 1e-12 may round off it by as much again) and needs no end boxes; in any other, the covers off the z axis
+    # are measured by theirs
+    vertical = np.ones(len(axis), dtype=bool) if upright else np.abs(axis[:, 2]) > 1.0 - 1e-12
     out = []
     for tool, error in zip(tools, errors, strict=True):
         shift = tool.offset_mm - ref.offset_mm     # moving the covers along; turns move it by |shift| * turn
@@ -127,7 +139,8 @@ def hull_covers(bodies: RobotBodies, segs: Segments, idx: np.ndarray, stretch: n
         grow = worst + (rho + abs(shift)) * turn + GJK_EPS_MM
         box_lo, box_hi = (np.zeros((0, 3)),) * 2 if upright else _end_boxes(Ta, Tb, tool, edges)
         out.append(HullCovers(centre + axis * shift, axis, tool.radius_mm + spread, tool.half_mm + along, grow,
-                              box_lo, box_hi, worst + GJK_EPS_MM, piece_stretch[edges[:-1]], edges, glob, s0, s1))
+                              vertical, box_lo, box_hi, worst + GJK_EPS_MM, piece_stretch[edges[:-1]], edges,
+                              glob, s0, s1))
     return tools, out
 
 
@@ -163,17 +176,7 @@ def piece_covers(bodies: RobotBodies, tool: ToolCylinder, Ta: np.ndarray, Tb: np
     centre, axis, spread, along, turn = _cover(ends[pad].reshape(-1, 2 * per, 3), axes[pad].reshape(-1, 2 * per, 3))
     error = bodies.chord_error_mm(np.abs(dq), tool.body)[pad].reshape(-1, per).max(axis=1)
     grow = error + float(np.hypot(tool.radius_mm, tool.half_mm)) * turn + GJK_EPS_MM
-    return centre, frames(axis), tool.radius_mm + spread, tool.half_mm + along, grow
-
-
-def frames(z: np.ndarray) -> np.ndarray:
-    """Rotations (N, 3, 3) whose third columns are the unit vectors ``z`` (N, 3)."""
-    z0, z1, z2 = z[:, 0], z[:, 1], z[:, 2]
-    off = np.abs(z0) < 0.9                                        # z x (1, 0, 0), else z x (0, 1, 0)
-    x = np.stack([np.where(off, 0.0, -z2), np.where(off, z2, 0.0), np.where(off, -z1, z0)], axis=1)
-    x /= np.linalg.norm(x, axis=1)[:, None]
-    y = np.stack([z1 * x[:, 2] - z2 * x[:, 1], z2 * x[:, 0] - z0 * x[:, 2], z0 * x[:, 1] - z1 * x[:, 0]], axis=1)
-    return np.stack([x, y, z], axis=2)
+    return centre, frame_from_z_axis(axis, X_REF), tool.radius_mm + spread, tool.half_mm + along, grow
 
 
 def _groups(Ta: np.ndarray, Tb: np.ndarray, tool: ToolCylinder, stretch: np.ndarray,
@@ -226,12 +229,8 @@ def _cover(ends: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 def vertical_covers(c: HullCovers, sel: slice) -> np.ndarray:
-    """Per cover of ``sel``: is it on the z axis (its distance to a box is exact: see the module docstring)?
-    Every cover of an upright batch is (:func:`hull_covers` keeps no end boxes for one): the mean of axes that
-    are each vertical to 1e-12 may round off it by as much again."""
-    if len(c.box_lo) == 0:
-        return np.ones(len(c.axis[sel]), dtype=bool)
-    return np.abs(c.axis[sel, 2]) > 1.0 - 1e-12
+    """Per cover of ``sel``: is it on the z axis (its distance to a box is exact: see the module docstring)?"""
+    return c.vertical[sel]
 
 
 def cover_distances(c: HullCovers, sel: slice, lo: np.ndarray, hi: np.ndarray, touch_mm: float) -> np.ndarray:

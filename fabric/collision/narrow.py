@@ -39,9 +39,10 @@ from collections.abc import Iterator
 import numpy as np
 
 from fabric.collision.advance import FINE_TREE_MAX_BEADS, Advancer, Item
-from fabric.collision.hull import HullCovers, ToolCylinder, frames, piece_covers
+from fabric.collision.hull import X_REF, HullCovers, ToolCylinder, piece_covers
 from fabric.collision.path import Segments
 from fabric.collision.trees import PartTrees
+from fabric.robot.frames import frame_from_z_axis
 
 __all__ = ["narrow", "HALVINGS", "FLOOR_MAX_MM"]
 
@@ -79,8 +80,8 @@ def narrow(adv: Advancer, trees: PartTrees, segs: Segments, tool: ToolCylinder, 
     bodies = adv.bodies
     qa, qb = _joints(segs, k, s0), _joints(segs, k, s1)
     Ta, Tb = (bodies.cell.robot.fk(qa), bodies.cell.robot.fk(qb)) if len(k) else (np.zeros((0, 4, 4)),) * 2
-    whole = _Covers(covers.centre[near], frames(covers.axis[near]), covers.radius[near], covers.half[near],
-                    covers.grow[near], covers.segment[covers.edges[near]])
+    whole = _Covers(covers.centre[near], frame_from_z_axis(covers.axis[near], X_REF), covers.radius[near],
+                    covers.half[near], covers.grow[near], covers.segment[covers.edges[near]])
     wide = np.flatnonzero(size == 16)                               # covers of 16 pieces: also in fours
     in16 = (first[wide][:, None] + np.arange(16)).ravel()
     if len(k):

@@ -159,6 +159,8 @@ def frame_from_z_axis(z_axis: np.ndarray, x_ref: np.ndarray) -> np.ndarray:
     failing that, the base y axis) is used instead, so every row gets a frame.
     """
     z = np.atleast_2d(np.asarray(z_axis, dtype=float))
+    if len(z) == 0:
+        return np.empty((0, 3, 3))
     n = max(len(z), len(np.atleast_2d(x_ref)))
     z = np.broadcast_to(z, (n, 3))
     z = z / np.linalg.norm(z, axis=-1, keepdims=True)

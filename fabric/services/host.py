@@ -39,9 +39,10 @@ from pathlib import Path
 
 import zenoh
 
+from fabric.client.sessions import open_session
 from fabric.services import SERVICE_MODULES
 from fabric.signals import SignalEvents
-from fabric.wire.config import SessionSettings, zenoh_config
+from fabric.wire.config import SessionSettings
 from fabric.wire.errors import ConfigError, FabricError, StoreError
 
 __all__ = ["EXIT_CANNOT_JOIN", "EXIT_NO_RESTART", "EXIT_NOTE_ENV", "LAUNCHER_PID_ENV", "STOP_DEADLINE_S",
@@ -49,7 +50,6 @@ __all__ = ["EXIT_CANNOT_JOIN", "EXIT_NO_RESTART", "EXIT_NOTE_ENV", "LAUNCHER_PID
 
 EXIT_CANNOT_JOIN = 2
 JOIN_WINDOW_S = 8.0               # how long a service retries a hub that refuses it (starting, or slow under load)
-JOIN_RETRY_S = 0.25
 EXIT_NO_RESTART = 78              # EX_CONFIG (sysexits.h): the operator must act; a restart cannot fix this
 STOP_DEADLINE_S = 3.5             # from the first SIGTERM/SIGINT to the end of the process, at the latest
 EXIT_NOTE_ENV = "FABRIC_EXIT_NOTE"
@@ -57,27 +57,6 @@ LAUNCHER_PID_ENV = "FABRIC_LAUNCHER_PID"
 _PR_SET_PDEATHSIG = 1
 
 
-
-def _join(name: str, settings: SessionSettings, stop: threading.Event, log: logging.Logger,
-          window_s: float = JOIN_WINDOW_S) -> zenoh.Session | None:
-    """The service's session, or None (stopped, or refused for ``window_s``: the error is logged).
-
-    A hub that is starting (its unit started just before this one's) or slow under load refuses a session
-    the same way a hub that refuses these credentials does: the service tries again for a few seconds
-    before it says why it thinks it was refused and exits for its unit to restart it."""
-    end = time.monotonic() + window_s
-    while True:
-        try:
-            return zenoh.open(zenoh_config(settings))
-        except zenoh.ZError as exc:
-            if time.monotonic() >= end:
-                from fabric.security.diagnose import explain_refusal
-                why = explain_refusal(settings.config_file, settings.connect) if settings.config_file else None
-                log.error("%s cannot join the fabric at %s after %g s: %s", name, ", ".join(settings.connect),
-                          window_s, why or exc)
-                return None
-        if stop.wait(JOIN_RETRY_S):
-            return None
 
 def setup_logging(name: str, level: str = "INFO") -> None:
     logging.basicConfig(level=getattr(logging, level.upper(), logging.INFO),
@@ -104,9 +83,13 @@ def serve(name: str, settings: SessionSettings, options: argparse.Namespace,
         guard.install()
         if not _die_with_launcher(log):
             return 0
-    session = _join(name, settings, stop, log)
-    if session is None:
-        return 0 if stop.is_set() else EXIT_CANNOT_JOIN
+    try:
+        # a hub that is starting (its unit started with this one) or slow under load refuses a session the way
+        # one that refuses these credentials does: tried again for a few seconds before saying why
+        session = open_session(settings, JOIN_WINDOW_S)
+    except FabricError as err:
+        log.error("%s cannot join the fabric at %s: %s", name, ", ".join(settings.connect), err.message)
+        return EXIT_CANNOT_JOIN
     code, svc = 0, None
     try:
         svc = module.build(session, settings.cell, options)

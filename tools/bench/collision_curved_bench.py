@@ -52,11 +52,15 @@ def timed(cert: Certifier, program: Program) -> dict:
         cpus.append(time.process_time() - t0)
         walls.append(res.elapsed_s)
     hit = res.first_hit
-    return {"rows": len(program), "segments": res.segments, "beads": res.beads, "wall_s": min(walls),
-            "cpu_s": min(cpus), "segments_per_s": res.segments / min(walls), "segments_per_cpu_s": res.segments / min(cpus),
-            "collision_free": res.collision_free, "clearance_mm": res.clearance_mm, "clearance_body": res.clearance_body,
-            "configs": res.configs, "hit": None if hit is None else {
-                "gcode_line": int(program.gcode_line[hit.row]), "body": hit.body, "other": hit.other}}
+    wall_s, cpu_s = min(walls), min(cpus)
+    return {
+        "rows": len(program), "segments": res.segments, "beads": res.beads, "wall_s": wall_s, "cpu_s": cpu_s,
+        "segments_per_s": res.segments / wall_s, "segments_per_cpu_s": res.segments / cpu_s,
+        "collision_free": res.collision_free, "clearance_mm": res.clearance_mm,
+        "clearance_body": res.clearance_body, "configs": res.configs,
+        "hit": None if hit is None else {"gcode_line": int(program.gcode_line[hit.row]), "body": hit.body,
+                                         "other": hit.other},
+    }
 
 
 def from_layer(program: Program, layer: int) -> Program:
@@ -135,15 +139,19 @@ def _line(name: str, v: dict) -> None:
 def _write(r: dict, argv: list[str]) -> None:
     out = ROOT / "docs" / "bench"
     (out / "collision_curved.json").write_text(json.dumps(r, indent=1) + "\n")
-    rows_p = "\n".join(f"| sample part, {name} | {v['segments']:,} | {v['cpu_s']:.2f} | **{v['segments_per_cpu_s']:,.0f}** | "
-                       f"{v['segments_per_s']:,.0f} | 1 | {v['clearance_mm']:.3f} ({v['clearance_body']}) | none |"
-                       for name, v in r["planar"].items())
+    rows_p = "\n".join(
+        f"| sample part, {name} | {v['segments']:,} | {v['cpu_s']:.2f} | **{v['segments_per_cpu_s']:,.0f}** | "
+        f"{v['segments_per_s']:,.0f} | 1 | {v['clearance_mm']:.3f} ({v['clearance_body']}) | none |"
+        for name, v in r["planar"].items())
     rows_c = "\n".join(
-        f"| {name} | {v['segments']:,} of {v['whole_segments']:,} | {v['cpu_s']:.2f} | **{v['segments_per_cpu_s']:,.0f}** | "
-        f"{v['segments_per_s']:,.0f} | {v['planar_over_curved']:.1f} | {v['clearance_mm']:.3f} ({v['clearance_body']}) |"
+        f"| {name} | {v['segments']:,} of {v['whole_segments']:,} | {v['cpu_s']:.2f} "
+        f"| **{v['segments_per_cpu_s']:,.0f}** | {v['segments_per_s']:,.0f} | {v['planar_over_curved']:.1f} "
+        f"| {v['clearance_mm']:.3f} ({v['clearance_body']}) |"
         + (f" line {v['first_hit']['gcode_line']}, {v['first_hit']['body']} - {v['first_hit']['other']} |"
            if "first_hit" in v else " none |")
         for name, v in r["curved"].items())
+    header = (f"| program | segments certified | CPU (s, best of {r['runs']}) | segments / CPU s "
+              "| segments / s (wall) | planar / this | certified clearance (mm) | first hit of the whole program |")
     inputs = "the files named" if argv else f"the four test shapes sliced curved ({CURVED_PROFILE})"
     md = f"""# Collision check: multi-axis programs against planar ones
 
@@ -158,7 +166,7 @@ hit's row), which is what a sweep does before it stops; `@LAYER`: the rows from 
 A few thousand segments are too few to say much: the sweep's fixed costs (the approach's joint moves, the
 broad phase, the first batch's hulls) are most of their time.
 
-| program | segments certified | CPU (s, best of {r['runs']}) | segments / CPU s | segments / s (wall) | planar / this | certified clearance (mm) | first hit of the whole program |
+{header}
 |---|---:|---:|---:|---:|---:|---|---|
 {rows_p}
 {rows_c}

@@ -19,11 +19,11 @@ Over the layer under. A tip whose axis is ``d`` off the layer normal digs its
 low edge ``r sin d`` into the layer under it (the tip rides on the top of the
 layer it lays): the collision check lets it touch the layer it lays and the one
 under (about two layer thicknesses), nothing older. The axis is therefore kept
-within :attr:`CurvedOptions.max_axis_deviation_deg` of the layer normal (10
-degrees: ``1.5 sin 10 = 0.26`` mm, within the thinnest pair of layers the
-bounds allow). Where the layer itself leans further than the tilt limit plus
-that, the tilt limit wins and the deviation grows; the slice reports its
-largest.
+within :attr:`CurvedOptions.max_axis_deviation_deg` of the layer normal (5
+degrees: ``1.5 sin 5 = 0.13`` mm on the multi-axis cell, within the thinnest
+layer the bounds allow). Where the layer itself leans further than the tilt
+limit plus that, the tilt limit wins and the deviation grows; the slice
+reports its largest.
 """
 from __future__ import annotations
 

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from fabric.slicing.curved.axis import limit_deviation, limit_tilt, plate_tilt_deg
+from fabric.slicing.curved.axis import limit_deviation, limit_tilt, plate_tilt_deg, unit_rows
 from fabric.slicing.curved.band import build_band
 from fabric.slicing.curved.heat import (
     FemOperators,
@@ -84,11 +84,6 @@ def base_nodes(nodes: np.ndarray) -> np.ndarray:
     """Indices of the nodes that rest on the plate (only surface nodes can be that low)."""
     z = nodes[:, 2]
     return np.flatnonzero(z <= z.min() + BASE_TOL_MM)
-
-
-def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    norm = np.linalg.norm(v, axis=1)
-    return v / np.maximum(norm, 1e-12)[:, None], norm
 
 
 def _crease_half_angles_deg(build: np.ndarray, edges: np.ndarray, adj: sp.csr_matrix) -> np.ndarray:
@@ -151,7 +146,7 @@ def build_field(mesh: TetMesh, options: CurvedOptions, nominal_mm: float, side_m
     height = mesh.nodes[:, 2] - float(mesh.nodes[:, 2].min())
     w = plate_blend(height, first_layer_mm, options.plate_blend_mm)
     d_base = w * geodesic_distance(mesh, ops, base, options.heat_time_r) + (1.0 - w) * height
-    core_dir, _norm = _unit(node_gradients(ops, mesh.tets, d_base))
+    core_dir = unit_rows(node_gradients(ops, mesh.tets, d_base))
     core_grad = node_gradient_norms(ops, mesh.tets, d_base)
     n = len(mesh.nodes)
     band = build_band(mesh, ops, d_base, options, first_layer_mm, margin_mm=max(side_margin_mm, 2.0 * nominal_mm *

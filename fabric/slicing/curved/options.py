@@ -26,6 +26,13 @@ class CurvedOptions:
     the part, :mod:`.tetmesh`). ``heat_time_r`` > 0 takes the distance fields'
     directions from the heat method with that diffusion time (in squared mean
     edges), 0 from shortest paths along the mesh's edges (:mod:`.heat`).
+
+    The nozzle axis near the plate and over the layers (:mod:`.axis`): the
+    layers blend from flat to curved over the first ``plate_blend_mm``; the
+    tilt allowed grows with the height over the plate for a tip of
+    ``tip_radius_mm`` (a bound for any nozzle up to that radius); the axis
+    stays within ``max_axis_deviation_deg`` of the layer normal, and is
+    averaged along each path over ``path_axis_window_mm``.
     """
 
     max_tilt_deg: float = 45.0

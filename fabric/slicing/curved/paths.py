@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fabric.slicing.curved.axis import unit_rows
 from fabric.slicing.curved.isosurface import Surface, boundary_loops, clip_surface, iso_lines_many
 from fabric.slicing.flow import bead_spacing_mm
 from fabric.slicing.profile import Profile
@@ -99,17 +100,13 @@ def _to_path(rows: np.ndarray, closed: bool, spec: LayerSpec, role: str, width_m
         return None
     if closed:
         rows = np.vstack([rows, rows[:1]])
-    normal = _unit_rows(rows[:, NORMAL])
+    normal = unit_rows(rows[:, NORMAL])
     thick = rows[:, THICK]
     pts = rows[:, POS] + normal * (thick / 2.0)[:, None]
     d = np.diff(pts, axis=0)
     if float(np.sqrt(np.einsum("ij,ij->i", d, d)).sum()) < MIN_PATH_R * width_mm:
         return None
-    return CurvedPath(spec.index, role, pts, _unit_rows(rows[:, AXIS]), normal, thick, width_mm, closed)
-
-
-def _unit_rows(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.sqrt(np.einsum("ij,ij->i", v, v)), 1e-12)[:, None]
+    return CurvedPath(spec.index, role, pts, unit_rows(rows[:, AXIS]), normal, thick, width_mm, closed)
 
 
 def layer_paths(surface: Surface, spec: LayerSpec, profile: Profile) -> list[CurvedPath]:

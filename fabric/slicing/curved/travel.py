@@ -49,8 +49,7 @@ class HeightMap:
         where along the segment (0..1) each lies nearest."""
         lo = np.minimum(a_xy, b_xy) - reach_mm
         hi = np.maximum(a_xy, b_xy) + reach_mm
-        (i0, j0), (i1, j1) = (np.clip(np.floor((v - self.lo) / CELL_MM).astype(int), 0,
-                                      np.array(self.z.shape) - 1) for v in (lo, hi))
+        (i0, i1), (j0, j1) = self._cells(np.vstack([lo, hi]))
         z = self.z[i0:i1 + 1, j0:j1 + 1]
         ii, jj = np.nonzero(np.isfinite(z))
         if len(ii) == 0:
