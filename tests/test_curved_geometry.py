@@ -238,6 +238,10 @@ def test_options_are_range_checked():
         CurvedOptions(max_tilt_deg=95.0)
     with pytest.raises(BadRequest):
         CurvedOptions(top_band_layers=-1)
+    for key, bad in (("tip_radius_mm", -1.0), ("plate_blend_mm", float("nan")), ("max_axis_deviation_deg", 91.0),
+                     ("path_axis_window_mm", float("inf"))):
+        with pytest.raises(BadRequest, match=key):
+            CurvedOptions(**{key: bad})
 
 
 def test_a_mesh_with_a_hole_is_a_typed_error():

@@ -107,7 +107,7 @@ def test_a_service_started_before_its_hub_joins_it_once_it_is_up(tmp_path) -> No
     with open(log, "wb") as out:
         svc = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "serve", "planner", "--config",
                                 str(creds.config("service")), "--cell", cell], stdout=out, stderr=subprocess.STDOUT)
-    time.sleep(2.0)
+    time.sleep(2.0)              # the scenario, not a synchronisation: the hub comes up after the first tries
     hub = start_hub(creds)
     try:
         wait_for(lambda: b"serving" in log.read_bytes() or svc.poll() is not None, 30.0, "the planner serving")
