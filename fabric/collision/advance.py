@@ -30,12 +30,12 @@ a piece whose motion is down to the tolerance and still not certified, is a
 hit, and the walk of that item stops there.
 
 Distances come from the broad phase (:mod:`fabric.collision.trees`): the
-part's boxes, then the beads' chains (for the tip, without its two exempt
+part's boxes, then the beads' chains (for the tip, without its exempt
 layers), each a lower bound of the next. The boxes hold every bead laid
 before the stretch's end, the chains every bead laid before the row asked
 about (they follow the path), a superset for each row; where they say
 touching, the exact distance is taken: the table, the plate and exactly the
-beads laid before the row (for the tip, not its two exempt layers), found by
+beads laid before the row (for the tip, not its exempt layers), found by
 their bounding boxes in a grid, nearest first (those within
 ``EXACT_NEAR_MM`` first: if one is nearer than that, no other can be), each
 measured with coal. An exact distance holds for its own row only, so it
@@ -410,7 +410,7 @@ class Advancer:
 
     def exact(self, item: Item, k: int, q: np.ndarray, margin_mm: float) -> Probe:
         """The distance at ``q`` with exactly what the row of segment ``k`` may touch: the table, the plate
-        and the beads laid before that row (for the tip, not those of its two exempt layers). Beads farther
+        and the beads laid before that row (for the tip, not those of its exempt layers). Beads farther
         than ``margin_mm`` from the body's bounding box count as ``margin_mm`` away (a lower bound)."""
         self._place(q)
         if item.other is not None:
@@ -430,7 +430,7 @@ class Advancer:
             aabb = bodies.placed_object(body).getAABB()
             lo, hi = np.asarray(aabb.min_) / MM, np.asarray(aabb.max_) / MM
             layer = int(self.segs.tip_layer[k])
-            skip = (layer, layer - 1) if item.tip and layer != NO_LAYER else ()
+            skip = beads.exempt_layers(layer) if item.tip and layer != NO_LAYER else ()
             for m in (EXACT_NEAR_MM, margin_mm) if margin_mm > EXACT_NEAR_MM else (margin_mm,):
                 # nearest bounding box first: a bead whose box is no nearer than the best so far is not nearer
                 near = beads.near(lo, hi, m, upto, skip)

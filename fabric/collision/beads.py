@@ -28,6 +28,7 @@ import coal
 import numpy as np
 
 from fabric.collision.bodies import MM
+from fabric.collision.support import resting_layers
 from fabric.motion.program import MOVEL, Program
 from fabric.sim.deposition import UP, Deposition, bead_frames, nozzle_axes
 
@@ -61,6 +62,7 @@ class BeadSolids:
         self._objects: list[coal.CollisionObject | None] = [None] * len(self)
         self._grid: _Grid | None = None
         self._scans = 0
+        self._rests_on: dict[int, tuple[int, ...]] | None = None
 
     def __len__(self) -> int:
         return len(self.row)
@@ -149,6 +151,15 @@ class BeadSolids:
                            for k in ("centre", "axes", "half", "layer", "row", "gcode_line")))
         out._objects = self._objects + more._objects
         return out
+
+    # --- what the tip may touch ---------------------------------------------------------------
+
+    def exempt_layers(self, tip_layer: int) -> tuple[int, ...]:
+        """The layers the tip may touch while it lays ``tip_layer``: that layer, the one before it and any
+        other its beads rest on (:func:`fabric.collision.support.resting_layers`, found once)."""
+        if self._rests_on is None:                             # found once, on first use
+            self._rests_on = resting_layers(self.centre, self.axes, self.half, self.layer)
+        return (int(tip_layer), int(tip_layer) - 1, *self._rests_on.get(int(tip_layer), ()))
 
     # --- coal objects -----------------------------------------------------------------------
 

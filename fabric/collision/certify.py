@@ -12,8 +12,10 @@ against its own arm).
 The one exemption. The nozzle's tip (``tool_tip``: the nozzle's radius, from
 the tip ``nozzle_clearance_mm`` up; 4 mm x 1 mm on the paper's extruder)
 lays the bead under it and rests on the layer below: against the beads of
-the layer it is laying and of the layer under it, and only those, it is not
-checked. The rest of the nozzle begins where the tip ends, so it clears the
+the layer it is laying and of the layers that layer rests on, and only those,
+it is not checked. A layer rests on the one printed before it and on any
+other whose beads lie right under its own (:mod:`fabric.collision.support`:
+a curved top band's first layer lies on the ends of many core layers). The rest of the nozzle begins where the tip ends, so it clears the
 bead being laid by ``nozzle_clearance_mm`` and is checked against
 everything. The tip is checked against the plate, the table and every other
 bead: printing the first layer it is one layer height above the plate. For a
@@ -21,7 +23,7 @@ live move the tip is laying nothing: it may only leave the beads of the last
 layer (and the one under) that it rests on where the move starts, within its
 radius and one layer height of the tip. The straight descent of a restart
 onto a layer's first point gets the print's exemption for that layer (the
-layer it goes on to lay, and the one under it, on which the tip lands): no
+layer it goes on to lay, and those under it, on which the tip lands): no
 more than the sweep of the program grants the rows that follow.
 
 How. The path is cut into stretches where the tip's layer changes (and
@@ -79,7 +81,7 @@ BLOCK_COVERS = 64            # the covers near the part are refined this many at
 def exemption_text(bodies: RobotBodies) -> str:
     """The exemption zone in words, for reports and docs."""
     return (f"{TIP}: r {bodies.tip_radius_mm:g} mm x {bodies.tip_length_mm:g} mm at the nozzle tip, "
-            f"exempt against the layer being laid and the one under it (a live move: those it rests on at "
+            f"exempt against the layer being laid and those it rests on (a live move: those it rests on at "
             f"its start, within r + one layer height)")
 
 
@@ -134,9 +136,9 @@ class Certifier:
         with ``q_down`` the straight descent after it, from ``q_to`` to ``q_down`` (a restart's way down).
 
         The tip was laying layer ``tip_layer`` where the move starts (an interrupted print): the beads of
-        that layer and the one under it within the exemption zone around the tip there (the tip's radius
+        that layer and those it rests on within the exemption zone around the tip there (the tip's radius
         and one layer height) are what it rests on, and it may leave them. On the descent the tip may touch
-        the beads of ``down_layer`` and the layer under it, as when printing ``down_layer``. Every other
+        the beads of ``down_layer`` and the layers under it, as when printing ``down_layer``. Every other
         bead counts."""
         t0 = time.perf_counter()
         solids = beads if beads is not None else BeadSolids.empty()
@@ -154,7 +156,7 @@ class Certifier:
         layers of the joint move and of the descent.
 
         The joint move may leave what the tip rests on at ``q`` (:meth:`_resting`); the descent may touch the
-        beads of ``down_layer`` and of the layer under; a bead may be both. Three labels below every layer
+        beads of ``down_layer`` and of the layers it rests on; a bead may be both. Three labels below every layer
         say which: ``START_LAYER`` resting only, ``START_LAYER - 1`` both, ``START_LAYER - 2`` the descent's
         only. The joint move's tip layer is then ``START_LAYER`` (it may touch the first two) and the
         descent's ``START_LAYER - 1`` (the last two). Reports name beads by their own layers: they are
@@ -162,7 +164,7 @@ class Certifier:
         resting = self._resting(beads, q, tip_layer) if tip_layer != NO_LAYER else np.zeros(len(beads), bool)
         descent = np.zeros(len(beads), bool)
         if down_layer != NO_LAYER:
-            descent = (beads.layer == down_layer) | (beads.layer == down_layer - 1)
+            descent = np.isin(beads.layer, beads.exempt_layers(down_layer))
         joint_tip = START_LAYER if tip_layer != NO_LAYER else NO_LAYER
         down_tip = START_LAYER - 1 if down_layer != NO_LAYER else NO_LAYER
         if not (resting.any() or descent.any()):
@@ -173,16 +175,17 @@ class Certifier:
         layer[~resting & descent] = START_LAYER - 2
         out = BeadSolids(beads.centre, beads.axes, beads.half, layer, beads.row, beads.gcode_line)
         out._objects, out._grid = beads._objects, beads._grid
+        out._rests_on = {}                                 # the labels above say all the move may touch
         return out, joint_tip, down_tip
 
     def _resting(self, beads: BeadSolids, q: np.ndarray, tip_layer: int) -> np.ndarray:
-        """Per bead: does the tip rest on it at ``q``? Of layer ``tip_layer`` or the one under, within the
+        """Per bead: does the tip rest on it at ``q``? Of layer ``tip_layer`` or those it rests on, within the
         tip's radius and one layer height of the tip."""
         tip = self.cell.robot.fk(q)[:3, 3]
         height = float(np.max(2.0 * beads.half[:, 2])) if len(beads) else 0.0
         reach = self.bodies.tip_radius_mm + height
         gap = np.linalg.norm(np.maximum(np.maximum(beads.lo - tip, tip - beads.hi), 0.0), axis=1)
-        return (gap <= reach) & ((beads.layer == tip_layer) | (beads.layer == tip_layer - 1))
+        return (gap <= reach) & np.isin(beads.layer, beads.exempt_layers(tip_layer))
 
     # --- the sweep ------------------------------------------------------------------------------
 

@@ -6,7 +6,7 @@ tolerance of those boxes nearly everywhere: a box holds a piece of a curved
 surface and the empty space beside it, where the tool is. Such covers are
 measured here as what they are, cylinders, with coal against the beads'
 chains (:meth:`fabric.collision.trees.PartTrees.fine_tree`; for the tip,
-without its two exempt layers), coarse to fine:
+without its exempt layers), coarse to fine:
 
 1. each cover as it is (up to 16 pieces; a wide tool, the extruder's body,
    first against balls around the chains: it is far from them);

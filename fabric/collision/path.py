@@ -19,7 +19,7 @@ temperatures, retractions) add nothing.
 
 Every segment carries its program row, its move kind (print, travel, approach,
 retract, home, joint) and the tip's layer: the layer whose beads (with the
-layer under it) the nozzle tip may touch: the row's own layer, or the layer
+layers it rests on) the nozzle tip may touch: the row's own layer, or the layer
 the last extruding row laid when that is later (a lift off the last layer,
 the return home).
 
@@ -108,7 +108,7 @@ def _joint_pieces(traj: Any, q_from: np.ndarray, q_to: np.ndarray) -> tuple[np.n
 
 
 def tip_layers(program: Program) -> np.ndarray:
-    """Per row: the layer the tip may touch (its beads and the layer under): the row's own layer, or the
+    """Per row: the layer the tip may touch (its beads and those it rests on): the row's own layer, or the
     last extruding row's layer when later."""
     laid = np.where((program.op == MOVEL) & (program.flow_mm3_mm > 0), program.layer, -1)
     return np.maximum(program.layer, np.maximum.accumulate(laid) if len(laid) else laid)

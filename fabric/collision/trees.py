@@ -7,7 +7,7 @@ of the one below:
   vectorised first pass of :mod:`fabric.collision.advance` (spheres around
   each body against them);
 * ``coarse``: the part's boxes with the table and the plate; ``coarse_tip``
-  is the same without the boxes of the tip's two exempt layers. A flat layer
+  is the same without the boxes of the tip's exempt layers. A flat layer
   (planar printing) is one box around all of its beads, whose top is the
   beads' top. A curved layer's box is as tall as the layer (a dome's layer
   spans its height) and would touch the tool wherever it goes, so a layer
@@ -18,7 +18,7 @@ of the one below:
   swept hulls of the tool are measured against one box per layer, as arrays
   (:meth:`layer_boxes`);
 * ``fine``: the beads, by chains (:meth:`BeadSolids.chains`: boxes around
-  runs of consecutive beads), and ``fine_tip``: the same without the tip's two
+  runs of consecutive beads), and ``fine_tip``: the same without the tip's
   exempt layers, each built the first time a query needs it (a body within a
   few mm of a box: beside a wall, in a gap, a tilted nozzle over a curved
   layer). They follow the path: a query for a row brings in the chains of the
@@ -107,8 +107,8 @@ class PartTrees:
         self._tip_fine_in = np.zeros(0, bool)              # per chain: in ``fine_tip``
 
     def advance(self, count: int, tip_layer: int) -> None:
-        """Hold beads ``0 .. count - 1``; ``coarse_tip`` and ``fine_tip`` leave out layers ``tip_layer`` and
-        ``tip_layer - 1`` (none for ``NO_LAYER``)."""
+        """Hold beads ``0 .. count - 1``; ``coarse_tip`` and ``fine_tip`` leave out the layers the tip may touch
+        while it lays ``tip_layer`` (:meth:`BeadSolids.exempt_layers`; none for ``NO_LAYER``)."""
         beads = self.beads
         if count > self.count:
             self.part_lo = np.minimum(self.part_lo, beads.lo[self.count:count].min(axis=0))
@@ -118,7 +118,7 @@ class PartTrees:
         for i in range(self._in, n_in):
             self.coarse.registerObject(self._box(i))
         self._layers_in = int(np.searchsorted(self._layer_first, count, "left"))
-        self._exempt = (tip_layer, tip_layer - 1) if tip_layer != NO_LAYER else ()
+        self._exempt = self.beads.exempt_layers(tip_layer) if tip_layer != NO_LAYER else ()
         exempt = [self._layer_boxes[self._pos[x]] for x in self._exempt if x in self._pos]
         ex = np.concatenate(exempt) if exempt else np.zeros(0, np.int64)
         ex = ex[ex < n_in]
@@ -148,7 +148,7 @@ class PartTrees:
         return self.fine
 
     def fine_tip_tree(self, upto: int) -> coal.BroadPhaseCollisionManager:
-        """Beads ``0 .. upto - 1`` at least, but not those of the tip's two exempt layers, by chains, with the
+        """Beads ``0 .. upto - 1`` at least, but not those of the tip's exempt layers, by chains, with the
         table and the plate (built on first use): what the tip may not touch. The chains of layers that
         stopped being exempt come in, those of layers that became exempt leave, then the new chains."""
         if self.fine_tip is None:
@@ -182,7 +182,7 @@ class PartTrees:
 
     def chain_balls(self, upto: int, tip: bool) -> tuple[np.ndarray, np.ndarray]:
         """Balls (centres (m, 3), radii (m,), mm) around the chains holding beads ``0 .. upto - 1`` (for the
-        tip, not those of its two exempt layers): what :meth:`fine_tree` holds, coarser."""
+        tip, not those of its exempt layers): what :meth:`fine_tree` holds, coarser."""
         n = self._chains_upto(upto)
         chains = self._chains
         assert chains is not None

@@ -220,7 +220,7 @@ class CollisionRequest:
     include_part: bool = True           # a program: its own beads, each an obstacle once it is laid
     beads: str = f(default="none", choices=COLLISION_BEADS)   # a single move: "station" takes the beads the
                                         # twin has actually laid (asked from station/beads, kept between checks)
-    tip_layer: int = f(default=-2, ge=-2)   # a single move: the layer whose beads (and the layer under) the
+    tip_layer: int = f(default=-2, ge=-2)   # a single move: the layer whose beads (and those it rests on) the
                                         # nozzle tip may touch; -1 none, -2 the layer of the last bead laid
     vel_r: float = f(default=0.5, ge=0.001, le=1.0)   # a single move: share of the joint speed limits (the
                                         # twin's joint move, whose path depends on it)
@@ -231,7 +231,7 @@ class CollisionRequest:
                                         # joints (a linear move, joints interpolated as the twin does; kind
                                         # "descent" in a hit): a restart's way onto the part (nil: none)
     down_layer: int = f(default=-1, ge=-1)  # the layer that descent goes on printing: the nozzle tip may touch
-                                        # its beads and those of the layer under, as when printing it (-1: none)
+                                        # its beads and those of the layers it rests on, as when printing it (-1: none)
 
 
 @schema("collision.Hit", version=2)
@@ -271,8 +271,8 @@ class CollisionReport:
     segments: int = 0                  # path segments certified (joint-space pieces between targets)
     swept_pieces: int = 0              # pieces of linear moves checked as swept hulls of the nozzle and the tool
     beads: int = 0                     # bead solids in the part (laid by the program, or by the twin)
-    exemption: str = ""                # the only contact not checked: the nozzle tip on its own and the layer
-                                       # under it (size in words)
+    exemption: str = ""                # the only contact not checked: the nozzle tip on its own layer and
+                                       # those it rests on (size in words)
     tolerance_mm: float = 0.01         # bodies this close count as touching
 
 
