@@ -37,6 +37,7 @@ from fabric.client import Client
 from fabric.motion.program import Program
 from fabric.motion.timing import StartState, time_program
 from fabric.planning import PlanOptions, plan_gcode
+from fabric.planning.blas import single_blas_thread
 from fabric.planning.memory import give_back_freed_memory, keep_freed_memory
 from fabric.planning.post import write_export
 from fabric.planning.post.stream import ExportStream
@@ -93,6 +94,7 @@ class PlannerService(Service):
     def __init__(self, session: zenoh.Session, cell_id: str, cell: Cell, data_dir: Path | None = None) -> None:
         super().__init__(session, cell_id, data_dir)
         keep_freed_memory()                     # the next plan reuses the pages of the last one
+        single_blas_thread()                    # no OpenBLAS worker spinning on the other core (planning.blas)
         self.cell = cell
         self.client = Client(session, cell_id)
         self.jobs = JobRunner("planner", self.publisher("progress", lossless=True), data_dir=self.data_dir)
