@@ -10,21 +10,22 @@ the robot itself, every pair of its bodies that are not neighbours (the tool
 against its own arm).
 
 The one exemption. The nozzle's tip (``tool_tip``: the nozzle's radius, from
-the tip ``nozzle_clearance_mm`` up; 4 mm x 1 mm on the paper's extruder)
-lays the bead under it and rests on the layer below: against the beads of
-the layer it is laying and of the layers that layer rests on, and only those,
-it is not checked. A layer rests on the one printed before it and on any
-other whose beads lie right under its own (:mod:`fabric.collision.support`:
-a curved top band's first layer lies on the ends of many core layers). The rest of the nozzle begins where the tip ends, so it clears the
-bead being laid by ``nozzle_clearance_mm`` and is checked against
-everything. The tip is checked against the plate, the table and every other
-bead: printing the first layer it is one layer height above the plate. For a
-live move the tip is laying nothing: it may only leave the beads of the last
-layer (and the one under) that it rests on where the move starts, within its
-radius and one layer height of the tip. The straight descent of a restart
-onto a layer's first point gets the print's exemption for that layer (the
-layer it goes on to lay, and those under it, on which the tip lands): no
-more than the sweep of the program grants the rows that follow.
+the tip ``nozzle_clearance_mm`` up; 4 mm x 1 mm on the paper's extruder) lays
+the bead under it and rests on the layer below: against the beads of the layer
+it is laying and of the layers that layer rests on, and only those, it is not
+checked. A layer rests on the one printed before it and on any other whose
+beads lie right under its own (:mod:`fabric.collision.support`: a curved top
+band's first layer lies on the ends of many core layers). The rest of the
+nozzle begins where the tip ends, so it clears the bead being laid by
+``nozzle_clearance_mm`` and is checked against everything. The tip is checked
+against the plate, the table and every other bead: printing the first layer it
+is one layer height above the plate. For a live move the tip is laying
+nothing: it may only leave the beads of the last layer (and those under it)
+that it rests on where the move starts, within its radius and one layer height
+of the tip. The straight descent of a restart onto a layer's first point gets
+the print's exemption for that layer (the layer it goes on to lay, and those
+under it, on which the tip lands): no more than the sweep of the program
+grants the rows that follow.
 
 How. The path is cut into stretches where the tip's layer changes (and
 where that layer's first bead is laid); as the sweep reaches each, the beads
