@@ -240,7 +240,7 @@ class BeadSolids:
         else:
             idx = self._grid.query(lo, hi)
             idx = idx[idx < n]
-            idx = idx[np.all((self.lo[idx] <= hi) & (self.hi[idx] >= lo), axis=1)]
+            idx = np.unique(idx[np.all((self.lo[idx] <= hi) & (self.hi[idx] >= lo), axis=1)])   # once, in order
         return idx[~np.isin(self.layer[idx], skip_layers)] if skip_layers else idx
 
 
@@ -295,7 +295,8 @@ class _Grid:
         return (ix * self.shape[1] + iy) * self.shape[2] + iz
 
     def query(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """Every bead (once, in order) whose cells meet the box [lo, hi] (mm), and every large one."""
+        """Every bead whose cells meet the box [lo, hi] (mm), and every large one: once per cell it is in (the
+        caller keeps those whose boxes meet, then each once: fewer to sort)."""
         c0 = np.maximum(np.floor((lo - self.origin) / self.cell).astype(np.int64), 0)
         c1 = np.minimum(np.floor((hi - self.origin) / self.cell).astype(np.int64), self.shape - 1)
         if np.any(c1 < c0):
@@ -307,4 +308,4 @@ class _Grid:
         a, b = self.edges[pos], self.edges[pos + 1]
         size = b - a
         at = np.repeat(a - np.cumsum(size) + size, size) + np.arange(int(size.sum()))
-        return np.unique(np.concatenate([self.beads[at], self.big]))
+        return np.concatenate([self.beads[at], self.big])
