@@ -140,3 +140,20 @@ def test_the_twin_lays_beads_along_the_nozzle_and_the_check_sees_them_so(planned
     # beads saved before multi-axis printing (no axis) load as laid straight up
     old = {k: v for k, v in beads.to_arrays().items() if k != "axis"}
     np.testing.assert_array_equal(Deposition.from_arrays(p, old).axis, np.tile([0.0, 0.0, 1.0], (len(beads), 1)))
+
+
+def test_a_wrist_jump_suggests_the_multiaxis_cell_only_on_another_cell() -> None:
+    """The reason of a tilted program's wrist jump names the cell that can follow the tilt, except to that
+    cell itself (there it would send the operator in a circle)."""
+    from fabric.motion.testprog import square_program
+    from fabric.planning.report import MULTIAXIS_CELL, unreachable_detail
+
+    program = square_program(Cell.builtin("irb140"), size_mm=10, layers=1, layer_height_mm=0.3, speed_mm_s=20)
+    program.meta["multiaxis"] = True
+    row = len(program) // 2
+    program.q_rad[row:, 3] += math.radians(354.0)                 # A4 turns almost a whole turn
+    other = unreachable_detail(program, row, "joint jump", "irb140")
+    same = unreachable_detail(program, row, "joint jump", MULTIAXIS_CELL)
+    assert other.startswith("A4 turns 354 deg")
+    assert other.endswith(f"(a cell whose wrist stays bent can: {MULTIAXIS_CELL})")
+    assert same.startswith("A4 turns 354 deg") and MULTIAXIS_CELL not in same and "cannot follow the tilt" in same

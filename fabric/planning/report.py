@@ -22,6 +22,7 @@ __all__ = ["Reachability", "PlanStats", "PlanResult", "UNREACHABLE_CODES"]
 # envelope (fabric.planning.envelope) are fatal too unless the user allows them.
 UNREACHABLE_CODES = (IK_OUT_OF_REACH, IK_JOINT_LIMIT, IK_JUMP, ENV_OFF_PLATE, ENV_BELOW_PLATE)
 REASONS = {**IK_REASONS, **ENVELOPE_REASONS}
+MULTIAXIS_CELL = "irb140-multiaxis"   # the built-in cell whose wrist stays bent under a tilted nozzle
 
 
 @dataclass
@@ -121,16 +122,19 @@ class PlanStats:
         return asdict(self)
 
 
-def unreachable_detail(program: Program, row: int, reason: str) -> str:
+def unreachable_detail(program: Program, row: int, reason: str, cell_name: str = "") -> str:
     """The first unreachable target's reason in more words, where there are more to say: which joint jumps
     and by how much; for a tilted nozzle (a multi-axis program) whose jump or singularity is in the wrist,
-    that the cell's wrist cannot follow the tilt. "" otherwise."""
+    that the cell's wrist cannot follow the tilt (and, on another cell than :data:`MULTIAXIS_CELL`, that
+    one can). "" otherwise."""
     if not 0 < row < len(program):
         return ""
     wrist = ""
     if program.meta.get("multiaxis", False):
         wrist = ("; the tilted nozzle turns the wrist past a limit or through its singularity, so this cell "
-                 "cannot follow the tilt continuously (a cell whose wrist stays bent can: irb140-multiaxis)")
+                 "cannot follow the tilt continuously")
+        if cell_name != MULTIAXIS_CELL:
+            wrist += f" (a cell whose wrist stays bent can: {MULTIAXIS_CELL})"
     if reason == "joint jump":
         step = np.degrees(np.abs(program.q_rad[row] - program.q_rad[row - 1]))
         j = int(np.argmax(step))

@@ -27,6 +27,8 @@ type- and range-checked when read.
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -272,6 +274,14 @@ class Cell:
     def native_export(self) -> str:
         """The export format the robot's own controller runs: RAPID (ABB), KRL (KUKA), URScript (UR), else CSV."""
         return NATIVE_EXPORTS[self.brand]
+
+    def fingerprint(self) -> str:
+        """A short digest of what makes the cell this cell: its robot, tool, table, plate, home and approach
+        (not its description or the file it came from). A station's saved twin belongs to one cell."""
+        d = self.to_dict()
+        for key in ("description", "source_path"):
+            d.pop(key, None)
+        return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
     # Frames --------------------------------------------------------------
     def wobj_T(self) -> np.ndarray:

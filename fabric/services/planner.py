@@ -200,7 +200,7 @@ class PlannerService(Service):
         def program_ready(program: Program, report: Reachability) -> None:
             # the program is final: exports by job id start formatting it, and it is encoded, hashed (its
             # id) and written to the durable store while the plan goes on with the cycle time
-            handoff.program_ready(program, _first_unreachable(report, program), _cold_extrusion(report))
+            handoff.program_ready(program, _first_unreachable(report, program, self.cell.name), _cold_extrusion(report))
             storing.append(self._storer.submit(self._store_program, program, name))
 
         self._forget_plans(keep=job.job_id)
@@ -217,7 +217,7 @@ class PlannerService(Service):
         while len(self.recent) > KEEP_PLANS:
             self.recent.pop(next(iter(self.recent)))
         rep = result.report
-        first = _first_unreachable(rep, program)
+        first = _first_unreachable(rep, program, self.cell.name)
         cold = _cold_extrusion(rep)
         st = result.stats
         estimate = float(result.estimate_s) if np.isfinite(result.estimate_s) else -1.0
@@ -374,13 +374,13 @@ def _material_fields(stats) -> dict:
             "warnings": list(stats.warnings)}
 
 
-def _first_unreachable(report: Reachability, program: Program) -> s.UnreachableTarget | None:
+def _first_unreachable(report: Reachability, program: Program, cell_name: str) -> s.UnreachableTarget | None:
     if report.first_unreachable is None:
         return None
     line, reason = report.first_unreachable
     row = int(report.first_unreachable_row)
     return s.UnreachableTarget(gcode_line=int(line), reason=reason, row=row,
-                               detail=unreachable_detail(program, row, reason))
+                               detail=unreachable_detail(program, row, reason, cell_name))
 
 
 def _cold_extrusion(report: Reachability) -> s.ColdExtrusion | None:

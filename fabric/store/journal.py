@@ -83,7 +83,8 @@ class StationJournal:
         now = time.monotonic()
         if not force and now - self._last_s < self.period_s:
             return False
-        state = {"meta": asdict(meta), "twin": twin.snapshot(with_beads=False)}
+        state = {"meta": asdict(meta), "twin": twin.snapshot(with_beads=False), "cell": twin.cell.fingerprint(),
+                 "cell_name": twin.cell.name}
         epoch = f"{meta.program_id}:{twin.s.t_started_s}"
         self.store.save_checkpoint(state, epoch, twin.beads)
         self._last_s = now
@@ -99,6 +100,9 @@ class StationJournal:
         if ck is None:
             return None
         meta = StationMeta(**ck.state["meta"])
+        saved = ck.state.get("cell")                          # older checkpoints do not say: taken as this cell
+        if saved is not None and saved != cell.fingerprint():
+            return self._other_cell(cell, meta, str(ck.state.get("cell_name", "?")))
         program = program_from_artifact(self.artifacts.get(meta.program_id)) if meta.program_id else None
         twin = Twin.from_snapshot(cell, ck.state["twin"], program, ck.beads)
         last_seq = self.store.last_seq()
@@ -111,6 +115,19 @@ class StationJournal:
         log.info("restored the twin at t_sim %.3f s (%s, %d beads) from the checkpoint and the clock mark",
                  twin.t_sim_s, twin.state, len(twin.beads))
         return Restored(twin, meta, events)
+
+    def _other_cell(self, cell: Any, meta: StationMeta, saved_name: str) -> Restored:
+        """The last checkpoint is of another cell (the station was started with another cell file): its pose,
+        program and beads mean nothing here. A fresh twin at this cell's home; a part said to be on the plate
+        is still said to be there (the operator says when it is off)."""
+        log.warning("the last checkpoint is of another cell (%r, not %r as configured now): not restored; the "
+                    "twin starts at this cell's home%s", saved_name, cell.name,
+                    ", the plate still marked occupied" if meta.plate_occupied else "")
+        twin = Twin(cell)
+        twin.number_events_after(self.store.last_seq())
+        kept = StationMeta(rtf=meta.rtf, plate_occupied=meta.plate_occupied, plate_job_id=meta.plate_job_id,
+                           plate_program_id=meta.plate_program_id, plate_mm3=meta.plate_mm3)
+        return Restored(twin, kept, [])
 
     def last_seq(self) -> int:
         """The last event's sequence number in the log (a fresh twin's events go on from there)."""
