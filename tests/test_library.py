@@ -140,3 +140,45 @@ def test_submitted_files_are_kept_and_printed_again_from_the_library(session, se
             assert client.file(entry.file_id).jobs == 2
     finally:
         sup.close()
+
+
+def _far_tower() -> bytes:
+    """A tower far out of the robot's reach: planned, every target unreachable, no time estimate (-1)."""
+    return tower_gcode(2).replace(b"X100", b"X2100").replace(b"X130", b"X2130")
+
+
+def test_a_file_whose_job_was_unreachable_can_be_listed_and_submitted_again(session, settings, tmp_path):
+    """Found driving the cell: a job refused as unreachable left its file's entry with the planner's -1 s
+    estimate, which the entry's schema refuses, and the next submission of the file failed with "field
+    'estimate_s': -1.0 is below the minimum 0.0"."""
+    services = _services(session, settings, tmp_path)
+    for svc in services:
+        svc.start()
+    try:
+        with Client.connect(settings) as client:
+            client.wait_alive(("station", "collision", "planner", "supervisor"), deadline_s=20)
+            for _ in range(2):
+                job = client.submit(s.JobSubmit(model=_far_tower(), filename="far.gcode"))
+                failed = wait_job(client, job.job_id, lambda r: r.state == "failed")
+                assert failed.reason.startswith("unreachable") and failed.plan.estimate_s < 0
+                (entry,) = client.files().files
+                assert (entry.last_state, entry.estimate_s) == ("failed", 0.0)
+            assert client.file(entry.file_id).jobs == 2
+    finally:
+        for svc in reversed(services):
+            svc.close()
+
+
+def test_an_entry_stored_with_a_negative_estimate_reads_as_no_estimate(tmp_path):
+    """Entries a library before this fix wrote are read, not refused."""
+    from fabric.wire import codec
+    store = LibraryStore(tmp_path / "library.sqlite")
+    entry = _entry("far.gcode", b"3", 100.0)
+    store.put(entry)
+    body = codec.unpack(codec.encode(entry))
+    body["estimate_s"] = -1.0
+    with store.db.write() as conn:
+        conn.execute("UPDATE library SET entry = ? WHERE file_id = ?", (codec.pack(body), entry.file_id))
+    assert store.get(entry.file_id).estimate_s == 0.0
+    assert store.page(0, 10)[0][0].estimate_s == 0.0
+    store.close()

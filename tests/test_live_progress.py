@@ -19,6 +19,7 @@ import pytest
 from fabric import schemas as s
 from fabric.cli.progress import PrintProgress, eta_text
 from fabric.demo import sample_model
+from fabric.printjobs.history import material_text
 from fabric.printjobs.live import apply_live
 
 from conftest import free_port
@@ -45,6 +46,19 @@ def test_the_record_takes_the_stations_figures_while_it_prints() -> None:
         0.25, 500.0, 5, 60.0, 30.0)
     assert rec.stage == "printing layer 6" and rec.segments[-1].last_layer == 5
     assert not apply_live(rec, _state(), wall_s=130.0)              # nothing new: no save
+
+
+def test_the_material_line_says_when_the_filament_is_counted() -> None:
+    """The volume follows the print; the filament is the station's count at a run's end: a run still open does
+    not show "0 mm of filament"."""
+    rec = _printing()
+    apply_live(rec, _state(), wall_s=130.0)
+    assert material_text(rec) == "500 mm3 deposited, filament counted when the run ends"
+    rec.segments[-1].ended, rec.filament_mm = "stopped", 166.0
+    assert material_text(rec) == "500 mm3 deposited, 166 mm of filament"
+    rec.segments.append(s.JobSegment(began="restart", started_s=200.0, t_sim_start_s=80.0, from_layer=5))
+    rec.deposited_mm3 = 900.0
+    assert material_text(rec) == "900 mm3 deposited, 166 mm of filament by the end of run 1 (run 2 still open)"
 
 
 @pytest.mark.parametrize("why, rec_state, st", [

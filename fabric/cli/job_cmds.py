@@ -16,7 +16,7 @@ from fabric.cli.pipeline_cmds import parse_sets
 from fabric.cli.progress import print_progress
 from fabric.client import Client
 from fabric.client.follow import follow_print
-from fabric.printjobs.history import override_lines, segment_lines
+from fabric.printjobs.history import estimate_text, material_text, override_lines, segment_lines
 from fabric.samples import SAMPLES_DIR, Sample, samples
 from fabric.wire.errors import NotFound, ValidationError
 
@@ -99,11 +99,11 @@ def _record_text(rec: s.JobRecord) -> str:
     lines.append(f"  created    {_when(rec.created_s)}   started {_when(rec.started_s)}   ended {_when(rec.ended_s)}")
     if rec.started_s:
         lines.append(f"  duration   {rec.sim_elapsed_s:.1f} s simulated, {rec.wall_elapsed_s:.1f} s wall")
-        lines.append(f"  material   {rec.deposited_mm3:.0f} mm3 deposited, {rec.filament_mm:.0f} mm of filament")
+        lines.append(f"  material   {material_text(rec)}")
     if rec.plan is not None:
         lines.append(f"  plan       {rec.plan.moves} moves, {rec.plan.layers} layers, "
                      f"{rec.plan.extruded_mm3:.0f} mm3 of {rec.plan.filament_diameter_mm:g} mm filament "
-                     f"({rec.plan.material_source}), estimate {rec.plan.estimate_s:.1f} s")
+                     f"({rec.plan.material_source}), {estimate_text(rec.plan.estimate_s)}")
     if rec.segments:
         lines.append("  runs")
         lines += [f"    {line}" for line in segment_lines(rec)]

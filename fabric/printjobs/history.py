@@ -3,10 +3,11 @@ while it printed. Pure functions of the record, shared by ``fabric-cli job show`
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 from fabric import schemas as s
 
-__all__ = ["duration_text", "segment_lines", "override_lines"]
+__all__ = ["duration_text", "segment_lines", "override_lines", "material_text", "estimate_text"]
 
 def duration_text(seconds: float) -> str:
     """``42s``, ``3m12s``, ``2h05m``."""
@@ -20,6 +21,29 @@ def duration_text(seconds: float) -> str:
 
 def _clock(t_s: float) -> str:
     return time.strftime("%H:%M:%S", time.localtime(t_s)) if t_s else "-"
+
+
+def estimate_text(estimate_s: float, words: Callable[[float], str] = lambda t: f"{t:.1f} s") -> str:
+    """``estimate 1354.0 s`` (``words`` writes the time); a plan that cannot be timed (its targets are not all
+    reachable: the planner says -1) has ``no time estimate``."""
+    return f"estimate {words(estimate_s)}" if estimate_s >= 0.0 else "no time estimate"
+
+
+def material_text(rec: s.JobRecord) -> str:
+    """``3900 mm3 deposited, 1296 mm of filament``. The volume follows the print as it goes; the filament is
+    the station's count when a run ends, so a run still open is said to be::
+
+        571 mm3 deposited, filament counted when the run ends
+        1839 mm3 deposited, 612 mm of filament by the end of run 1 (run 2 still open)
+    """
+    volume = f"{rec.deposited_mm3:.0f} mm3 deposited"
+    open_runs = [i for i, seg in enumerate(rec.segments, 1) if not seg.ended]
+    if not open_runs:
+        return f"{volume}, {rec.filament_mm:.0f} mm of filament"
+    if rec.filament_mm <= 0.0:
+        return f"{volume}, filament counted when the run ends"
+    return (f"{volume}, {rec.filament_mm:.0f} mm of filament by the end of run {open_runs[-1] - 1} "
+            f"(run {open_runs[-1]} still open)")
 
 
 def segment_lines(rec: s.JobRecord) -> list[str]:

@@ -81,7 +81,8 @@ class FileLibrary:
         if entry is None:
             return
         plan = rec.plan
-        figures = (plan.layers, plan.extruded_mm3, plan.estimate_s) if plan is not None else \
+        # a plan that cannot be timed (unreachable targets) says -1: the entry keeps 0, "no estimate"
+        figures = (plan.layers, plan.extruded_mm3, max(plan.estimate_s, 0.0)) if plan is not None else \
             (entry.layers, entry.extruded_mm3, entry.estimate_s)
         if entry.last_state == rec.state and (entry.layers, entry.extruded_mm3, entry.estimate_s) == figures:
             return

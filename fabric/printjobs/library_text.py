@@ -27,4 +27,5 @@ def plan_text(entry: s.LibraryFile) -> str:
     """The last plan's layers, volume and duration; ``not planned yet`` before any."""
     if not entry.layers:
         return "not planned yet"
-    return f"{entry.layers} layers, {entry.extruded_mm3:.0f} mm3, {duration_text(entry.estimate_s)}"
+    timed = duration_text(entry.estimate_s) if entry.estimate_s > 0 else "no time estimate"
+    return f"{entry.layers} layers, {entry.extruded_mm3:.0f} mm3, {timed}"

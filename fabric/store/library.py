@@ -58,7 +58,7 @@ class LibraryStore:
         """The entry ``file_id`` exactly (None when there is none)."""
         with self.db.read() as conn:
             row = conn.execute("SELECT entry FROM library WHERE file_id = ?", (file_id,)).fetchone()
-        return None if row is None else codec.decode(row[0], s.LibraryFile)
+        return None if row is None else _entry(row[0])
 
     def get(self, file_id: str) -> s.LibraryFile:
         """The entry ``file_id`` or the one entry whose id starts with it (at least ``MIN_ID_PREFIX``
@@ -77,7 +77,7 @@ class LibraryStore:
         if len(rows) > 1:
             raise ValidationError(f"file id {file_id!r} names more than one library file: give more of it",
                                   field="file_id", value=file_id)
-        return codec.decode(rows[0][0], s.LibraryFile)
+        return _entry(rows[0][0])
 
     def page(self, offset: int, limit: int, name_contains: str = "") -> tuple[list[s.LibraryFile], int]:
         """``limit`` entries from the ``offset``-th, most recently used first, and how many matched."""
@@ -87,7 +87,7 @@ class LibraryStore:
             total = int(conn.execute(f"SELECT COUNT(*) FROM library{where}", params).fetchone()[0])
             rows = conn.execute(f"SELECT entry FROM library{where} ORDER BY used_s DESC, name LIMIT ? OFFSET ?",
                                 (*params, int(limit), int(offset))).fetchall()
-        return [codec.decode(r[0], s.LibraryFile) for r in rows], total
+        return [_entry(r[0]) for r in rows], total
 
     def by_job(self, job_id: str) -> s.LibraryFile | None:
         """The entry whose last job is ``job_id`` (None: none, or a later job was made from it since)."""
@@ -95,7 +95,7 @@ class LibraryStore:
             return None
         with self.db.read() as conn:
             row = conn.execute("SELECT entry FROM library WHERE last_job_id = ?", (job_id,)).fetchone()
-        return None if row is None else codec.decode(row[0], s.LibraryFile)
+        return None if row is None else _entry(row[0])
 
     def holds_content(self, content_id: str) -> bool:
         """Whether any entry keeps the bytes ``content_id`` (another name may share them)."""
@@ -109,3 +109,14 @@ class LibraryStore:
 
     def close(self) -> None:
         self.db.close()
+
+
+def _entry(blob: bytes) -> s.LibraryFile:
+    """An entry as stored. Entries written before the library kept only estimates >= 0 may hold the planner's
+    -1 ("cannot be timed") of a job whose targets were unreachable, which the schema refuses: read as 0 (no
+    estimate), so the file can be printed again."""
+    body = codec.unpack(blob)
+    if isinstance(body, dict) and isinstance(body.get("estimate_s"), float | int) and body["estimate_s"] < 0:
+        body["estimate_s"] = 0.0
+        blob = codec.pack(body)
+    return codec.decode(blob, s.LibraryFile)

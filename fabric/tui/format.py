@@ -4,7 +4,7 @@ from __future__ import annotations
 import time
 
 from fabric import schemas as s
-from fabric.printjobs.history import duration_text, override_lines, segment_lines
+from fabric.printjobs.history import duration_text, estimate_text, material_text, override_lines, segment_lines
 
 __all__ = ["duration_text", "eta_text", "layer_text", "job_outcome", "job_report", "STATE_STYLE"]
 
@@ -49,11 +49,11 @@ def job_report(rec: s.JobRecord) -> str:
     if rec.started_s:
         lines.append(f"duration  {duration_text(rec.sim_elapsed_s)} simulated, "
                      f"{duration_text(rec.wall_elapsed_s)} wall")
-        lines.append(f"material  {rec.deposited_mm3:.0f} mm3 deposited, {rec.filament_mm:.0f} mm filament")
+        lines.append(f"material  {material_text(rec)}")
     if rec.plan is not None:
         p = rec.plan
         lines.append(f"plan      {p.layers} layers, {p.moves} moves, {p.extruded_mm3:.0f} mm3, "
-                     f"estimate {duration_text(p.estimate_s)}")
+                     f"{estimate_text(p.estimate_s, duration_text)}")
         lines.append(f"filament  {p.filament_diameter_mm:g} mm ({p.material_source})"
                      + (f", {p.material}" if p.material else ""))
     if rec.segments:
