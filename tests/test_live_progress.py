@@ -45,6 +45,7 @@ def test_the_record_takes_the_stations_figures_while_it_prints() -> None:
     assert (rec.progress_r, rec.deposited_mm3, rec.layer, rec.sim_elapsed_s, rec.wall_elapsed_s) == (
         0.25, 500.0, 5, 60.0, 30.0)
     assert rec.stage == "printing layer 6" and rec.segments[-1].last_layer == 5
+    assert rec.segments[-1].deposited_mm3 == 500.0                  # the running run's share follows
     assert not apply_live(rec, _state(), wall_s=130.0)              # nothing new: no save
 
 
