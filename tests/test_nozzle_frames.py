@@ -1,4 +1,5 @@
-"""Nozzle frame quaternions: the straight-down fast path gives what Shepperd's method gives on every row."""
+"""Nozzle frame quaternions: what Shepperd's method gives on every row, straight down (w = 0 on every row, where
+the sign rule decides) and tilted."""
 from __future__ import annotations
 
 import numpy as np
@@ -36,17 +37,6 @@ def test_down_nozzle_quaternions_match_shepperd():
     assert np.all(big >= 0.0)
 
 
-def test_down_and_general_paths_agree_bitwise():
-    """The fast path is the general rule with |z| = 0 left out: the same bits as the general branch."""
-    fr, theta = _frames(np.array([0.0, 0.0, -1.0]), 3000, 2)
-    fast = fr.quats(theta)
-    fr.const = False                         # the general path over the same frames (Shepperd's quaternion of R0)
-    fr.z0 = np.repeat(fr.z0, fr.x0.shape[1], axis=1)
-    general = fr.quats(theta)
-    assert np.allclose(fast, general, atol=1e-12)
-    assert np.array_equal(np.sign(fast[:, 1:3]) != 0, np.sign(general[:, 1:3]) != 0)
-
-
-def test_tilted_nozzle_keeps_the_general_rule():
+def test_tilted_nozzle_quaternions_match_shepperd():
     fr, theta = _frames(np.array([0.3, -0.2, -0.9]), 500, 3)
     assert np.allclose(fr.quats(theta), _shepperd(fr, theta), atol=1e-12)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from fabric import schemas as s
 
-__all__ = ["JOB_EVENT_KINDS", "apply_event", "job_id_of_event"]
+__all__ = ["JOB_EVENT_KINDS", "apply_event", "job_id_of_event", "run_share_mm3"]
 
 _STATE_OF = {"started": "printing", "resumed": "printing", "recovered": "printing", "paused": "paused",
              "finished": "finished", "stopped": "stopped", "fault": "failed", "interrupted": "interrupted"}
@@ -130,6 +130,12 @@ def _clock(rec: s.JobRecord, seg: s.JobSegment, event: s.Event, wall_s: float) -
     rec.wall_elapsed_s = sum(max((x.ended_s or wall_s) - x.started_s, 0.0) for x in rec.segments)
 
 
+def run_share_mm3(rec: s.JobRecord, seg: s.JobSegment) -> float:
+    """What run ``seg`` deposited: the print's volume so far (the twin counts over all its runs) less the
+    other runs'."""
+    return max(rec.deposited_mm3 - sum(x.deposited_mm3 for x in rec.segments if x is not seg), 0.0)
+
+
 def _deposited(rec: s.JobRecord, seg: s.JobSegment, data: dict) -> None:
     """What the print has deposited so far (the twin's count over its segments), this segment's share, and
     the share of the plan's volume that is (when the event says it)."""
@@ -137,8 +143,7 @@ def _deposited(rec: s.JobRecord, seg: s.JobSegment, data: dict) -> None:
         return
     rec.deposited_mm3 = float(data["extruded_mm3"])
     rec.filament_mm = float(data.get("filament_mm", rec.filament_mm))
-    before = sum(x.deposited_mm3 for x in rec.segments if x is not seg)
-    seg.deposited_mm3 = max(rec.deposited_mm3 - before, 0.0)
+    seg.deposited_mm3 = run_share_mm3(rec, seg)
     planned = rec.plan.extruded_mm3 if rec.plan is not None else 0.0
     if planned > 0:
         rec.progress_r = min(max(rec.deposited_mm3 / planned, 0.0), 1.0)

@@ -14,6 +14,7 @@ ignored.
 from __future__ import annotations
 
 from fabric import schemas as s
+from fabric.printjobs.events import run_share_mm3
 
 __all__ = ["LIVE_PERIOD_S", "apply_live"]
 
@@ -30,7 +31,7 @@ def apply_live(rec: s.JobRecord, st: s.StationState, wall_s: float) -> bool:
     before = (rec.progress_r, rec.deposited_mm3, rec.layer, rec.sim_elapsed_s)   # the run's share follows these
     rec.progress_r = min(max(float(st.progress_r), 0.0), 1.0)
     rec.deposited_mm3 = max(float(st.deposited_mm3), 0.0)
-    seg.deposited_mm3 = max(rec.deposited_mm3 - sum(x.deposited_mm3 for x in rec.segments if x is not seg), 0.0)
+    seg.deposited_mm3 = run_share_mm3(rec, seg)
     if st.layer > rec.layer:
         rec.layer = int(st.layer)
         seg.last_layer = max(seg.last_layer, int(st.layer))

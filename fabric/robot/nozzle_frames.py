@@ -91,17 +91,12 @@ class NozzleFrames:
         c, s = np.cos(half), np.sin(half)
         cols = (w1 * c - z1 * s, x1 * c + y1 * s, y1 * c - x1 * s, z1 * c + w1 * s)
         flip = cols[0] < 0.0
-        if self.const and w1 == 0.0 and z1 == 0.0:
-            # a nozzle pointing straight down (B's quaternion (0, x, y, 0)): w and z are zero on every row, so
-            # the largest component is x or y (Shepperd's sign rule below, with |z| = 0 left out)
-            flip = np.where(np.abs(cols[1]) >= np.abs(cols[2]), cols[1], cols[2]) < 0.0
-        else:
-            zero = np.flatnonzero(cols[0] == 0.0)          # w = 0: largest component positive, as Shepperd's
-            if len(zero):
-                sub = [col if len(zero) == len(c) else col[zero] for col in cols[1:]]
-                a = [np.abs(col) for col in sub]
-                largest = np.where((a[0] >= a[1]) & (a[0] >= a[2]), sub[0],
-                                   np.where(a[1] >= a[2], sub[1], sub[2]))
-                flip[zero] = largest < 0.0
+        zero = np.flatnonzero(cols[0] == 0.0)              # w = 0: largest component positive, as Shepperd's
+        if len(zero):
+            sub = [col if len(zero) == len(c) else col[zero] for col in cols[1:]]
+            a = [np.abs(col) for col in sub]
+            largest = np.where((a[0] >= a[1]) & (a[0] >= a[2]), sub[0],
+                               np.where(a[1] >= a[2], sub[1], sub[2]))
+            flip[zero] = largest < 0.0
         q = np.stack(cols, axis=1)
         return np.negative(q, out=q, where=flip[:, None])

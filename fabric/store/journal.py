@@ -65,6 +65,7 @@ class StationJournal:
         self.period_s = float(period_s)
         self._last_s = float("-inf")
         self.checkpoints = 0
+        self._cell: tuple[Any, str] | None = None          # the twin's cell and its fingerprint, found once
 
     # Writing -------------------------------------------------------------------------------
 
@@ -83,13 +84,18 @@ class StationJournal:
         now = time.monotonic()
         if not force and now - self._last_s < self.period_s:
             return False
-        state = {"meta": asdict(meta), "twin": twin.snapshot(with_beads=False), "cell": twin.cell.fingerprint(),
+        state = {"meta": asdict(meta), "twin": twin.snapshot(with_beads=False), "cell": self._fingerprint(twin.cell),
                  "cell_name": twin.cell.name}
         epoch = f"{meta.program_id}:{twin.s.t_started_s}"
         self.store.save_checkpoint(state, epoch, twin.beads)
         self._last_s = now
         self.checkpoints += 1
         return True
+
+    def _fingerprint(self, cell: Any) -> str:
+        if self._cell is None or self._cell[0] is not cell:
+            self._cell = (cell, cell.fingerprint())
+        return self._cell[1]
 
     # Restoring ------------------------------------------------------------------------------
 
@@ -101,7 +107,7 @@ class StationJournal:
             return None
         meta = StationMeta(**ck.state["meta"])
         saved = ck.state.get("cell")                          # older checkpoints do not say: taken as this cell
-        if saved is not None and saved != cell.fingerprint():
+        if saved is not None and saved != self._fingerprint(cell):
             return self._other_cell(cell, meta, str(ck.state.get("cell_name", "?")))
         program = program_from_artifact(self.artifacts.get(meta.program_id)) if meta.program_id else None
         twin = Twin.from_snapshot(cell, ck.state["twin"], program, ck.beads)

@@ -187,8 +187,9 @@ the return home; joint moves along the twin's own Ruckig paths) for every robot 
 nozzle and its tip, against the table, the plate, every bead laid before the motion (one box per bead, of
 the twin's width and height) and the robot itself. The only contact not checked: the nozzle tip (radius
 4 mm, the last 1 mm of the nozzle) on the layer it lays and the layers it rests on (for these planar
-prints, the layer under it). Nothing is missed between checked configurations (distance lower bounds against motion bounds, swept hulls for the
-nozzle along linear moves); the clearance reported is a lower bound along the whole motion.
+prints, the layer under it). Nothing is missed between checked configurations (distance lower bounds
+against motion bounds, swept hulls for the nozzle along linear moves); the clearance reported is a lower
+bound along the whole motion.
 
 ## The sample part through the CLI: check against plan
 

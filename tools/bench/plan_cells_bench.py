@@ -103,7 +103,8 @@ def bench_cell(name: str, gcode: Path, moves: int, n_dls: int, tmp: Path, n_cli:
         "plan_s": plan_s, "ik_s": st.ik_s, "plan_moves_per_s": st.moves / plan_s,
         "csv_s": csv_s, "csv_rows": rows_written, "csv_joint_columns": sum(c.endswith("_deg") for c in header),
         "plan_and_csv_moves_per_s": st.moves / (plan_s + csv_s),
-        "dls_targets": len(rows), "dls_targets_per_s": len(rows) / dls_s, "dls_converged_r": float(ok.min()), "dls_runs": len(dls_runs),
+        "dls_targets": len(rows), "dls_targets_per_s": len(rows) / dls_s, "dls_converged_r": float(ok.min()),
+        "dls_runs": len(dls_runs),
         "plan_vs_dls_x": (st.moves / plan_s) / (len(rows) / dls_s),
     }
 
