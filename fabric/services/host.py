@@ -57,7 +57,6 @@ LAUNCHER_PID_ENV = "FABRIC_LAUNCHER_PID"
 _PR_SET_PDEATHSIG = 1
 
 
-
 def setup_logging(name: str, level: str = "INFO") -> None:
     logging.basicConfig(level=getattr(logging, level.upper(), logging.INFO),
                         format=f"%(asctime)s {name} %(levelname)s %(message)s", datefmt="%H:%M:%S")
