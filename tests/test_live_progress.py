@@ -19,7 +19,7 @@ import pytest
 from fabric import schemas as s
 from fabric.cli.progress import PrintProgress, eta_text
 from fabric.demo import sample_model
-from fabric.printjobs.history import material_text
+from fabric.printjobs.history import material_text, state_text
 from fabric.printjobs.live import apply_live
 
 from conftest import free_port
@@ -60,6 +60,18 @@ def test_the_material_line_says_when_the_filament_is_counted() -> None:
     rec.segments.append(s.JobSegment(began="restart", started_s=200.0, t_sim_start_s=80.0, from_layer=5))
     rec.deposited_mm3 = 900.0
     assert material_text(rec) == "900 mm3 deposited, 166 mm of filament by the end of run 1 (run 2 still open)"
+
+
+def test_prepared_is_said_of_a_queued_job_only() -> None:
+    """"prepared" tells a queued job was sliced, planned and checked ahead; on the station or ended it is noise
+    (``job show`` said "printing (prepared)")."""
+    rec = _printing()
+    rec.prepared = True
+    assert state_text(rec) == "printing"
+    rec.state = "queued"
+    assert state_text(rec) == "queued (prepared)"
+    rec.prepared = False
+    assert state_text(rec) == "queued"
 
 
 @pytest.mark.parametrize("why, rec_state, st", [

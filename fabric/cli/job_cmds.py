@@ -16,7 +16,7 @@ from fabric.cli.pipeline_cmds import parse_sets
 from fabric.cli.progress import print_progress
 from fabric.client import Client
 from fabric.client.follow import follow_print
-from fabric.printjobs.history import estimate_text, material_text, override_lines, segment_lines
+from fabric.printjobs.history import estimate_text, material_text, override_lines, segment_lines, state_text
 from fabric.samples import SAMPLES_DIR, Sample, samples
 from fabric.wire.errors import NotFound, ValidationError
 
@@ -92,7 +92,7 @@ def resolve_job_id(c: Client, job_id: str) -> str:
 
 def _record_text(rec: s.JobRecord) -> str:
     source = f"{rec.source}, curved layers" if rec.layers == "curved" else rec.source
-    lines = [f"job {rec.job_id}: {rec.filename} ({source}) {rec.state}" + (" (prepared)" if rec.prepared else ""),
+    lines = [f"job {rec.job_id}: {rec.filename} ({source}) {state_text(rec)}",
              f"  stage      {rec.stage}"]
     if rec.reason:
         lines.append(f"  reason     {rec.reason}")

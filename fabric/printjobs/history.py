@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 from fabric import schemas as s
 
-__all__ = ["duration_text", "segment_lines", "override_lines", "material_text", "estimate_text"]
+__all__ = ["duration_text", "segment_lines", "override_lines", "material_text", "estimate_text", "state_text"]
 
 def duration_text(seconds: float) -> str:
     """``42s``, ``3m12s``, ``2h05m``."""
@@ -27,6 +27,12 @@ def estimate_text(estimate_s: float, words: Callable[[float], str] = lambda t: f
     """``estimate 1354.0 s`` (``words`` writes the time); a plan that cannot be timed (its targets are not all
     reachable: the planner says -1) has ``no time estimate``."""
     return f"estimate {words(estimate_s)}" if estimate_s >= 0.0 else "no time estimate"
+
+
+def state_text(rec: s.JobRecord) -> str:
+    """The job's state, ``queued (prepared)`` while a queued job is sliced, planned and checked ahead (once it
+    is on the station, or has ended, being prepared says nothing more)."""
+    return rec.state + (" (prepared)" if rec.prepared and rec.state == "queued" else "")
 
 
 def material_text(rec: s.JobRecord) -> str:

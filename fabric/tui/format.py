@@ -4,7 +4,14 @@ from __future__ import annotations
 import time
 
 from fabric import schemas as s
-from fabric.printjobs.history import duration_text, estimate_text, material_text, override_lines, segment_lines
+from fabric.printjobs.history import (
+    duration_text,
+    estimate_text,
+    material_text,
+    override_lines,
+    segment_lines,
+    state_text,
+)
 
 __all__ = ["duration_text", "eta_text", "layer_text", "job_outcome", "job_report", "STATE_STYLE"]
 
@@ -40,7 +47,7 @@ def job_report(rec: s.JobRecord) -> str:
     """A job's whole record, as the job dialog shows it."""
     when = lambda t: time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(t)) if t else "-"  # noqa: E731
     lines = [f"{rec.filename} ({rec.source}, {rec.backend or '-'} / {rec.profile or '-'})",
-             f"state     {rec.state}" + (" (prepared)" if rec.prepared else "")
+             f"state     {state_text(rec)}"
              + (f", waiting for the {rec.waiting_for}" if rec.waiting_for else ""),
              f"stage     {rec.stage or '-'}"]
     if rec.reason:
