@@ -96,3 +96,35 @@ def test_up_starts_services_with_the_named_cell(cell_up) -> None:
         state = client.state()
     wobj = Cell.builtin(name).wobj_T()[:3, 3]
     np.testing.assert_allclose(state.wobj_xyz_mm, wobj, atol=1e-6)      # the station runs that cell
+
+
+def test_the_console_draws_the_joints_against_the_cells_own_limits(cell_up) -> None:
+    """The station tells its cell (``station/cmd/cell``); a console started with no ``--cell-config`` draws each
+    joint against that arm's limits (it showed the default IRB 140's, or "limits unknown" for the Panda)."""
+    import asyncio
+
+    from fabric.tui.app import FabricConsole
+    from fabric.tui.widgets.joints_panel import JointsPanel
+
+    name, procs = cell_up
+    model = Cell.builtin(name).to_dict()["robot"]
+    with Client.connect(replace(procs.client_settings, mode="client")) as client:
+        client.wait_alive(deadline_s=60)
+        info = client.cell_info()
+        assert (info.name, info.fingerprint, info.joint_names) == (name, Cell.builtin(name).fingerprint(),
+                                                                    model["joint_names"])
+        assert (info.lower_deg, info.upper_deg) == (model["lower_deg"], model["upper_deg"])
+
+        async def scenario() -> None:
+            app = FabricConsole(client)
+            async with app.run_test(size=(160, 48)) as pilot:
+                for _ in range(400):
+                    if app.limits is not None and app.pose is not None:
+                        break
+                    await pilot.pause(0.05)
+                assert app.limits == (model["lower_deg"], model["upper_deg"])
+                await pilot.pause(0.3)
+                text = str(app.screen.query_one(JointsPanel).render())
+                assert "limits unknown" not in text
+                assert all(f"A{k + 1} " in text for k in range(len(model["joint_names"])))
+        asyncio.run(scenario())

@@ -66,6 +66,12 @@ class StubClient:
     def state(self) -> s.StationState:
         return self.station
 
+    def cell_info(self) -> s.CellInfo:
+        """The station's cell: the IRB 140's joints and limits."""
+        return s.CellInfo(name="irb140", joint_names=[f"joint_{k}" for k in range(1, 7)],
+                          lower_deg=[-180.0, -90.0, -230.0, -200.0, -115.0, -400.0],
+                          upper_deg=[180.0, 110.0, 50.0, 200.0, 115.0, 400.0])
+
     def artifact(self, service: str, artifact_id: str, timeout: float = 60.0) -> s.Artifact:
         if artifact_id not in self.artifacts:
             raise NotFound(f"no artifact {artifact_id} at {service}")

@@ -263,6 +263,7 @@ class Client:
     # --- station: the paper's commands ------------------------------------------
 
     def position(self) -> s.Pose: return self.call("station", "position")
+    def cell_info(self) -> s.CellInfo: return self.call("station", "cell")
     def home(self) -> s.Ack: return self.call("station", "home")
     def jog(self, dx_mm: float = 0.0, dy_mm: float = 0.0, dz_mm: float = 0.0, speed_mm_s: float = 20.0) -> s.Ack:
         """A straight move of the nozzle by hand (plate frame), certified against the part first."""

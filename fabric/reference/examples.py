@@ -65,6 +65,11 @@ def _ack(message: str, state: str) -> s.Ack:
 
 COMMAND_EXAMPLES: dict[tuple[str, str], Example] = {
     ("station", "position"): (s.Empty(), POSE),
+    ("station", "cell"): (s.Empty(), s.CellInfo(
+        name="irb140", description="ABB IRB 140 additive-manufacturing cell of the paper (RoboDK station, Table II)",
+        robot="irb140", brand="abb", ik_family="opw", joint_names=[f"joint_{k}" for k in range(1, 7)],
+        lower_deg=[-180.0, -90.0, -230.0, -200.0, -115.0, -400.0], upper_deg=[180.0, 110.0, 50.0, 200.0, 115.0, 400.0],
+        fingerprint="3625a53f467a9e8c")),
     ("station", "home"): (s.Empty(), _ack("moving home (collision-checked)", "idle")),
     ("station", "jog"): (s.JogRequest(dxyz_mm=[0.0, 0.0, 20.0], speed_mm_s=20.0),
                          _ack("jogging by (0, 0, 20) mm at 20 mm/s (collision-checked)", "idle")),

@@ -46,6 +46,7 @@ from fabric.schemas.pipeline import (
 )
 from fabric.schemas.station import (
                                    CalibrationReport,
+                                   CellInfo,
                                    Check,
                                    Event,
                                    EventList,
@@ -78,7 +79,8 @@ __all__ = [
     "SliceRequest", "SliceResult", "SlowedMove", "UnreachableTarget",
     "ExportChunk", "ExportChunkRequest", "UploadChunk", "UploadStatus",
     "MAX_FILES_PAGE", "FileAdd", "FileList", "FileQuery", "FilesQuery", "LibraryFile",
-    "CalibrationReport", "Check", "Event", "EventList", "EventsQuery", "ExtrudeRequest", "Extrusion", "JogRequest",
+    "CalibrationReport", "CellInfo", "Check", "Event", "EventList", "EventsQuery", "ExtrudeRequest", "Extrusion",
+    "JogRequest",
     "LoadRequest",
     "MeshRequest", "Overrides", "Pose", "ReadyReport", "StartRequest", "StationState", "Temps", "TimeInfo",
 ]

@@ -131,6 +131,21 @@ class TimeInfo:
     state: str = ""              # the station's state
 
 
+@schema("station.CellInfo")
+class CellInfo:
+    """The cell the station runs: its name, the arm, and each joint's limits (what a console draws the joints
+    against, whichever cell it follows)."""
+    name: str                    # the cell's name (a built-in cell's, ``fabric-cli cell list``, or its file's)
+    description: str = ""        # the cell's own words
+    robot: str = ""              # the arm's model (its URDF's name)
+    brand: str = ""              # whose controller: abb, kuka, ur, franka, ... (which export is native)
+    ik_family: str = ""          # the arm's inverse kinematics: closed forms opw, ur, panda; numeric (batched DLS)
+    joint_names: list[str] = f(factory=list)    # A1..An, as the robot model names them
+    lower_deg: list[float] = f(factory=list)    # each joint's lower limit, degrees
+    upper_deg: list[float] = f(factory=list)    # each joint's upper limit, degrees
+    fingerprint: str = ""        # hash of the cell's configuration (robot, tool, table, plate, home, approach)
+
+
 @schema("station.LoadRequest")
 class LoadRequest:
     """Load a planned program, fetched by id from the planner's artifact store."""

@@ -103,8 +103,10 @@ class StationService(Service):
         self.pub_events = self.publisher("events", lossless=True)
         self._position = codec.encode(self.msgs.pose())    # the twin's pose now, encoded
         self.handle_snapshot("position", lambda: self._position)
+        cell_info = codec.encode(cell_info_of(cell))              # constant for the process's life
+        self.handle_snapshot("cell", lambda: cell_info)
         for ep in endpoints_of(self.name):
-            if ep.command not in ("position", "health"):
+            if ep.command not in ("position", "cell", "health"):
                 self.handle(ep.command, getattr(self, f"on_{ep.command}"))
 
     # The meta's fields, as the rest of this module reads them.
@@ -563,6 +565,15 @@ class StationService(Service):
                            gcode_line=lines.astype("<i8"), wobj=np.array(wobj, dtype="<f8"),
                            axis=np.array(beads.axis[lo:hi], dtype="<f8"))
         return self._step(read)
+
+
+def cell_info_of(cell: Cell) -> s.CellInfo:
+    """What the station tells of its cell (``station/cmd/cell``)."""
+    robot = cell.to_dict()["robot"]
+    return s.CellInfo(name=cell.name, description=cell.description, robot=str(robot.get("name", "")),
+                      brand=cell.brand, ik_family=cell.robot.ik_family,
+                      joint_names=list(robot["joint_names"]), lower_deg=[float(v) for v in robot["lower_deg"]],
+                      upper_deg=[float(v) for v in robot["upper_deg"]], fingerprint=cell.fingerprint())
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -15,8 +15,9 @@ def main(argv: list[str] | None = None) -> int:
     from fabric.client import Client
     p = argparse.ArgumentParser(prog="fabric-tui", description="operator console for an am-fabric cell")
     add_session_args(p)
-    p.add_argument("--cell-config", default=None, metavar="TOML",
-                   help="the cell model for joint limits (default: the built-in cell, as the services use)")
+    p.add_argument("--cell-config", default=None, metavar="NAME|FILE",
+                   help="a cell model whose joint limits stand in while the cell's station cannot tell its own "
+                        "(by default the station tells them)")
     a = p.parse_args(argv)
     try:
         from fabric.tui.app import FabricConsole, default_state_path

@@ -122,6 +122,7 @@ class FabricConsole(App):
         self.log_lines: deque[str] = deque(maxlen=LOG_LINES)
         self._toolpath_id = ""          # the program the toolpath is of
         self._hit_program_id = ""       # the program the collision hit is of
+        self._limits_source = ""        # who told the joints' limits shown: "station", "model" or "" (none yet)
 
     # --- life ---------------------------------------------------------------------------
 
@@ -129,7 +130,6 @@ class FabricConsole(App):
         self.switch_mode("cell")
         if self.client is not None:
             self._follow(self.client)
-            self.load_limits()
 
     def on_unmount(self) -> None:
         if self.link is not None:
@@ -143,9 +143,11 @@ class FabricConsole(App):
         self.cell = client.keys.cell
         self.sub_title = f"cell {self.cell}"
         self.station_state = self.pose = self.extrusion = self.temps = self.toolpath = self.collision_hit = None
+        self.limits, self._limits_source = None, ""
         self.alive, self.degraded, self.jobs, self._toolpath_id, self._hit_program_id = {}, {}, [], "", ""
         self.link = CellLink(client, self.post_message)
         self.link.open()
+        self.load_limits()
 
     def switch_cell(self, name: str) -> None:
         if self.client is not None and name and name != self.cell:
@@ -154,7 +156,22 @@ class FabricConsole(App):
 
     @work(thread=True, group="limits")
     def load_limits(self) -> None:
-        """Joint limits from the cell model (no service serves it): ``--cell-config`` or the built-in cell."""
+        """The joints' limits of the cell followed. Its station tells them (``station/cmd/cell``); while no
+        station answers, the cell model of ``--cell-config`` stands in, if one was given (no service else
+        knows the arm: a default model could be another arm's, with other limits)."""
+        client, cell = self.client, self.cell
+        if client is None:
+            return
+        try:
+            info = client.cell_info()
+        except FabricError as err:
+            if self.cell_config is None:
+                return                      # asked again when the station comes up
+            self._limits_from_model(cell, err)
+            return
+        self.post_message(LimitsReady(cell, info.joint_names, info.lower_deg, info.upper_deg, "station"))
+
+    def _limits_from_model(self, cell: str, station_error: FabricError) -> None:
         try:
             from fabric.robot.cell import Cell
             model = Cell.load_or_builtin(self.cell_config).to_dict()["robot"]
@@ -162,9 +179,10 @@ class FabricConsole(App):
             why = err if isinstance(err, FabricError) else missing_extra(err, "the cell model")
             if why is None:
                 raise
-            self.call_from_thread(self.show_reply, "cell model", False, f"joint limits unknown: {why.message}")
+            self.call_from_thread(self.show_reply, "cell model", False,
+                                  f"joint limits unknown: {station_error.message}; {why.message}")
             return
-        self.post_message(LimitsReady(model["joint_names"], model["lower_deg"], model["upper_deg"]))
+        self.post_message(LimitsReady(cell, model["joint_names"], model["lower_deg"], model["upper_deg"], "model"))
 
     # --- what the console remembers between runs --------------------------------------------
 
@@ -234,7 +252,10 @@ class FabricConsole(App):
 
     def on_liveliness(self, msg: Liveliness) -> None:
         if msg.cell == self.cell:
+            came = msg.alive.get("station") and not self.alive.get("station")
             self.alive = {**self.alive, **msg.alive}
+            if came and self._limits_source != "station":     # a station (again): it tells its cell's arm
+                self.load_limits()
 
     def on_health_report(self, msg: HealthReport) -> None:
         if msg.cell == self.cell:
@@ -262,7 +283,9 @@ class FabricConsole(App):
         self.collision_hit = hit
 
     def on_limits_ready(self, msg: LimitsReady) -> None:
-        self.limits = (msg.lower_deg, msg.upper_deg)
+        if msg.cell == self.cell:
+            self.limits = (msg.lower_deg, msg.upper_deg)
+            self._limits_source = msg.source
 
     def on_reply(self, msg: Reply) -> None:
         self.show_reply(msg.command, msg.ok, msg.text, msg.severity)

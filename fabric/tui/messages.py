@@ -62,11 +62,13 @@ class CollisionChecked(Message):
 
 
 class LimitsReady(Message):
-    """Joint names and limits of the cell model (degrees)."""
+    """Joint names and limits (degrees) of cell ``cell``'s arm, and where they come from (``station``: the
+    station of that cell told them; ``model``: the console's own ``--cell-config``)."""
 
-    def __init__(self, names: list[str], lower_deg: list[float], upper_deg: list[float]) -> None:
+    def __init__(self, cell: str, names: list[str], lower_deg: list[float], upper_deg: list[float],
+                 source: str) -> None:
         super().__init__()
-        self.names, self.lower_deg, self.upper_deg = names, lower_deg, upper_deg
+        self.cell, self.names, self.lower_deg, self.upper_deg, self.source = cell, names, lower_deg, upper_deg, source
 
 
 class JobsListed(Message):

@@ -61,6 +61,7 @@ def _ep(service: str, command: str, req: type, rep: type, timeout_s: float = 5.0
 _TABLE = [
     # station: the paper's commands
     _ep("station", "position", s.Empty, s.Pose, doc="TCP pose and joints now"),
+    _ep("station", "cell", s.Empty, s.CellInfo, doc="the cell it runs: its name, the arm, the joints' limits"),
     _ep("station", "home", s.Empty, s.Ack, 30.0, "collision-checked joint move to home"),
     _ep("station", "jog", s.JogRequest, s.Ack, 30.0, "collision-checked straight move of the nozzle by hand"),
     _ep("station", "extrude", s.ExtrudeRequest, s.Ack, doc="push or pull filament by hand (a hot nozzle)"),
