@@ -8,6 +8,8 @@ column per axis. The station's pose carries the arm's joints.
 from __future__ import annotations
 
 import io
+import subprocess
+import sys
 import threading
 from dataclasses import replace
 
@@ -114,6 +116,11 @@ def test_the_console_draws_the_joints_against_the_cells_own_limits(cell_up) -> N
         assert (info.name, info.fingerprint, info.joint_names) == (name, Cell.builtin(name).fingerprint(),
                                                                     model["joint_names"])
         assert (info.lower_deg, info.upper_deg) == (model["lower_deg"], model["upper_deg"])
+        assert client.status().station_cell == info                 # the supervisor's status says it too
+        out = subprocess.run([sys.executable, "-m", "fabric.cli.main", "status", *procs.client_settings.to_args()],
+                             capture_output=True, text=True, timeout=60)
+        assert out.stdout.splitlines()[0] == (f"cell {procs.cell}: {name}, {len(info.joint_names)} joints "
+                                              f"({info.ik_family} IK)"), out.stdout + out.stderr
 
         async def scenario() -> None:
             app = FabricConsole(client)

@@ -210,6 +210,7 @@ def test_real_replies_and_publications_validate_against_the_description(cell_in_
         for svc in ("station", "slicer", "planner", "collision", "supervisor"):
             assert raw.ask(svc, "health")["state"] == "ok"
         raw.ask("station", "position")
+        raw.ask("station", "cell")
         raw.ask("station", "time")
         raw.ask("station", "events", s.EventsQuery(since_seq=0, limit=10))
         raw.ask("slicer", "backends")

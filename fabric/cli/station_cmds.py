@@ -45,7 +45,9 @@ def _service_line(i) -> str:
 
 
 def _status_text(st) -> str:
-    lines = [f"cell {st.cell}"] + [_service_line(i) for i in st.services]
+    info = st.station_cell
+    head = f"cell {st.cell}" + (f": {info.name}, {len(info.joint_names)} joints ({info.ik_family} IK)" if info else "")
+    lines = [head] + [_service_line(i) for i in st.services]
     job = st.job
     if job is not None:
         lines.append(f"job {job.job_id} {job.filename}: {job.state} {job.stage}".rstrip())
@@ -77,6 +79,8 @@ def cmd_status(c: Client, a: argparse.Namespace) -> int:
         s.ServiceInfo(name=n, alive=v, health=healths[n].state if v and n in healths else "",
                       reasons=list(healths[n].reasons) if v and n in healths else [])
         for n, v in alive.items()])
+    if alive.get("station"):
+        st.station_cell = c.station_cell(timeout=a.timeout)
     if alive.get("supervisor"):
         try:
             st.job = c.status().job

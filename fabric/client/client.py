@@ -38,7 +38,7 @@ from fabric.client.transfers import EXPORT_CHUNK_BYTES, export_to_file, input_si
 from fabric.schemas.upload import UPLOAD_CHUNK_BYTES
 from fabric.wire import codec
 from fabric.wire.config import SessionSettings
-from fabric.wire.errors import NotFound, ServiceUnavailable
+from fabric.wire.errors import FabricError, NotFound, ServiceUnavailable
 from fabric.wire.keys import ALIVE_EVERY_CELL, ENDPOINTS, SERVICES, TOPICS, Endpoint, Keys, parse_alive
 from fabric.wire.qos import BULK_QOS, command_qos
 
@@ -264,6 +264,14 @@ class Client:
 
     def position(self) -> s.Pose: return self.call("station", "position")
     def cell_info(self) -> s.CellInfo: return self.call("station", "cell")
+
+    def station_cell(self, timeout: float = 2.0) -> s.CellInfo | None:
+        """The cell model the station runs, or None when no station answers (for ``status``)."""
+        try:
+            return self.call("station", "cell", timeout=timeout)
+        except FabricError:
+            return None
+
     def home(self) -> s.Ack: return self.call("station", "home")
     def jog(self, dx_mm: float = 0.0, dy_mm: float = 0.0, dz_mm: float = 0.0, speed_mm_s: float = 20.0) -> s.Ack:
         """A straight move of the nozzle by hand (plate frame), certified against the part first."""

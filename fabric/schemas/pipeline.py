@@ -7,6 +7,7 @@ import numpy as np
 
 from fabric.schemas.base import f, schema
 from fabric.schemas.common import ErrorReply
+from fabric.schemas.station import CellInfo
 from fabric.wire.errors import COLD_EXTRUSION_REASONS, UNREACHABLE_REASONS, ValidationError
 
 BACKENDS = ("builtin", "prusaslicer", "slic3r")
@@ -413,6 +414,7 @@ class FabricStatus:
     services: list[ServiceInfo]                 # every service of the cell, alive or not
     job: JobRecord | None = None                # the job on the station, else the latest job (nil: none)
     job_error: str = ""                         # why the latest job could not be read (then ``job`` is nil)
+    station_cell: CellInfo | None = None        # the cell model the station runs (nil: no station answered)
 
 
 @schema("supervisor.JobSubmit", version=6)

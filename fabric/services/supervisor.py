@@ -179,7 +179,8 @@ class SupervisorService(Service):
             infos.append(s.ServiceInfo(name=n, alive=now[n], since_s=since.get(n, 0.0) if now[n] else 0.0,
                                        health=h.state if h else "", reasons=list(h.reasons) if h else []))
         current = self._on_station() or self.store.latest()
-        return s.FabricStatus(cell=self.keys.cell, services=infos, job=current)
+        return s.FabricStatus(cell=self.keys.cell, services=infos, job=current,
+                              station_cell=self.client.station_cell() if now["station"] else None)
 
     def on_submit(self, req: s.JobSubmit) -> s.JobAccepted:
         """Queue a print job. ``source`` not given is taken from the file name (``s.pipeline.source_of``), here
