@@ -5,6 +5,7 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -76,6 +77,10 @@ def test_kill_9_mid_print_then_recover(session, settings, cell, tmp_path) -> Non
             before = client.state()
             station.send_signal(signal.SIGKILL)
             station.wait(timeout=10)
+            gone_by = time.monotonic() + 30.0       # its liveliness token goes with its link: not at once
+            while client.alive(timeout=1.0).get("station"):         # under load (else the wait below sees it)
+                assert time.monotonic() < gone_by, "the killed station is still said to be alive"
+                time.sleep(0.05)
 
             station = spawn_station(settings, tmp_path / "data", log)
             client.wait_alive(("station",), deadline_s=60)
