@@ -49,7 +49,7 @@ def _three_mf(mesh: trimesh.Trimesh, unit: str = "millimeter", transform: str | 
     ("part.STL", _ascii_stl(BOX)),
     ("part.obj", BOX.export(file_type="obj").encode()),
     ("part.3mf", _three_mf(BOX)),
-])
+], ids=["binary-stl", "ascii-stl", "obj", "3mf"])     # not the bytes: a 3MF's zip holds the time it was made,
 def test_formats_load_to_the_same_solid(name: str, data: bytes) -> None:
     mesh = load_mesh(data, name)
     assert mesh.is_watertight
