@@ -30,6 +30,32 @@ def event_msg(e) -> s.Event:
                    layer=e.layer, data=dict(e.data))
 
 
+def test_a_station_at_rest_moves_its_clock_mark_once_a_second_and_every_event_at_once(tmp_path: Path,
+                                                                                     monkeypatch) -> None:
+    """An idle station wrote its clock mark 50 times a second. At rest (nothing moves, no print runs) a tick
+    without events moves it at most every REST_MARK_S; a tick with events, or any tick of a print, writes."""
+    from fabric.store import journal as jr
+    from fabric.store.artifacts import ArtifactStore
+    now = [100.0]
+    monkeypatch.setattr(jr.time, "monotonic", lambda: now[0])
+    store = StationStore(tmp_path / "station.sqlite")
+    journal = jr.StationJournal(store, ArtifactStore(tmp_path / "artifacts"))
+    journal.record_tick([], 1.0, at_rest=True)
+    assert store.clock_mark() == 1.0                            # the first mark
+    for k in range(1, 40):                                     # 0.78 s of 20 ms ticks at rest: no writes
+        now[0] += 0.02
+        journal.record_tick([], 1.0 + 0.02 * k, at_rest=True)
+    assert store.clock_mark() == 1.0
+    journal.record_tick([s.Event(seq=1, t_sim_s=1.8, kind="temp_reached")], 1.8, at_rest=True)
+    assert store.clock_mark() == 1.8 and store.last_seq() == 1     # an event goes at once, with the mark
+    now[0] += jr.REST_MARK_S
+    journal.record_tick([], 2.8, at_rest=True)
+    assert store.clock_mark() == 2.8                            # a second on: the mark moves
+    now[0] += 0.02
+    journal.record_tick([], 2.82, at_rest=False)
+    assert store.clock_mark() == 2.82                           # moving or printing: every tick
+
+
 def test_events_and_clock_survive_a_reopen_and_are_pruned(tmp_path: Path) -> None:
     store = StationStore(tmp_path / "station.sqlite", keep_events=1500)
     assert store.last_seq() == 0 and store.clock_mark() is None and store.load() is None

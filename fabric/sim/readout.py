@@ -22,6 +22,7 @@ class Readout:
         self.state = state
         self.moves = moves
         self._cache: tuple[tuple[float, int, float], Sample] | None = None
+        self._rest: tuple[bytes, Pose] | None = None      # the pose at rest, kept while the robot stands still
 
     def forget(self) -> None:
         """Drop the cached sample (the state changed other than by time passing)."""
@@ -44,16 +45,24 @@ class Readout:
         smp, leg = self._now_sample()
         work_T = self.state.work_T
         if smp is None or leg is None:
-            q, T = self.state.rest_q_rad, self.state.rest_T
-        else:
-            wobj = leg.timeline.program.wobj
-            if np.array_equal(wobj, work_T):
-                return Pose(np.array(smp.q_rad, dtype=float), np.array(smp.xyz_mm, dtype=float),
-                            np.array(smp.quat_wxyz, dtype=float), np.array(smp.base_xyz_mm, dtype=float))
-            q = smp.q_rad
-            T = wobj @ make_T(R_from_quat(smp.quat_wxyz), smp.xyz_mm)
+            return self._rest_pose(work_T)
+        wobj = leg.timeline.program.wobj
+        if np.array_equal(wobj, work_T):
+            return Pose(np.array(smp.q_rad, dtype=float), np.array(smp.xyz_mm, dtype=float),
+                        np.array(smp.quat_wxyz, dtype=float), np.array(smp.base_xyz_mm, dtype=float))
+        T = wobj @ make_T(R_from_quat(smp.quat_wxyz), smp.xyz_mm)
         Tp = inv_T(work_T) @ T
-        return Pose(np.array(q, dtype=float), Tp[:3, 3].copy(), quat_from_R(Tp[:3, :3]), T[:3, 3].copy())
+        return Pose(np.array(smp.q_rad, dtype=float), Tp[:3, 3].copy(), quat_from_R(Tp[:3, :3]), T[:3, 3].copy())
+
+    def _rest_pose(self, work_T: np.ndarray) -> Pose:
+        """The pose of the robot standing still, computed once while it stands (telemetry asks every tick)."""
+        q, T = np.asarray(self.state.rest_q_rad, dtype=float), np.asarray(self.state.rest_T, dtype=float)
+        key = q.tobytes() + T.tobytes() + np.asarray(work_T, dtype=float).tobytes()
+        if self._rest is None or self._rest[0] != key:
+            Tp = inv_T(work_T) @ T
+            self._rest = (key, Pose(q.copy(), Tp[:3, 3].copy(), quat_from_R(Tp[:3, :3]), T[:3, 3].copy()))
+        p = self._rest[1]
+        return Pose(p.q_rad.copy(), p.xyz_mm.copy(), p.quat_wxyz.copy(), p.base_xyz_mm.copy())
 
     def extrusion(self) -> ExtrusionState:
         """Extruder on/off and flow now; volume and filament pushed since start (retractions included)."""

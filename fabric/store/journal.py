@@ -26,6 +26,7 @@ __all__ = ["Restored", "StationJournal", "StationMeta", "DEFAULT_CHECKPOINT_PERI
 
 log = logging.getLogger("fabric.store.journal")
 DEFAULT_CHECKPOINT_PERIOD_S = 1.0
+REST_MARK_S = 1.0                   # at rest, an eventless tick moves the clock mark at most this often (wall s)
 LOADED_PIN = "station:loaded"
 
 
@@ -64,14 +65,23 @@ class StationJournal:
         self.artifacts = artifacts
         self.period_s = float(period_s)
         self._last_s = float("-inf")
+        self._mark_s = float("-inf")                          # when the clock mark was last written (monotonic)
         self.checkpoints = 0
         self._cell: tuple[Any, str] | None = None          # the twin's cell and its fingerprint, found once
 
     # Writing -------------------------------------------------------------------------------
 
-    def record_tick(self, events: list[s.Event], t_sim_s: float) -> None:
-        """This tick's events and the clock mark (before they are published)."""
+    def record_tick(self, events: list[s.Event], t_sim_s: float, at_rest: bool = False) -> None:
+        """This tick's events and the clock mark (before they are published).
+
+        ``at_rest``: nothing moves and no print runs, so a restore replays nothing from the mark but the clock
+        and the heaters; a tick without events then moves the mark at most every ``REST_MARK_S`` (an idle
+        station wrote its database 50 times a second). A tick with events always writes them and the mark."""
+        now = time.monotonic()
+        if at_rest and not events and now - self._mark_s < REST_MARK_S:
+            return
         self.store.record_tick(events, t_sim_s)
+        self._mark_s = now
 
     def keep_program(self, artifact: s.Artifact) -> None:
         """Keep the loaded program's artifact here (pinned), so a restart needs no other service."""

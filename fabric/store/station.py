@@ -5,7 +5,10 @@ instant comes back exactly:
 
 - every simulation tick, in one transaction: the events of that tick (the
   lossless stream, so ``seq`` goes on across restarts) and the *clock mark*,
-  the simulated time reached. Both are small;
+  the simulated time reached. Both are small. At rest (nothing moves, no
+  print runs) a tick without events moves the mark at most once a second
+  (:mod:`fabric.store.journal`): a restore replays only the clock and the
+  heaters from there;
 - at a bounded cadence and on every command: the *checkpoint*, the twin's
   whole state without its beads (see :mod:`fabric.sim.state`) plus what the
   station needs beside it (program id, job id, real-time factor);
