@@ -47,7 +47,7 @@ def test_a_clock_that_keeps_failing_backs_off_faults_the_print_and_says_why(sess
             calls = []
             full = threading.Event()
 
-            def disk_full(events, t_sim_s):               # what a full disk does under the journal
+            def disk_full(events, t_sim_s, at_rest=False):    # what a full disk does under the journal
                 calls.append(time.monotonic())
                 full.set()
                 raise OSError(errno.ENOSPC, "No space left on device")
