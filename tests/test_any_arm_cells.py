@@ -135,3 +135,29 @@ def test_the_console_draws_the_joints_against_the_cells_own_limits(cell_up) -> N
                 assert "limits unknown" not in text
                 assert all(f"A{k + 1} " in text for k in range(len(model["joint_names"])))
         asyncio.run(scenario())
+
+
+SQUARE_GCODE = ("M104 S210\nM109 S210\nG21\nG90\nM83\nG1 Z0.3 F1200\nG1 X20 Y20 F3000\n"
+                + "".join(f"G1 Z{0.3 * (k + 1):.1f}\nG1 X40 Y20 E1 F1500\nG1 X40 Y40 E1\nG1 X20 Y40 E1\n"
+                          f"G1 X20 Y20 E1\n" for k in range(3)))
+
+
+def test_plan_says_when_an_export_is_another_brands_language(cell_up, tmp_path) -> None:
+    """A RAPID module for a UR or a KUKA arm is text no controller of the cell runs: ``plan`` writes it (it was
+    asked for) and says so; the cell's own language and the CSV go without a word."""
+    name, procs = cell_up
+    native = Cell.builtin(name).native_export
+    gcode = tmp_path / "square.gcode"
+    gcode.write_text(SQUARE_GCODE)
+    asked = {"csv": tmp_path / "p.csv", native: tmp_path / f"p.{native}"}
+    if name != "panda":                         # the 6-axis languages refuse a 7-axis program
+        asked["rapid"] = tmp_path / "p.mod"
+    flags = [a for fmt, path in asked.items() for a in (f"--{fmt}", str(path))]
+    out = subprocess.run([sys.executable, "-m", "fabric.cli.main", "plan", str(gcode), *flags,
+                          *procs.client_settings.to_args()], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stdout + out.stderr
+    warned = [ln for ln in out.stdout.splitlines() if ln.startswith("warning: ") and "controllers" in ln]
+    foreign = [fmt for fmt in asked if fmt not in ("csv", native)]
+    assert warned == [f"warning: {asked[fmt]} is {fmt} (ABB's controllers); this cell's controller runs {native}"
+                      for fmt in foreign], out.stdout
+    assert all(path.stat().st_size > 0 for path in asked.values())

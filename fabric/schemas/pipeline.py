@@ -138,7 +138,7 @@ class SlowedMove:
     joint: int = f(ge=1)        # the limiting axis, 1-based (A1 = 1)
 
 
-@schema("planner.PlanSummary", version=4)
+@schema("planner.PlanSummary", version=5)
 class PlanSummary:
     """What a plan produced. The material: ``filament_diameter_mm`` turned E into ``extruded_mm3``; it came
     from ``material_source`` (the request's option, the G-code's comments, or assumed: then ``warnings``
@@ -169,6 +169,8 @@ class PlanSummary:
     warnings: list[str] = f(factory=list)      # what the planner warns about (an assumed diameter, ...)
     allow_off_plate: bool = False              # targets off the plate or below it were allowed (still counted)
     cold_extrusion: ColdExtrusion | None = None    # the first move that would extrude cold (nil: none)
+    native_export: str = ""                    # the export the cell's controller runs (rapid, krl, urscript; csv
+                                               # for a cell of no brand): another brand's is a text, not a program
 
 
 @schema("planner.ProgramMsg")
@@ -407,7 +409,7 @@ class JobMove:
     position: int = f(default=0, ge=0, le=100000)   # its place among the waiting jobs (0 = next)
 
 
-@schema("supervisor.Status", version=2)
+@schema("supervisor.Status", version=3)
 class FabricStatus:
     """The cell at a glance: every service (alive, healthy) and the current job."""
     cell: str                                   # the cell's name

@@ -228,6 +228,7 @@ class PlannerService(Service):
             unreachable_by_reason={str(k): int(v) for k, v in rep.counts.items() if k != "ok"},
             elapsed_s=float(st.total_s), slowed_targets=0 if result.slowed_rows is None else len(result.slowed_rows),
             first_slowed=_first_slowed(result, program), allow_off_plate=req.allow_off_plate, cold_extrusion=cold,
+            native_export=self.cell.native_export,
             **_material_fields(st))
         self.records.put("summary", pid, summary)
         return pid
