@@ -79,13 +79,14 @@ def cmd_status(c: Client, a: argparse.Namespace) -> int:
         s.ServiceInfo(name=n, alive=v, health=healths[n].state if v and n in healths else "",
                       reasons=list(healths[n].reasons) if v and n in healths else [])
         for n, v in alive.items()])
-    if alive.get("station"):
-        st.station_cell = c.station_cell(timeout=a.timeout)
     if alive.get("supervisor"):
         try:
-            st.job = c.status().job
+            sup = c.status()                # it asks the station for its cell too
+            st.job, st.station_cell = sup.job, sup.station_cell
         except FabricError as exc:  # the supervisor may be mid-shutdown: liveliness already answered
             st.job_error = str(exc)
+    if alive.get("station") and st.station_cell is None:
+        st.station_cell = c.station_cell(timeout=a.timeout)
     if not any(alive.values()):
         cells = c.cells(timeout=a.timeout)
         others = ", ".join(cells) if cells else "none"

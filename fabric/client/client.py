@@ -263,12 +263,12 @@ class Client:
     # --- station: the paper's commands ------------------------------------------
 
     def position(self) -> s.Pose: return self.call("station", "position")
-    def cell_info(self) -> s.CellInfo: return self.call("station", "cell")
+    def cell_info(self, timeout: float | None = None) -> s.CellInfo: return self.call("station", "cell", None, timeout)
 
     def station_cell(self, timeout: float = 2.0) -> s.CellInfo | None:
-        """The cell model the station runs, or None when no station answers (for ``status``)."""
+        """:meth:`cell_info`, or None when no station answers (for ``status``)."""
         try:
-            return self.call("station", "cell", timeout=timeout)
+            return self.cell_info(timeout)
         except FabricError:
             return None
 

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from fabric.robot import frames
+from fabric.robot.brands import NATIVE_EXPORTS
 from fabric.robot.model import RobotModel, ToolGeometry
 from fabric.wire.errors import ConfigError, NotFound, ValidationError
 
@@ -50,8 +51,6 @@ __all__ = ["Cell", "CELLS_DIR", "PACKAGE_DIR", "DEFAULT_CELL", "NATIVE_EXPORTS",
 PACKAGE_DIR = Path(__file__).resolve().parent.parent
 CELLS_DIR = PACKAGE_DIR / "cells"
 DEFAULT_CELL = "irb140"          # the built-in cell a service uses when given no cell file
-# robot brand ([robot] brand) -> the export its controller runs; a cell naming no brand exports CSV
-NATIVE_EXPORTS: dict[str, str] = {"abb": "rapid", "kuka": "krl", "ur": "urscript", "franka": "csv", "": "csv"}
 
 
 def builtin_cell_names() -> list[str]:

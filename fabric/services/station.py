@@ -229,7 +229,7 @@ class StationService(Service):
             position = self._position = codec.encode(self.msgs.pose(sample=pose_due))
             ext = self.msgs.extrusion_due(now, ext_now) if pose_due else None
             temps = self.msgs.temps_due(now) if pose_due else None
-            at_rest = self.twin.state != "printing" and not self.twin.s.legs
+            at_rest = self.twin.state != "printing" and not self.twin.moving
             self.journal.record_tick(msgs, self.twin.t_sim_s, at_rest)      # written before it is published
             self.journal.checkpoint(self.twin, self.meta, force=key[:4] != self._last_state[:4])
             for m in msgs:

@@ -95,6 +95,7 @@ def round_trips(client: Client, session: zenoh.Session, n: int = 500) -> dict:
 def station_run(client: Client, monitors: list[Client], rtf: float, pid: str) -> dict:
     subs = [(m.subscribe("station", "pose"), m.subscribe("station", "events")) for m in monitors]
     try:
+        client.clear_plate()                # the operator takes the last run's part off the plate
         info = client.load(pid)
         client_events = client.subscribe("station", "events")
         t0 = time.perf_counter()
