@@ -82,10 +82,11 @@ def test_status_wait_waits_for_a_secured_hub_still_starting(tmp_path) -> None:
     booted, as in the deployment guide): it waits for the hub, is admitted with the operator's password
     (a hub that does not answer yet is not "refused the password"), then waits for the services (this cell has none)."""
     creds = Credentials.init(tmp_path / "creds", hub=f"tls/127.0.0.1:{free_port()}")
-    status = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "status", "--json", "--wait", "5",
+    status = subprocess.Popen([sys.executable, "-m", "fabric.cli.main", "status", "--json", "--wait", "12",
                                "--config", str(creds.config("operator")), "--cell", "nosuchcell"],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     time.sleep(3.5)                                    # longer than a plain command's connect window (3 s)
+    # (the wait leaves the hub 8.5 s to come up: 1.5 s was too little with the suite's two workers loading the host)
     hub = start_hub(creds)
     try:
         out, err = status.communicate(timeout=60)
@@ -94,7 +95,7 @@ def test_status_wait_waits_for_a_secured_hub_still_starting(tmp_path) -> None:
         hub.wait()
     said = out + err
     assert "refused" not in said and "cannot reach" not in said, said
-    assert json.loads(out)["error"]["message"].startswith("not alive after 5 s"), said   # admitted; no service
+    assert json.loads(out)["error"]["message"].startswith("not alive after 12 s"), said  # admitted; no service
 
 
 def test_a_service_started_before_its_hub_joins_it_once_it_is_up(tmp_path) -> None:

@@ -11,7 +11,6 @@ from fabric import schemas as s
 from fabric.cli.inputs import LargeInput, gcode_source, model_source, read_input
 from fabric.cli.output import emit
 from fabric.client import Client
-from fabric.robot.brands import language_maker
 from fabric.wire.errors import BadRequest
 
 __all__ = ["register", "parse_sets", "read_input"]
@@ -19,10 +18,12 @@ __all__ = ["register", "parse_sets", "read_input"]
 EXPORT_FLAGS = {"csv": "csv", "rapid": "rapid", "krl": "krl", "urscript": "urscript"}
 
 
-def foreign_export(fmt: str, native: str) -> bool:
-    """An export in another brand's robot language than the cell's (CSV is anyone's; an older planner's summary
-    names no native export: nothing is said)."""
-    return language_maker(fmt) is not None and bool(native) and fmt != native
+def foreign_maker(fmt: str, native: str) -> str | None:
+    """Whose robot language export ``fmt`` is, when that is another brand's than the cell's (``native``); None
+    for CSV (anyone's), the cell's own, or an older planner's summary that names no native export."""
+    from fabric.robot.brands import language_maker  # fabric.robot is the services' package: not at import
+    maker = language_maker(fmt)
+    return maker if maker is not None and native and fmt != native else None
 
 
 def parse_sets(items: list[str] | None) -> dict[str, str]:
@@ -132,8 +133,8 @@ def cmd_plan(c: Client, a: argparse.Namespace) -> int:
             lines.append(", ".join(f"{n} targets {k}" for k, n in outside.items())
                          + (" (allowed)" if r.allow_off_plate else " (--allow-off-plate to print anyway)"))
         lines += [f"wrote {fmt}: {path}" for fmt, path in written.items()]
-        lines += [f"warning: {path} is {fmt} ({language_maker(fmt)}'s controllers); this cell's controller runs "
-                  f"{r.native_export}" for fmt, path in written.items() if foreign_export(fmt, r.native_export)]
+        lines += [f"warning: {path} is {fmt} ({maker}'s controllers); this cell's controller runs {r.native_export}"
+                  for fmt, path in written.items() if (maker := foreign_maker(fmt, r.native_export))]
         return "\n".join(lines)
     emit(result, a.json, text)
     return 0 if summary.runnable else 2
