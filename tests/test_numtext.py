@@ -1,22 +1,58 @@
-"""Vectorised fixed-point text: exactly the characters of ``"%.<d>f"``, ties and edge values included."""
+"""Fixed-point text: exactly the characters of ``"%.<d>f"``, ties and edge values included, on both paths (the C
+helper ``fabric/native/numtext.c`` and numpy's)."""
 from __future__ import annotations
+
+import shutil
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
+from fabric.planning.post import numtext
 from fabric.planning.post.numtext import ChoiceColumn, FixedColumn, format_rows, trimmed_text
+
+
+@pytest.fixture(params=["native", "numpy"], autouse=True)
+def path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Every test on both paths: the C helper's, and numpy's (the helper switched off)."""
+    if request.param == "numpy":
+        monkeypatch.setattr(numtext, "_lib", [None])
+    elif numtext._numtext() is None:
+        pytest.fail("the C helper did not load" if shutil.which("cc") else "no C compiler here")
+    return str(request.param)
 
 _EDGES = [0.0, -0.0, -1e-9, 1e-9, 0.5, 1.5, 2.5, -2.5, 0.125, -0.125, 0.0005, 1.00005, 1e20, -1e20, np.nan, np.inf,
           -np.inf, 123456789.123456, 9.99995, 99999.99995]
 
 
-@pytest.mark.parametrize("decimals", [0, 1, 3, 4, 5, 7])
+_FINITE = [v for v in _EDGES if np.isfinite(v)]
+
+
+@pytest.mark.parametrize("decimals", [0, 1, 3, 4, 5, 7, 12])
 def test_same_text_as_printf(decimals: int) -> None:
     rng = np.random.default_rng(decimals)
     values = np.concatenate([rng.normal(0, 300, 20_000), rng.uniform(-1, 1, 20_000),
-                             np.round(rng.normal(0, 1, 20_000), decimals) + 0.5 * 10.0 ** -decimals, _EDGES])
+                             np.round(rng.normal(0, 1, 20_000), decimals) + 0.5 * 10.0 ** -decimals, _FINITE])
     got = format_rows([FixedColumn(values, decimals)]).decode()
     assert got == "".join(f"%.{decimals}f\n" % v for v in values.tolist())
+
+
+def test_values_not_finite_in_a_block_are_written_as_python_writes_them() -> None:
+    """The C helper leaves a block with NaN or infinity to numpy: the block is still written whole."""
+    values = np.array(_EDGES * 3)
+    got = format_rows([FixedColumn(np.arange(len(values)), 0), FixedColumn(values, 4)]).decode()
+    assert got == "".join(f"{i},{v:.4f}\n" for i, v in enumerate(values.tolist()))
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=1, max_size=40),
+       st.integers(0, 12), st.lists(st.integers(-2**63, 2**63 - 1), min_size=1, max_size=40))
+def test_fuzz_rows_are_printf(path: str, floats: list[float], decimals: int, ints: list[int]) -> None:
+    n = min(len(floats), len(ints))
+    f, i = np.array(floats[:n]), np.array(ints[:n], dtype=np.int64)
+    got = format_rows([FixedColumn(i, 0), FixedColumn(f, decimals), b"x"]).decode()
+    assert got == "".join(f"{a},%.{decimals}f,x\n" % b for a, b in zip(i.tolist(), f.tolist(), strict=True))
 
 
 def test_integer_and_constant_columns_and_separator() -> None:

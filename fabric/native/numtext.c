@@ -1,0 +1,118 @@
+/* Rows of fixed-point numbers as text: the characters C's and Python's "%.<d>f" write, one row per line.
+ *
+ * The Python side (fabric/planning/post/numtext.py) formats the same rows with numpy; this is the same
+ * algorithm without numpy's passes over memory. A value is scaled to an integer of `decimals` places
+ * (nearbyint(|v| * 10^d), the FPU's round-half-even like numpy's rint) and its digits are written; a
+ * value whose scaled double lies within its own rounding error of a half (a tie or nearly), or is huge,
+ * is written by snprintf, which rounds the exact binary value as Python does. A value not finite, or whose
+ * text would be longer than 63 characters, is not written: the call returns NUMTEXT_NOT_FINITE and the
+ * caller formats that block itself.
+ *
+ * Built and loaded by fabric/native/__init__.py (cc -O2 -shared), called through ctypes (the GIL is
+ * released during the call).
+ */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+#define NUMTEXT_NO_ROOM (-1)
+#define NUMTEXT_NOT_FINITE (-2)
+#define NUMTEXT_BAD_COLUMN (-3)
+
+enum { KIND_FLOAT = 0, KIND_INT = 1, KIND_TEXT = 2 };
+
+static const double MAX_SCALED = 1e15;   /* beyond this the integer path is not trusted */
+static const double TIE_TOL_R = 1e-15;   /* relative width of the band around a half left to snprintf */
+static const uint64_t POW10[13] = {1ULL, 10ULL, 100ULL, 1000ULL, 10000ULL, 100000ULL, 1000000ULL,
+                                   10000000ULL, 100000000ULL, 1000000000ULL, 10000000000ULL,
+                                   100000000000ULL, 1000000000000ULL};
+
+/* Digits of u, most significant first, at p; returns the end. */
+static char *put_uint(char *p, uint64_t u)
+{
+    char tmp[24];
+    int k = 0;
+    do {
+        tmp[k++] = (char)('0' + u % 10);
+        u /= 10;
+    } while (u);
+    while (k)
+        *p++ = tmp[--k];
+    return p;
+}
+
+/* "%.<d>f" of v at p (room for at least 64 bytes); returns the end, or NULL where v is not finite. */
+static char *put_fixed(char *p, double v, int d)
+{
+    if (!isfinite(v))
+        return NULL;
+    double scaled = fabs(v) * (double)POW10[d];
+    double rounded = nearbyint(scaled);
+    double off = fabs(scaled - rounded);
+    if (!(off < 0.5 - scaled * TIE_TOL_R) || !(scaled < MAX_SCALED)) {
+        int len = snprintf(p, 64, "%.*f", d, v);
+        return (len > 0 && len < 64) ? p + len : NULL;
+    }
+    uint64_t iv = (uint64_t)rounded;
+    if (signbit(v))
+        *p++ = '-';
+    if (d == 0)
+        return put_uint(p, iv);
+    p = put_uint(p, iv / POW10[d]);
+    *p++ = '.';
+    uint64_t frac = iv % POW10[d];
+    for (int k = d - 1; k >= 0; k--) {
+        p[k] = (char)('0' + frac % 10);
+        frac /= 10;
+    }
+    return p + d;
+}
+
+/* Rows 0..n-1 of `ncol` columns into out (capacity `cap` bytes), `sep` between columns, '\n' after each row.
+ * Column c: kind[c] KIND_FLOAT (double data[c][i], decimals[c] in 0..12), KIND_INT (int64_t data[c][i])
+ * or KIND_TEXT (text[c] of text_len[c] bytes on every row). Returns the bytes written, or a NUMTEXT_ code. */
+long numtext_rows(long n, int ncol, const int *kind, const void *const *data, const int *decimals,
+                  const char *const *text, const long *text_len, char sep, char *out, long cap)
+{
+    char *p = out;
+    char *end = out + cap;
+    for (int c = 0; c < ncol; c++)
+        if (kind[c] == KIND_FLOAT && (decimals[c] < 0 || decimals[c] > 12))
+            return NUMTEXT_BAD_COLUMN;
+    for (long i = 0; i < n; i++) {
+        for (int c = 0; c < ncol; c++) {
+            if (end - p < 96)
+                return NUMTEXT_NO_ROOM;
+            if (c && sep)
+                *p++ = sep;
+            switch (kind[c]) {
+            case KIND_FLOAT:
+                p = put_fixed(p, ((const double *)data[c])[i], decimals[c]);
+                if (p == NULL)
+                    return NUMTEXT_NOT_FINITE;
+                break;
+            case KIND_INT: {
+                int64_t v = ((const int64_t *)data[c])[i];
+                uint64_t u = (uint64_t)v;
+                if (v < 0) {
+                    *p++ = '-';
+                    u = 0 - u;
+                }
+                p = put_uint(p, u);
+                break;
+            }
+            case KIND_TEXT:
+                if (end - p < text_len[c] + 2)
+                    return NUMTEXT_NO_ROOM;
+                memcpy(p, text[c], (size_t)text_len[c]);
+                p += text_len[c];
+                break;
+            default:
+                return NUMTEXT_BAD_COLUMN;
+            }
+        }
+        *p++ = '\n';
+    }
+    return (long)(p - out);
+}
