@@ -28,18 +28,35 @@ static const uint64_t POW10[13] = {1ULL, 10ULL, 100ULL, 1000ULL, 10000ULL, 10000
                                    10000000ULL, 100000000ULL, 1000000000ULL, 10000000000ULL,
                                    100000000000ULL, 1000000000000ULL};
 
+/* "00" "01" .. "99": two digits per division */
+static const char PAIRS[201] =
+    "00010203040506070809101112131415161718192021222324252627282930313233343536373839"
+    "40414243444546474849505152535455565758596061626364656667686970717273747576777879"
+    "8081828384858687888990919293949596979899";
+
+/* The `width` last digits of u (zero-padded) at p[0..width-1]. */
+static void put_digits(char *p, uint64_t u, int width)
+{
+    int k = width;
+    while (k >= 2) {
+        unsigned pair = (unsigned)(u % 100);
+        u /= 100;
+        k -= 2;
+        p[k] = PAIRS[2 * pair];
+        p[k + 1] = PAIRS[2 * pair + 1];
+    }
+    if (k)
+        p[0] = (char)('0' + u % 10);
+}
+
 /* Digits of u, most significant first, at p; returns the end. */
 static char *put_uint(char *p, uint64_t u)
 {
-    char tmp[24];
-    int k = 0;
-    do {
-        tmp[k++] = (char)('0' + u % 10);
-        u /= 10;
-    } while (u);
-    while (k)
-        *p++ = tmp[--k];
-    return p;
+    int width = 1;
+    for (uint64_t t = u; t >= 10; t /= 10)
+        width++;
+    put_digits(p, u, width);
+    return p + width;
 }
 
 /* "%.<d>f" of v at p (room for at least 64 bytes); returns the end, or NULL where v is not finite. */
@@ -61,11 +78,7 @@ static char *put_fixed(char *p, double v, int d)
         return put_uint(p, iv);
     p = put_uint(p, iv / POW10[d]);
     *p++ = '.';
-    uint64_t frac = iv % POW10[d];
-    for (int k = d - 1; k >= 0; k--) {
-        p[k] = (char)('0' + frac % 10);
-        frac /= 10;
-    }
+    put_digits(p, iv % POW10[d], d);
     return p + d;
 }
 

@@ -238,11 +238,11 @@ def _native_rows(columns: Sequence[Column], sep: bytes, n: int) -> bytes | None:
         data[j] = values.ctypes.data
         cap += _ROW_BOUND + 1
     cap = max(cap * n + 128, 128)
-    out = ctypes.create_string_buffer(cap)
-    written = lib.numtext_rows(n, k, kinds, data, decimals, texts, text_len, sep[:1] or b"\0", out, cap)
+    out = np.empty(cap, dtype=np.uint8)     # not zeroed: only the bytes written are read
+    written = lib.numtext_rows(n, k, kinds, data, decimals, texts, text_len, sep[:1] or b"\0", out.ctypes.data, cap)
     if written < 0:                         # not finite or too long, or (never expected) no room: numpy writes it
         return None
-    return ctypes.string_at(out, written)
+    return out[:written].tobytes()
 
 
 _lib: list[ctypes.CDLL | None] = []
@@ -256,7 +256,7 @@ def _numtext() -> ctypes.CDLL | None:
             f.restype = ctypes.c_long
             f.argtypes = [ctypes.c_long, ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_void_p),
                           ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_char_p),
-                          ctypes.POINTER(ctypes.c_long), ctypes.c_char, ctypes.c_char_p, ctypes.c_long]
+                          ctypes.POINTER(ctypes.c_long), ctypes.c_char, ctypes.c_void_p, ctypes.c_long]
         _lib.append(lib)
     return _lib[0]
 
