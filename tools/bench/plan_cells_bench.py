@@ -40,6 +40,7 @@ from fabric.cli.up import CellProcesses  # noqa: E402
 from fabric.motion.program import MOVEL  # noqa: E402
 from fabric.planning import PlanOptions, plan_gcode_file  # noqa: E402
 from fabric.planning.post import write_csv  # noqa: E402
+from fabric.planning.post.numtext import native_rows  # noqa: E402
 from fabric.robot.cell import Cell, builtin_cell_names  # noqa: E402
 from fabric.robot.frames import R_from_quat, make_T  # noqa: E402
 from fabric.wire.config import SessionSettings  # noqa: E402
@@ -128,6 +129,9 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
         "same cell, run before the CLI runs and after each (the best of them, as the CLI's best: the host's load "
         "swings twofold within minutes here, and the pairing keeps it out of the ratio).",
         "",
+        f"CSV rows written by {meta.get('csv_rows_by', 'numpy')} (`fabric/native/numtext.c` where it is built; "
+        "`FABRIC_NATIVE=0` runs numpy's path).",
+        "",
         "| cell | IK | joints | moves | reachable | plan (s) | of which IK (s) | plan (moves/s) | CSV (s) "
         "| plan + CSV (moves/s) | DLS (targets/s) | plan / DLS | `fabric-cli plan --csv` (s: first, best) "
         "| CLI / DLS |",
@@ -156,7 +160,8 @@ def main(argv: list[str]) -> None:
             rows.append(bench_cell(name, gcode, moves, n_dls, tmp, n_cli))
             print(json.dumps(rows[-1]), flush=True)
     meta = {"n_moves": n_moves, "n_dls": n_dls, "n_cli": n_cli, "machine": platform.machine(), "cpus": os.cpu_count(),
-            "python": platform.python_version(), "numpy": np.__version__}
+            "python": platform.python_version(), "numpy": np.__version__,
+            "csv_rows_by": "the C helper" if native_rows() else "numpy"}
     out = ROOT / "docs" / "bench"
     (out / "plan_cells.json").write_text(json.dumps({"meta": meta, "cells": rows}, indent=2))
     (out / "plan_cells.md").write_text(report(rows, meta))

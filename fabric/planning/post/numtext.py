@@ -35,7 +35,7 @@ import numpy as np
 
 from fabric import native
 
-__all__ = ["format_rows", "FixedColumn", "ChoiceColumn", "Column", "trimmed_text"]
+__all__ = ["format_rows", "FixedColumn", "ChoiceColumn", "Column", "trimmed_text", "native_rows"]
 
 _ZERO, _DOT, _MINUS = ord("0"), ord("."), ord("-")
 _MAX_SCALED = 1e15          # beyond this the int64 digits path is not trusted: Python formats the value
@@ -246,6 +246,11 @@ def _native_rows(columns: Sequence[Column], sep: bytes, n: int) -> bytes | None:
 
 
 _lib: list[ctypes.CDLL | None] = []
+
+
+def native_rows() -> bool:
+    """Whether plain rows are written by the C helper here (else by numpy)."""
+    return _numtext() is not None
 
 
 def _numtext() -> ctypes.CDLL | None:
