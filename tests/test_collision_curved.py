@@ -15,6 +15,7 @@ from fabric.collision.beads import BeadSolids
 from fabric.collision.bodies import MM, TIP
 from fabric.collision.certify import Certifier
 from fabric.collision.path import MOVE_KINDS
+from fabric.collision import trees as trees_module
 from fabric.collision.trees import PartTrees
 from fabric.robot.cell import Cell
 
@@ -131,6 +132,29 @@ def test_a_tip_tilted_past_the_layer_under_it_is_reported(cell, cert, tilt_deg, 
     hit = res.first_hit
     assert hit is not None and hit.body == TIP and hit.other == "part"
     assert int(program.layer[hit.row]) == 3 and cert.beads.layer[hit.bead] <= 1   # a layer it may not touch
+
+
+@pytest.mark.parametrize("tilt_deg", [10.0, -40.0])
+def test_a_print_too_big_for_the_beads_trees_gets_the_same_verdict(cell, cert, monkeypatch, tilt_deg):
+    """Above ``FINE_TREE_MAX_CHAINS`` chains the sweep takes exact queries where it would ask the beads' trees:
+    the same verdict, the same first hit, and a clearance that is still a lower bound of the exact distances.
+    (The limit counts the chains a tree holds; it counted beads, so a curved print of 227k beads, some 30k
+    chains, went exact near the part everywhere: 635 s instead of 9 s with a slender nozzle.)"""
+    program = plan(cell, ridge_gcode(layers=5, tilt_deg=tilt_deg, upright=3))
+    with_trees = cert.sweep_program(program)
+    asked = cert.trees.fine is not None or cert.trees.fine_tip is not None
+    assert asked or with_trees.collision_free                  # the tip dug in where the trees were asked
+    monkeypatch.setattr(trees_module, "FINE_TREE_MAX_CHAINS", -1)
+    plain = Certifier(cell)
+    exact = plain.sweep_program(program)
+    assert plain.trees.fine is None and plain.trees.fine_tip is None     # no tree: exact queries only
+    assert exact.collision_free == with_trees.collision_free
+    if with_trees.first_hit is None:
+        assert exact.first_hit is None
+        assert min(with_trees.clearance_mm, exact.clearance_mm) <= sampled(cert, names=(TIP,))[0] + 1e-6
+    else:
+        assert exact.first_hit is not None
+        assert (exact.first_hit.row, exact.first_hit.body) == (with_trees.first_hit.row, with_trees.first_hit.body)
 
 
 def test_the_tips_bead_tree_holds_every_layer_but_its_two(cell, cert):

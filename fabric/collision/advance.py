@@ -60,7 +60,6 @@ __all__ = ["Advancer", "Item", "Probe", "SweepHit", "GJK_EPS_MM", "EXACT_MARGIN_
 EXACT_MARGIN_MM = 2.0        # an exact query looks this far around a body for beads
 EXACT_NEAR_MM = 0.5          # first this far: where a bead is nearer, no farther one can be
 FINE_BELOW_MM = 5.0          # the beads' tree is asked only when the layer boxes are this close
-FINE_TREE_MAX_BEADS = 200_000   # above this, exact queries (by bounding boxes) stand in for the beads' tree
 _MAX_DEPTH = 60              # bisections of one segment
 
 
@@ -393,7 +392,7 @@ class Advancer:
         d = self._tree_distance(self.trees.coarse_tip if item.tip else self.trees.coarse, obj)
         if d > need_mm or d > FINE_BELOW_MM:       # far from the layer boxes: bisecting is cheaper than beads
             return Probe(d)
-        if self.trees.count > FINE_TREE_MAX_BEADS:  # a tree that big takes longer to build than to go exact
+        if self.trees.fine_too_big():               # a tree that big takes longer to build than to go exact
             return Probe(-1.0)
         upto = self.upto(k)
         fine = self.trees.fine_tip_tree(upto) if item.tip else self.trees.fine_tree(upto)

@@ -38,7 +38,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from fabric.collision.advance import FINE_TREE_MAX_BEADS, Advancer, Item
+from fabric.collision.advance import Advancer, Item
 from fabric.collision.hull import X_REF, HullCovers, ToolCylinder, piece_covers
 from fabric.collision.path import Segments
 from fabric.collision.trees import PartTrees
@@ -61,7 +61,7 @@ def narrow(adv: Advancer, trees: PartTrees, segs: Segments, tool: ToolCylinder, 
     cylinders are made for all of ``near`` at once; coal measures them one by one."""
     last = covers.segment[covers.edges[near + 1] - 1]
     upto_all = adv.upto_many(last)                                  # beads laid before each cover's last row
-    if trees.count > FINE_TREE_MAX_BEADS:                           # no beads' tree: the boxes, then the walk
+    if trees.fine_too_big():                                        # no beads' tree: the boxes, then the walk
         loose = np.flatnonzero(box_mm > touch_mm)
         if len(loose):
             i = int(loose[np.argmin(box_mm[loose])])

@@ -42,10 +42,11 @@ from fabric.collision.beads import BeadSolids
 from fabric.collision.bodies import MM
 from fabric.collision.path import NO_LAYER
 
-__all__ = ["PartTrees", "RUN_SLACK_R", "RUN_SPAN_MM"]
+__all__ = ["PartTrees", "RUN_SLACK_R", "RUN_SPAN_MM", "FINE_TREE_MAX_CHAINS"]
 
 RUN_SLACK_R = 0.5            # a box may stand this many bead heights taller than its tallest bead
 RUN_SPAN_MM = 10.0           # and a run's box spans at most this much along x and along y
+FINE_TREE_MAX_CHAINS = 200_000   # above this many chains, exact queries (by bounding boxes) stand in for the trees
 
 
 class PartTrees:
@@ -190,6 +191,12 @@ class PartTrees:
         if tip and self._exempt:
             keep = keep[~np.isin(chains.layer[:n], self._exempt)]
         return chains.centre[keep], self._chain_radius[keep]
+
+    def fine_too_big(self) -> bool:
+        """Whether the beads' trees would hold more than :data:`FINE_TREE_MAX_CHAINS` chains for the beads laid so
+        far: a tree that big takes longer to build than exact queries take (the objects counted are the
+        chains the tree holds, several beads each, not the beads)."""
+        return self._chains_upto(self.count) > FINE_TREE_MAX_CHAINS
 
     def _chains_upto(self, upto: int) -> int:
         """How many chains hold beads ``0 .. upto - 1`` (the chains are made on first use:
