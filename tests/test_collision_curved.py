@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from certify_cells import plan_reachable
 
+from fabric.collision import trees as trees_module
 from fabric.collision.advance import Item
 from fabric.collision.beads import BeadSolids
 from fabric.collision.bodies import MM, TIP
 from fabric.collision.certify import Certifier
 from fabric.collision.path import MOVE_KINDS
-from fabric.collision import trees as trees_module
 from fabric.collision.trees import PartTrees
 from fabric.robot.cell import Cell
 
