@@ -138,7 +138,7 @@ def test_a_tip_tilted_past_the_layer_under_it_is_reported(cell, cert, tilt_deg, 
 def test_a_print_too_big_for_the_beads_trees_gets_the_same_verdict(cell, cert, monkeypatch, tilt_deg):
     """Above ``FINE_TREE_MAX_CHAINS`` chains the sweep takes exact queries where it would ask the beads' trees:
     the same verdict, the same first hit, and a clearance that is still a lower bound of the exact distances.
-    (The limit counts the chains a tree holds; it counted beads, so a curved print of 227k beads, some 30k
+    (The limit counts the chains a tree holds; it counted beads, so a curved print of 222k beads, 35k
     chains, went exact near the part everywhere: 635 s instead of 9 s with a slender nozzle.)"""
     program = plan(cell, ridge_gcode(layers=5, tilt_deg=tilt_deg, upright=3))
     with_trees = cert.sweep_program(program)
