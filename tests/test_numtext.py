@@ -81,3 +81,11 @@ def test_choice_column_writes_the_chosen_text() -> None:
     text = format_rows([ChoiceColumn(np.array([1, 0, 2, 1]), [b"a", b"bcd", b""]), FixedColumn(np.arange(4), 0)],
                        sep=b"|").decode()
     assert text == "bcd|0\na|1\n|2\nbcd|3\n"
+
+
+def test_unsigned_and_fixed_point_integer_columns() -> None:
+    """Integers past int64 and integers read as fixed-point (the C helper leaves both to numpy): the same text."""
+    columns = [FixedColumn(np.array([2**64 - 1, 7], dtype=np.uint64), 0), FixedColumn(np.array([12345, -7]), 3),
+               FixedColumn(np.array([3, 250], dtype=np.uint8), 0)]
+    text = format_rows(columns).decode()
+    assert text == "18446744073709551615,12.345,3\n7,-0.007,250\n"

@@ -22,8 +22,6 @@
 
 enum { KIND_FLOAT = 0, KIND_INT = 1, KIND_TEXT = 2 };
 
-static const double MAX_SCALED = 1e15;   /* beyond this the integer path is not trusted */
-static const double TIE_TOL_R = 1e-15;   /* relative width of the band around a half left to snprintf */
 static const uint64_t POW10[13] = {1ULL, 10ULL, 100ULL, 1000ULL, 10000ULL, 100000ULL, 1000000ULL,
                                    10000000ULL, 100000000ULL, 1000000000ULL, 10000000000ULL,
                                    100000000000ULL, 1000000000000ULL};
@@ -59,15 +57,16 @@ static char *put_uint(char *p, uint64_t u)
     return p + width;
 }
 
-/* "%.<d>f" of v at p (room for at least 64 bytes); returns the end, or NULL where v is not finite. */
-static char *put_fixed(char *p, double v, int d)
+/* "%.<d>f" of v at p (room for at least 64 bytes); returns the end, or NULL where v is not finite. Scaled
+ * values of max_scaled or more, and those within tie_tol_r of a half (relative), go to snprintf. */
+static char *put_fixed(char *p, double v, int d, double max_scaled, double tie_tol_r)
 {
     if (!isfinite(v))
         return NULL;
     double scaled = fabs(v) * (double)POW10[d];
     double rounded = nearbyint(scaled);
     double off = fabs(scaled - rounded);
-    if (!(off < 0.5 - scaled * TIE_TOL_R) || !(scaled < MAX_SCALED)) {
+    if (!(off < 0.5 - scaled * tie_tol_r) || !(scaled < max_scaled)) {
         int len = snprintf(p, 64, "%.*f", d, v);
         return (len > 0 && len < 64) ? p + len : NULL;
     }
@@ -84,9 +83,11 @@ static char *put_fixed(char *p, double v, int d)
 
 /* Rows 0..n-1 of `ncol` columns into out (capacity `cap` bytes), `sep` between columns, '\n' after each row.
  * Column c: kind[c] KIND_FLOAT (double data[c][i], decimals[c] in 0..12), KIND_INT (int64_t data[c][i])
- * or KIND_TEXT (text[c] of text_len[c] bytes on every row). Returns the bytes written, or a NUMTEXT_ code. */
+ * or KIND_TEXT (text[c] of text_len[c] bytes on every row). max_scaled and tie_tol_r: numtext.py's
+ * _MAX_SCALED and _TIE_TOL_R (declared there once). Returns the bytes written, or a NUMTEXT_ code. */
 long numtext_rows(long n, int ncol, const int *kind, const void *const *data, const int *decimals,
-                  const char *const *text, const long *text_len, char sep, char *out, long cap)
+                  const char *const *text, const long *text_len, char sep, char *out, long cap,
+                  double max_scaled, double tie_tol_r)
 {
     char *p = out;
     char *end = out + cap;
@@ -101,7 +102,7 @@ long numtext_rows(long n, int ncol, const int *kind, const void *const *data, co
                 *p++ = sep;
             switch (kind[c]) {
             case KIND_FLOAT:
-                p = put_fixed(p, ((const double *)data[c])[i], decimals[c]);
+                p = put_fixed(p, ((const double *)data[c])[i], decimals[c], max_scaled, tie_tol_r);
                 if (p == NULL)
                     return NUMTEXT_NOT_FINITE;
                 break;

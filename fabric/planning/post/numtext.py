@@ -208,11 +208,8 @@ def _native_rows(columns: Sequence[Column], sep: bytes, n: int) -> bytes | None:
     """:func:`format_rows` by the C helper (``fabric/native/numtext.c``, the same characters), or None where it
     cannot: no helper, a choice or trimmed column, a separator of more than one byte, a value not finite (or
     of over 63 characters)."""
-    if len(sep) > 1 or any(isinstance(c, ChoiceColumn) or (isinstance(c, FixedColumn) and c.trim)
-                           for c in columns):
-        return None
     lib = _numtext()
-    if lib is None:
+    if lib is None or len(sep) > 1:
         return None
     k = len(columns)
     kinds, decimals = (ctypes.c_int * k)(), (ctypes.c_int * k)()
@@ -224,14 +221,12 @@ def _native_rows(columns: Sequence[Column], sep: bytes, n: int) -> bytes | None:
             kinds[j], texts[j], text_len[j] = _KIND_TEXT, col, len(col)
             cap += len(col) + 2
             continue
-        if not isinstance(col, FixedColumn):
+        if not isinstance(col, FixedColumn) or col.trim:
             return None
         dt = col.values.dtype
-        ints = dt.kind == "i" or (dt.kind == "u" and dt.itemsize < 8)       # those an int64 holds
-        if dt.kind == "u" and dt.itemsize == 8:
-            return None
-        if ints and col.decimals:               # integers read as fixed-point: numpy's path alone writes those
-            return None
+        ints = dt.kind in "iu"
+        if ints and (col.decimals or (dt.itemsize == 8 and dt.kind == "u")):
+            return None                         # integers read as fixed-point, or past int64: numpy's path
         values = np.ascontiguousarray(col.values, dtype=np.int64 if ints else np.float64)
         keep.append(values)
         kinds[j], decimals[j] = (_KIND_INT, 0) if ints else (_KIND_FLOAT, col.decimals)
@@ -239,7 +234,8 @@ def _native_rows(columns: Sequence[Column], sep: bytes, n: int) -> bytes | None:
         cap += _ROW_BOUND + 1
     cap = max(cap * n + 128, 128)
     out = np.empty(cap, dtype=np.uint8)     # not zeroed: only the bytes written are read
-    written = lib.numtext_rows(n, k, kinds, data, decimals, texts, text_len, sep[:1] or b"\0", out.ctypes.data, cap)
+    written = lib.numtext_rows(n, k, kinds, data, decimals, texts, text_len, sep[:1] or b"\0", out.ctypes.data, cap,
+                               _MAX_SCALED, _TIE_TOL_R)
     if written < 0:                         # not finite or too long, or (never expected) no room: numpy writes it
         return None
     return out[:written].tobytes()
@@ -261,7 +257,8 @@ def _numtext() -> ctypes.CDLL | None:
             f.restype = ctypes.c_long
             f.argtypes = [ctypes.c_long, ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_void_p),
                           ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_char_p),
-                          ctypes.POINTER(ctypes.c_long), ctypes.c_char, ctypes.c_void_p, ctypes.c_long]
+                          ctypes.POINTER(ctypes.c_long), ctypes.c_char, ctypes.c_void_p, ctypes.c_long,
+                          ctypes.c_double, ctypes.c_double]
         _lib.append(lib)
     return _lib[0]
 
