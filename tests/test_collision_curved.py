@@ -96,7 +96,7 @@ def test_a_tilted_tip_on_its_own_two_layers_is_not_reported_and_the_clearance_ho
     # a lower bound of every exact distance, and close to the smallest (the tip over the plate on the first
     # layer, less the sag of the joint interpolation): the plain exact queries' own figure
     assert res.clearance_mm <= d + 1e-6
-    assert res.clearance_mm >= 0.9 * d and res.clearance_body == TIP
+    assert res.clearance_mm >= 0.9 * d and res.clearance_body in (TIP, "tool_nozzle")
     assert 0.25 < res.clearance_mm < LAYER_MM
 
 
@@ -121,8 +121,8 @@ def test_a_travel_through_a_curved_layer_is_reported_with_its_line(cell, cert):
 
 @pytest.mark.parametrize("tilt_deg, free", [(10.0, True), (-40.0, False)])
 def test_a_tip_tilted_past_the_layer_under_it_is_reported(cell, cert, tilt_deg, free):
-    """Flat layers 0.3 mm apart, the nozzle (3 mm across) tilted from the fourth on: at 10 deg its rim dips
-    0.26 mm below the tip, clear of the layer two down; at 40 deg, 0.96 mm: into it, which is not exempt."""
+    """Flat layers 0.3 mm apart, the nozzle (2 mm across) tilted from the fourth on: at 10 deg its rim dips
+    0.17 mm below the tip, clear of the layer two down; at 40 deg, 0.64 mm: into it, which is not exempt."""
     program = plan(cell, ridge_gcode(layers=5, tilt_deg=tilt_deg, upright=3))
     res = cert.sweep_program(program)
     assert res.collision_free == free, res.first_hit

@@ -13,14 +13,14 @@ so the first layer (``h = h1``) is laid with a vertical nozzle, and the full
 tilt ``a_max`` is allowed from ``h1 + r sin a_max`` up (3.1 mm for ``r`` 4 mm,
 the paper's nozzle, and 45 degrees). ``r`` is
 :attr:`CurvedOptions.tip_radius_mm`: a bound for any nozzle up to that
-radius (the multi-axis cell's is 1.5 mm).
+radius (the multi-axis cell's is 1 mm).
 
 Over the layer under. A tip whose axis is ``d`` off the layer normal digs its
 low edge ``r sin d`` into the layer under it (the tip rides on the top of the
 layer it lays): the collision check lets it touch the layer it lays and the one
 under (about two layer thicknesses), nothing older. The axis is therefore kept
 within :attr:`CurvedOptions.max_axis_deviation_deg` of the layer normal (5
-degrees: ``1.5 sin 5 = 0.13`` mm on the multi-axis cell, within the thinnest
+degrees: ``1 sin 5 = 0.09`` mm on the multi-axis cell, within the thinnest
 layer the bounds allow). Where the layer itself leans further than the tilt
 limit plus that, the tilt limit wins and the deviation grows; the slice
 reports its largest.

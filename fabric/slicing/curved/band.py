@@ -6,8 +6,8 @@ then wrap round their edges into the part, so the band had to be cut off: a
 margin from the side walls (where the core's layers climbed the wall to the
 top) and, for a top running down to the plate (a dome's rim), somewhere above
 the plate. Everything the core laid beside such a cut is older than the band
-and as high as it, and the nozzle's tip (a disc 3 mm across on the multi-axis
-cell, seven beads wide) reaches over it while laying the band's edge: the
+and as high as it, and the nozzle's tip (a disc 2 mm across on the multi-axis
+cell, five beads wide) reaches over it while laying the band's edge: the
 collision check finds the tip in the core's beads at every cut. The band's
 only boundary inside the part must be its bottom, which is one of its own
 level sets: the core then lies under the band everywhere.
