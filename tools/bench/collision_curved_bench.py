@@ -123,7 +123,8 @@ def main(argv: list[str]) -> dict:
             _line(name, entry)
     result = {"host": platform.node(), "cpus": os.cpu_count(), "python": platform.python_version(),
               "load_avg": os.getloadavg(), "date": time.strftime("%Y-%m-%d %H:%M"), "runs": RUNS,
-              "planar": planar, "curved": curved, "planar_segments_per_cpu_s": base}
+              "planar": planar, "curved": curved, "planar_segments_per_cpu_s": base,
+              "nozzle_mm": curved_cell.robot.tool.nozzle_diameter_mm}
     _write(result, argv)
     return result
 
@@ -161,7 +162,7 @@ The machine is shared: compare the ratios, each measured in one run; CPU time is
 
 Planar: the sample part sliced planar, on `irb140`. Curved: multi-axis programs (curved layers, the nozzle
 tilted up to 45 deg and more, each bead laid along its own nozzle axis), on `{CURVED_CELL}` (a slender nozzle,
-3 mm across). A program that is not collision-free is certified up to its first hit (the rows before the
+{r['nozzle_mm']:g} mm across). A program that is not collision-free is certified up to its first hit (the rows before the
 hit's row), which is what a sweep does before it stops; `@LAYER`: the rows from that layer on, alone.
 A few thousand segments are too few to say much: the sweep's fixed costs (the approach's joint moves, the
 broad phase, the first batch's hulls) are most of their time.
