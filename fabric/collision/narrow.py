@@ -39,6 +39,7 @@ chains gave 0.035 mm for a nozzle 0.95 mm from the beads).
 """
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Iterator
 
 import numpy as np
@@ -103,7 +104,7 @@ def narrow(adv: Advancer, trees: PartTrees, segs: Segments, tool: ToolCylinder, 
         check.tree = trees.fine_tip_tree(upto) if item.tip else trees.fine_tree(upto)
         if box_mm[j] > touch_mm:
             _tighten(check, whole, j, float(box_mm[j]),
-                     lambda g=int(near[j]), floor=float(box_mm[j]): _exact_bounds(adv, item, covers, g, floor))
+                     functools.partial(_exact_bounds, adv, item, covers, int(near[j]), float(box_mm[j])))
             continue
         a, b = int(first[t]), int(first[t + 1])
         f0 = int(four_of[t])
