@@ -48,10 +48,8 @@ the empty space beside a curved surface, where the tool is: hull covers that
 come within the tolerance of the boxes are measured as the cylinders they are
 against the beads, covers then pieces then halves (:mod:`fabric.collision.narrow`),
 and only what is left goes to the second's bisection with exact distances.
-A tilted tool's box distance is not its clearance, nor is an upright one's
-over curved layers (beads laid with a tilted nozzle): where it would be the
-smallest so far, the beads give it (within a factor two). Over flat layers an
-upright tool's box distance is its clearance (the box is a slab of beads). The certified
+A tilted tool's box distance is not its clearance: where it would be the
+smallest so far, the beads give it (within a factor two). The certified
 clearance is the smallest lower bound of all; the first hit is the earliest
 along the path, and ends the sweep (and every tool's refinement after it).
 """
@@ -78,7 +76,6 @@ TOLERANCE_MM = 0.01          # two bodies this close count as touching
 BATCH_SEGMENTS = 20_000      # stretches are prepared (vectorised bounds, hull covers) this many segments at a time
 FOOT_MM = 4.0                # a slender tool longer than twice this is covered as its foot and the rest
 LOOSE_BELOW_MM = 5.0         # a tilted tool's box distance below this (and the clearance) is no clearance of its own
-FLAT_BEAD_COS = float(np.cos(np.radians(5.0)))   # beads laid this near upright make flat layers (a plate's tilt)
 BLOCK_COVERS = 64            # the covers near the part are refined this many at a time, every tool's, in path order
 
 
@@ -195,8 +192,6 @@ class Certifier:
 
     def _sweep(self, segs: Segments, beads: BeadSolids, t0: float) -> SweepResult:
         self.segs, self.beads = segs, beads
-        # flat layers: every bead laid with the nozzle upright (their boxes are slabs of beads)
-        self._flat = not len(beads) or float(beads.axes[:, 2, 2].min()) >= FLAT_BEAD_COS
         self.trees = PartTrees(beads, self.bodies.env)
         adv = self.adv = Advancer(self.bodies, segs, beads, self.trees, self.tol)
         self.pieces = 0
@@ -271,8 +266,8 @@ class Certifier:
             dist = cover_distances(covers, slice(g0, g1), lo, hi, touch)
             # a tilted tool near a box may be far from the beads in it: its box distance is no clearance, and
             # where it would be the smallest so far, the beads say how far it is (at least)
-            tight = vertical_covers(covers, slice(g0, g1)) & self._flat
-            loose = (dist > touch) & (dist < min(adv.clearance, LOOSE_BELOW_MM)) & ~tight
+            loose = (dist > touch) & (dist < min(adv.clearance, LOOSE_BELOW_MM)) & ~vertical_covers(covers,
+                                                                                                 slice(g0, g1))
             clear = np.where((dist > touch) & ~loose, dist, np.inf)
             if np.isfinite(clear).any():
                 g = int(np.argmin(clear))
