@@ -250,9 +250,9 @@ def test_one_clock_and_honest_progress(fabric):
         client.start(rtf=30.0)
         while wait_event(events, ("layer",)).layer < 1:
             pass
-        client.set_rtf(100.0)
-        client.pause()
+        client.pause()                  # at rtf 30, so that layer 1 is still the one paused in on a busy host
         wait_event(events, ("paused",))
+        client.set_rtf(100.0)
         a = client.state()
         pose = client.position()
         a_after = client.state()
