@@ -173,8 +173,11 @@ def _layer_surfaces(fld: LayerField, first_mm: float, bounds: ThicknessBounds,
         band_attrs = np.column_stack([nodes, fld.band_dir, fld.axis, 1.0 / np.maximum(fld.band_grad_r, 1e-6),
                                       fld.band_clip_mm])
         weakest = float(band_attrs[fld.in_band, THICK].max()) if np.any(fld.in_band) else 1.0
+        # no thicker than the bounds allow where the band's gradient is weakest, and never thinner than the
+        # thinnest layer (a node of near-zero gradient asked for a million layers: 24 GB on a 100k-triangle dome)
         k = max(int(round(fld.band_mm / bounds.nominal_mm)),
-                int(np.ceil(fld.band_mm * weakest / bounds.max_mm - 1e-9)), 1)
+                min(int(np.ceil(fld.band_mm * weakest / bounds.max_mm - 1e-9)),
+                    int(np.ceil(fld.band_mm / bounds.min_mm - 1e-9))), 1)
         band_step = step = fld.band_mm / k
         for j in range(k):
             s = clip_surface(iso_surface(fld.mesh.tets, fld.d_top_mm, fld.band_mm - (j + 0.5) * step, band_attrs),
