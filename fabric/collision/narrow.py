@@ -159,7 +159,7 @@ class _Check:
         return False
 
 
-def _tighten(check: _Check, c: _Covers, i: int, box_mm: float, exact: Callable[[], None] | None = None) -> None:
+def _tighten(check: _Check, c: _Covers, i: int, box_mm: float, exact: Callable[[], None]) -> None:
     """Cover ``i`` of a tilted tool clears the boxes by ``box_mm``, less than the clearance so far: a bound of
     the boxes, not of the tool. Keep the largest of the clearance so far (or ``FLOOR_MAX_MM``), then half of
     it, and so on, that its cylinder clears the beads by (down to its box distance): within a factor two of
@@ -167,7 +167,7 @@ def _tighten(check: _Check, c: _Covers, i: int, box_mm: float, exact: Callable[[
     distances (:func:`_exact_bounds`) instead: beside a curved layer the chains' boxes hold air of their own,
     and the chains' figure could be the clearance reported, ten times under the tool's own."""
     margin = _margin(check, c, i, box_mm)
-    if margin < min(check.adv.clearance, FLOOR_MAX_MM) and exact is not None:
+    if margin < min(check.adv.clearance, FLOOR_MAX_MM):
         exact()
         return
     check.adv.bound(max(margin, box_mm), check.name, int(c.segment[i]))
@@ -230,10 +230,14 @@ def _exact_bounds(adv: Advancer, item: Item, covers: HullCovers, g: int, floor_m
     tool's own clearance than that."""
     segs = adv.segs
     margin = 2.0 * min(adv.clearance, FLOOR_MAX_MM)
+    last: tuple[int, float, float] | None = None          # the piece before's end: the next one's start
     for p in range(int(covers.edges[g]), int(covers.edges[g + 1])):
         k, s0, s1 = int(covers.segment[p]), float(covers.s0[p]), float(covers.s1[p])
         qa, qb = segs.q_at(k, s0), segs.q_at(k, s1)
-        todo = [(s0, qa, adv.exact(item, k, qa, margin).d, s1, qb, adv.exact(item, k, qb, margin).d, 0)]
+        da = last[2] if last is not None and last[:2] == (k, s0) else adv.exact(item, k, qa, margin).d
+        db = adv.exact(item, k, qb, margin).d
+        last = (k, s1, db)
+        todo = [(s0, qa, da, s1, qb, db, 0)]
         while todo:
             sa, qa, da, sb, qb, db, depth = todo.pop()
             lb = (da + db - adv.piece_motion(item, k, sa, sb, qa, qb)) / 2.0

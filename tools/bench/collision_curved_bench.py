@@ -161,9 +161,10 @@ Python {r['python']}, load average {r['load_avg'][0]:.1f} at the end), {r['date'
 The machine is shared: compare the ratios, each measured in one run; CPU time is this process's.
 
 Planar: the sample part sliced planar, on `irb140`. Curved: multi-axis programs (curved layers, the nozzle
-tilted up to 45 deg and more, each bead laid along its own nozzle axis), on `{CURVED_CELL}` (a slender nozzle,
-{r['nozzle_mm']:g} mm across). A program that is not collision-free is certified up to its first hit (the rows before the
-hit's row), which is what a sweep does before it stops; `@LAYER`: the rows from that layer on, alone.
+tilted up to 45 deg and more, each bead laid along its own nozzle axis), on `{CURVED_CELL}`
+(a slender nozzle, {r['nozzle_mm']:g} mm across). A program that is not collision-free is certified up to its
+first hit (the rows before the hit's row), which is what a sweep does before it stops; `@LAYER`: the rows from
+that layer on, alone.
 A few thousand segments are too few to say much: the sweep's fixed costs (the approach's joint moves, the
 broad phase, the first batch's hulls) are most of their time.
 
