@@ -124,11 +124,14 @@ class SupervisorService(Service):
         return self.writer.call(fn, timeout_s=STEP_TIMEOUT_S)
 
     def _save(self, rec: s.JobRecord, last_event_seq: int | None = None) -> None:
-        """Persist a changed record, then publish it (lossless ``jobs`` topic). On the writer only."""
+        """Persist a changed record, then publish it (lossless ``jobs`` topic). On the writer only.
+
+        The library's entry is noted first: a client that reads the record's new state (``job``, the topic)
+        then finds its file's entry showing it too (reads do not wait for the writer)."""
         rec.updated_s = time.time()
+        self.library.job_changed(rec)
         self.store.save(rec, last_event_seq=last_event_seq)
         self.pub_jobs.send(rec)
-        self.library.job_changed(rec)
 
     def _save_prepared(self, prepared: s.JobRecord) -> None:
         """The preparer's progress: its own fields are written onto the record as it is now (a ``job next``
