@@ -17,7 +17,7 @@ from fabric.collision.bodies import MM, TIP
 from fabric.collision.certify import Certifier
 from fabric.collision.path import MOVE_KINDS
 from fabric.collision.trees import PartTrees
-from fabric.robot.cell import Cell
+from fabric.robot.cell import CELLS_DIR, Cell
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -96,8 +96,10 @@ def test_a_tilted_tip_on_its_own_two_layers_is_not_reported_and_the_clearance_ho
     # a lower bound of every exact distance, and close to the smallest (the tip over the plate on the first
     # layer, less the sag of the joint interpolation): the plain exact queries' own figure
     assert res.clearance_mm <= d + 1e-6
-    assert res.clearance_mm >= 0.9 * d and res.clearance_body in (TIP, "tool_nozzle")
-    assert 0.25 < res.clearance_mm < LAYER_MM
+    # within a factor two of it, as the walk's rule promises (measured: 0.210 against 0.299 with the tapered
+    # nozzle; the exact queries' reach fed on the clearance so far and gave 0.021)
+    assert res.clearance_mm >= 0.5 * d and res.clearance_body.startswith("tool_")
+    assert 0.5 * LAYER_MM < res.clearance_mm < LAYER_MM
 
 
 def test_a_travel_through_a_curved_layer_is_reported_with_its_line(cell, cert):
@@ -119,11 +121,26 @@ def test_a_travel_through_a_curved_layer_is_reported_with_its_line(cell, cert):
     assert cert.adv.exact(item, hit.segment, hit.q_rad, 5.0).d <= 2.0 * cert.tol
 
 
-@pytest.mark.parametrize("tilt_deg, free", [(10.0, True), (-40.0, False)])
-def test_a_tip_tilted_past_the_layer_under_it_is_reported(cell, cert, tilt_deg, free):
-    """Flat layers 0.3 mm apart, the nozzle (2 mm across) tilted from the fourth on: at 10 deg its rim dips
-    0.17 mm below the tip, clear of the layer two down; at 40 deg, 0.64 mm: into it, which is not exempt."""
-    program = plan(cell, ridge_gcode(layers=5, tilt_deg=tilt_deg, upright=3))
+@pytest.fixture(scope="module")
+def blunt_cell(cell) -> Cell:
+    """The multi-axis cell with a nozzle as wide at its tip as its shank (2 mm): no taper."""
+    text = (CELLS_DIR / "irb140-multiaxis.toml").read_text()
+    text = "\n".join(ln for ln in text.splitlines() if not ln.startswith(("tip_diameter_mm", "taper_length_mm")))
+    blunt = Cell.from_toml_text(text, source="blunt")
+    assert blunt.robot.tool.tip_mm == 2.0
+    return blunt
+
+
+@pytest.mark.parametrize("tilt_deg, tapered, free", [(10.0, False, True), (-40.0, False, False),
+                                                     (-40.0, True, True)])
+def test_a_tip_tilted_past_the_layer_under_it_is_reported(cell, blunt_cell, cert, tilt_deg, tapered, free):
+    """Flat layers 0.3 mm apart, the nozzle tilted from the fourth on. A blunt one (2 mm across at its tip): at
+    10 deg its rim dips 0.17 mm below the tip, clear of the layer two down; at 40 deg, 0.64 mm: into it, which
+    is not exempt. The multi-axis cell's tapered nozzle (0.7 mm across at its tip) at 40 deg dips 0.22 mm, and
+    its cone stays over the tip: clear."""
+    use = cell if tapered else blunt_cell
+    cert = cert if tapered else Certifier(blunt_cell)
+    program = plan(use, ridge_gcode(layers=5, tilt_deg=tilt_deg, upright=3))
     res = cert.sweep_program(program)
     assert res.collision_free == free, res.first_hit
     if free:

@@ -14,6 +14,7 @@ from fabric import schemas as s
 from fabric.client import Client
 from fabric.gcode.reader import parse_gcode
 from fabric.robot.cell import Cell
+from fabric.services.collision import CollisionService
 from fabric.services.planner import PlannerService
 from fabric.services.slicer import SlicerService
 from fabric.slicing.curved.shapes import arch
@@ -60,18 +61,30 @@ def test_fabric_cli_slices_curved_layers_into_the_multiaxis_dialect(slicer, sess
     assert tp.multiaxis and tp.axis is not None and len(tp.axis) == len(tp)
     np.testing.assert_allclose(np.linalg.norm(tp.axis, axis=1), 1.0, atol=1e-12)
     assert np.degrees(np.arccos(tp.axis[:, 2].min())) <= 45.0 + 0.1
-    # and the planner plans it with the tilted nozzle: every target reached on the multi-axis cell
-    planner = PlannerService(session, settings.cell, Cell.builtin("irb140-multiaxis"), data_dir=tmp_path / "planner")
+    # and the planner plans it with the tilted nozzle: every target reached on the multi-axis cell; and the
+    # whole print is collision-free there: where the layers from both feet meet over the crown the creases are
+    # rounded and the nozzle turned clear of the other side (without either, its nozzle hit the part there)
+    cell = Cell.builtin("irb140-multiaxis")
+    planner = PlannerService(session, settings.cell, cell, data_dir=tmp_path / "planner")
+    collision = CollisionService(session, settings.cell, cell, data_dir=tmp_path / "collision")
     planner.start()
+    collision.start()
     try:
         r = subprocess.run([sys.executable, "-m", "fabric.cli.main", "plan", str(out), "--json",
                             *replace(settings, mode="client").to_args()], capture_output=True, text=True, timeout=120)
+        check = subprocess.run([sys.executable, "-m", "fabric.cli.main", "check", str(out), "--json",
+                                *replace(settings, mode="client").to_args()], capture_output=True, text=True,
+                               timeout=180)
     finally:
+        collision.close()
         planner.close()
     assert r.returncode == 0, r.stderr
     summary = json.loads(r.stdout)["summary"]
     assert summary["runnable"] and summary["feasible_r"] == 1.0 and summary["layers"] == result["layers"]
     assert "Traceback" not in r.stderr
+    assert check.returncode == 0, check.stdout[-2000:] + check.stderr[-2000:]
+    report = json.loads(check.stdout)["collisions"]
+    assert report["collision_free"] is True and report["first_hit"] is None, report
 
 
 def test_curved_layers_on_an_external_backend_are_refused_at_once(slicer, settings):

@@ -1,6 +1,8 @@
 """The IRB 140 model against its published figures, and the RobotModel API (mm at the API, metres inside)."""
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -202,3 +204,35 @@ def test_limits_change_rebuilds_the_closed_form_solver() -> None:
     r.with_limits(upper_rad=upper)
     assert r.solver is r.closed_form and r.closed_form is not None
     np.testing.assert_allclose(r.closed_form.upper_rad, upper)
+
+
+def test_a_tapered_nozzle_is_its_tip_a_cone_of_steps_and_its_shank() -> None:
+    """The multi-axis cell's nozzle: a 0.7 mm flat for 1 mm, a cone to 2 mm over 3 mm, then the 2 mm shank. The
+    cone's steps are as wide as the cone at their tops (nothing of it outside them) and stand end to end
+    between the tip and the shank; the certified sweep's exempt tip is the flat's radius."""
+    from fabric.collision.bodies import RobotBodies
+    from fabric.robot.cell import Cell
+    cell = Cell.builtin("irb140-multiaxis")
+    tool = cell.robot.tool
+    assert (tool.tip_diameter_mm, tool.taper_length_mm, tool.tip_mm) == (0.7, 3.0, 0.7)
+    steps = tool.taper_steps()
+    np.testing.assert_allclose([r for r, _l, _s in steps], [0.35 + 0.65 / 3, 0.35 + 1.3 / 3, 1.0])
+    ends = [(start, start + length) for _r, length, start in steps]
+    assert ends[0][0] == 1.0 and ends[-1][1] == pytest.approx(4.0)
+    assert all(a[1] == pytest.approx(b[0]) for a, b in itertools.pairwise(ends))
+    bodies = RobotBodies(cell)
+    axial = {b.name: (r, h, off) for b, r, h, off in bodies.axial_cylinders()}
+    assert bodies.tip_radius_mm == 0.35 and axial["tool_tip"][0] == 0.35
+    for k, (r, length, start) in enumerate(steps, 1):
+        assert axial[f"tool_taper{k}"] == pytest.approx((r, length / 2, -(start + length / 2)))
+    assert axial["tool_nozzle"] == pytest.approx((1.0, 14.5, -(4.0 + 14.5)))     # the shank begins where it ends
+    # the untapered nozzle has no steps and its tip is as wide as it
+    assert ToolGeometry().taper_steps() == [] and ToolGeometry().tip_mm == 8.0
+
+
+@pytest.mark.parametrize("tip, taper", [(3.0, 3.0), (0.7, 0.0), (0.0, 3.0)])
+def test_a_taper_wider_than_its_nozzle_or_half_given_is_refused(tip: float, taper: float) -> None:
+    with pytest.raises(ConfigError, match="tool\\.") as exc:
+        RobotModel.from_urdf(IRB140_URDF, tool=ToolGeometry(nozzle_diameter_mm=2.0, tip_diameter_mm=tip,
+                                                            taper_length_mm=taper))
+    assert exc.value.details["field"] in ("tool.tip_diameter_mm", "tool.taper_length_mm")

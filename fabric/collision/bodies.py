@@ -86,7 +86,7 @@ class RobotBodies:
         self.nq = int(self.model.nq)
         gm = robot.collision_model.copy()
         tool = robot.tool
-        self.tip_radius_mm = tool.nozzle_diameter_mm / 2.0
+        self.tip_radius_mm = tool.tip_mm / 2.0
         self.tip_length_mm = tool.nozzle_clearance_mm
         tcp = self.model.frames[robot.tcp_frame_id]
         tip_local = tcp.placement * pin.SE3(np.eye(3), np.array([0.0, 0.0, -self.tip_length_mm / 2.0]) * MM)

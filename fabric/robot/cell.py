@@ -63,7 +63,7 @@ _SCHEMA: dict[str, set[str]] = {
     "robot": {"urdf", "example_robot_data", "flange_frame", "name", "brand", "redundancy_joint", "base_xyz_mm",
               "base_rpy_deg"},
     "tool": {"tcp_xyz_mm", "tcp_rpy_deg", "body_diameter_mm", "body_length_mm", "nozzle_diameter_mm",
-             "nozzle_length_mm", "nozzle_clearance_mm"},
+             "nozzle_length_mm", "nozzle_clearance_mm", "tip_diameter_mm", "taper_length_mm"},
     "table": {"size_mm", "xyz_mm", "rpy_deg"},
     "plate": {"size_mm", "xyz_mm", "rpy_deg", "true_offset."},
     "plate.true_offset": {"xyz_mm", "rpy_deg"},
@@ -336,7 +336,8 @@ def _load_robot(rb: _Reader, tl: _Reader, lim: _Reader, base_dir: str | Path | N
     """Build the RobotModel from ``[robot]``, ``[tool]`` and ``[limits]``."""
     tool_T = _pose(tl.vec("tcp_xyz_mm", lo=-1000, hi=1000), tl.vec("tcp_rpy_deg", default=[0, 0, 0], lo=-360, hi=360))
     defaults = ToolGeometry()
-    tool = ToolGeometry(**{k: tl.num(k, default=getattr(defaults, k), lo=0.1, hi=1000.0) for k in vars(defaults)})
+    tool = ToolGeometry(**{k: tl.num(k, default=getattr(defaults, k), lo=0.0 if k in ToolGeometry.OPTIONAL else 0.1,
+                                     hi=1000.0) for k in vars(defaults)})
     if rb.has("urdf") == rb.has("example_robot_data"):
         raise ConfigError(f"{source}: [robot] needs exactly one of urdf / example_robot_data",
                           file=source, key="robot.urdf")

@@ -55,6 +55,10 @@ DEFAULT_TOOL_T = frames.xyzrpy_to_T([0.0, 0.0, 150.0], [0.0, 0.0, 0.0])
 """Flange -> TCP of the default extruder: nozzle tip 150 mm out along the flange z axis."""
 
 
+TAPER_STEPS = 3                 # cylinders covering a tapered nozzle's cone
+TAPER_LINK = "tool_taper"       # their links: tool_taper1 (at the tip) .. tool_taper3
+
+
 @dataclass(frozen=True)
 class ToolGeometry:
     """Collision envelope of the extruder tool (mm).
@@ -62,6 +66,16 @@ class ToolGeometry:
     The body is a cylinder from the flange along its z axis; the nozzle is a
     cylinder along the TCP z axis that stops ``nozzle_clearance_mm`` short of
     the tip.
+
+    A tapered nozzle (``taper_length_mm`` > 0) ends in a flat of
+    ``tip_diameter_mm`` across: from the tip up, the flat's cylinder
+    (``nozzle_clearance_mm`` long, the tip that lays the bead), then a cone
+    widening to ``nozzle_diameter_mm`` over ``taper_length_mm``, then the
+    nozzle's cylinder. The cone is covered by ``TAPER_STEPS`` cylinders, each as
+    wide as the cone at its top (:meth:`taper_steps`): nothing of the cone
+    lies outside them. Real nozzles are cones: a slender one reaches into a
+    crease of the part (the crown of an arch, where layers from both sides
+    meet) where a cylinder as wide as its shank would not.
     """
 
     body_diameter_mm: float = 60.0
@@ -69,12 +83,38 @@ class ToolGeometry:
     nozzle_diameter_mm: float = 8.0
     nozzle_length_mm: float = 29.0
     nozzle_clearance_mm: float = 1.0
+    tip_diameter_mm: float = 0.0        # the flat at the tip; 0: the nozzle's diameter (no taper)
+    taper_length_mm: float = 0.0        # the cone from the tip's flat to the nozzle's diameter; 0: none
+
+    OPTIONAL = ("tip_diameter_mm", "taper_length_mm")   # may be 0
 
     def check(self) -> None:
-        """Raise ConfigError naming the first non-positive dimension."""
+        """Raise ConfigError naming the first dimension out of range."""
         for name, value in vars(self).items():
-            if not (np.isfinite(value) and value > 0.0):
+            low_ok = value >= 0.0 if name in self.OPTIONAL else value > 0.0
+            if not (np.isfinite(value) and low_ok):
                 raise ConfigError(f"tool.{name} must be > 0, got {value}", field=f"tool.{name}", value=value)
+        if self.tip_diameter_mm > self.nozzle_diameter_mm:
+            raise ConfigError(f"tool.tip_diameter_mm {self.tip_diameter_mm:g} is wider than the nozzle "
+                              f"({self.nozzle_diameter_mm:g} mm)", field="tool.tip_diameter_mm",
+                              value=self.tip_diameter_mm)
+        if (self.taper_length_mm > 0.0) != (0.0 < self.tip_diameter_mm < self.nozzle_diameter_mm):
+            raise ConfigError("a tapered nozzle needs both tool.tip_diameter_mm (narrower than the nozzle) and "
+                              "tool.taper_length_mm", field="tool.taper_length_mm", value=self.taper_length_mm)
+
+    @property
+    def tip_mm(self) -> float:
+        """The diameter of the nozzle's tip (its flat)."""
+        return self.tip_diameter_mm if self.taper_length_mm > 0.0 else self.nozzle_diameter_mm
+
+    def taper_steps(self) -> list[tuple[float, float, float]]:
+        """The cylinders covering the cone: (radius, length, start above the tip), mm; none untapered."""
+        if self.taper_length_mm <= 0.0:
+            return []
+        step = self.taper_length_mm / TAPER_STEPS
+        r0, r1 = self.tip_diameter_mm / 2.0, self.nozzle_diameter_mm / 2.0
+        return [(r0 + (r1 - r0) * (k + 1) / TAPER_STEPS, step, self.nozzle_clearance_mm + k * step)
+                for k in range(TAPER_STEPS)]
 
 
 def _f(v: float) -> str:
@@ -150,14 +190,20 @@ def _tool_urdf(robot_urdf: str, flange_frame: str, tool_T: np.ndarray, tool: Too
     if flange_frame not in links:
         raise ConfigError(f"flange frame {flange_frame!r} is not a link of the URDF",
                           field="robot.flange_frame", value=flange_frame, links=sorted(links))
-    for name in ("tool_body", "tool_nozzle", "tcp"):
+    for name in ("tool_body", "tool_nozzle", "tcp", *(f"{TAPER_LINK}{k + 1}" for k in range(TAPER_STEPS))):
         if name in links:
             raise ConfigError(f"URDF already has a link named {name!r}", field="robot.urdf", link=name)
     xyz_mm, rpy_deg = frames.T_to_xyzrpy(tool_T)
     tcp_xyz = " ".join(_f(v / 1000.0 + 0.0) for v in xyz_mm)
     tcp_rpy = " ".join(_f(v + 0.0) for v in np.radians(rpy_deg))
     m = 1e-3
-    nz = -(tool.nozzle_clearance_mm + tool.nozzle_length_mm / 2.0) * m
+    nz = -(tool.nozzle_clearance_mm + tool.taper_length_mm + tool.nozzle_length_mm / 2.0) * m
+    taper = "".join(f"""
+  <link name="{TAPER_LINK}{k + 1}"><collision><origin xyz="0 0 {_f(-(start + length / 2.0) * m)}" rpy="0 0 0"/>
+    <geometry><cylinder radius="{_f(radius * m)}" length="{_f(length * m)}"/></geometry>
+  </collision></link>
+  <joint name="tcp-{TAPER_LINK}{k + 1}" type="fixed"><parent link="tcp"/><child link="{TAPER_LINK}{k + 1}"/>
+    <origin xyz="0 0 0" rpy="0 0 0"/></joint>""" for k, (radius, length, start) in enumerate(tool.taper_steps()))
     extra = f"""
   <link name="tool_body"><collision><origin xyz="0 0 {_f(tool.body_length_mm * m / 2)}" rpy="0 0 0"/>
     <geometry><cylinder radius="{_f(tool.body_diameter_mm * m / 2)}" length="{_f(tool.body_length_mm * m)}"/></geometry>
@@ -172,7 +218,7 @@ def _tool_urdf(robot_urdf: str, flange_frame: str, tool_T: np.ndarray, tool: Too
                         length="{_f(tool.nozzle_length_mm * m)}"/></geometry>
   </collision></link>
   <joint name="tcp-tool_nozzle" type="fixed"><parent link="tcp"/><child link="tool_nozzle"/>
-    <origin xyz="0 0 0" rpy="0 0 0"/></joint>
+    <origin xyz="0 0 0" rpy="0 0 0"/></joint>{taper}
 """
     for el in ET.fromstring(f"<x>{extra}</x>"):
         root.append(el)

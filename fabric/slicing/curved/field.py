@@ -7,7 +7,8 @@ Two scalar fields on the volume mesh define the layers:
   measured inside the part (:mod:`.heat`). Its level sets grow out of the base
   like wave fronts, so they climb along an outward-leaning wall (the wall's
   normal is perpendicular to the front's direction: no overhang) and up both
-  legs of an arch. Layers are its level sets, ``nominal`` apart along the gradient.
+  legs of an arch, where they meet in a crease over the crown, which is rounded
+  (:mod:`.crease`). Layers are its level sets, ``nominal`` apart along the gradient.
 * the *band* field ``d_top``: the distance from the top surface (faces whose
   normal is within ``top_slope_deg`` of +z). The last ``top_band_layers``
   layers are its level sets ``d_top = const`` below the top, so the part's top
@@ -38,6 +39,7 @@ import scipy.sparse as sp
 
 from fabric.slicing.curved.axis import limit_deviation, limit_tilt, plate_tilt_deg, unit_rows
 from fabric.slicing.curved.band import build_band
+from fabric.slicing.curved.crease import round_creases
 from fabric.slicing.curved.heat import (
     FemOperators,
     fem_operators,
@@ -145,7 +147,9 @@ def build_field(mesh: TetMesh, options: CurvedOptions, nominal_mm: float, side_m
         raise MeshError("curved slicing: the part does not touch the plate", reason="no_base")
     height = mesh.nodes[:, 2] - float(mesh.nodes[:, 2].min())
     w = plate_blend(height, first_layer_mm, options.plate_blend_mm)
-    d_base = w * geodesic_distance(mesh, ops, base, options.heat_time_r) + (1.0 - w) * height
+    geodesic = round_creases(mesh, ops, geodesic_distance(mesh, ops, base, options.heat_time_r),
+                             options.crease_flatten_r, options.crease_width_mm)
+    d_base = w * geodesic + (1.0 - w) * height
     core_dir = unit_rows(node_gradients(ops, mesh.tets, d_base))
     core_grad = node_gradient_norms(ops, mesh.tets, d_base)
     n = len(mesh.nodes)

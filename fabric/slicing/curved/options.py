@@ -33,6 +33,14 @@ class CurvedOptions:
     ``tip_radius_mm`` (a bound for any nozzle up to that radius); the axis
     stays within ``max_axis_deviation_deg`` of the layer normal, and is
     averaged along each path over ``path_axis_window_mm``.
+
+    Creases of the core field (where fronts from two legs meet) are rounded
+    within ``crease_width_mm`` by ``crease_flatten_r`` (:mod:`.crease`). The
+    nozzle the axes must clear (:mod:`.reach`): a tip of
+    ``nozzle_tip_radius_mm`` for ``nozzle_tip_length_mm``, a cone widening to
+    ``nozzle_radius_mm`` over ``nozzle_taper_mm``, then that radius up to
+    ``nozzle_reach_mm`` from the tip (the multi-axis cell's nozzle;
+    ``nozzle_radius_mm`` 0: no such check).
     """
 
     max_tilt_deg: float = 45.0
@@ -46,12 +54,22 @@ class CurvedOptions:
     tip_radius_mm: float = 4.0
     max_axis_deviation_deg: float = 5.0
     path_axis_window_mm: float = 2.0
+    crease_flatten_r: float = 0.5
+    crease_width_mm: float = 3.0
+    nozzle_tip_radius_mm: float = 0.35
+    nozzle_tip_length_mm: float = 1.0
+    nozzle_taper_mm: float = 3.0
+    nozzle_radius_mm: float = 1.0
+    nozzle_reach_mm: float = 30.0
 
     def __post_init__(self) -> None:
         checks = {"max_tilt_deg": (0.0, 89.0), "top_slope_deg": (0.0, 89.0), "heat_time_r": (0.0, 100.0),
                   "max_neighbour_deg": (1.0, 90.0), "plate_blend_mm": (0.0, 1000.0),
                   "tip_radius_mm": (0.0, 100.0), "max_axis_deviation_deg": (0.0, 90.0),
-                  "path_axis_window_mm": (0.0, 100.0)}
+                  "path_axis_window_mm": (0.0, 100.0), "crease_flatten_r": (0.0, 1.0),
+                  "crease_width_mm": (0.0, 100.0), "nozzle_tip_radius_mm": (0.0, 50.0),
+                  "nozzle_tip_length_mm": (0.0, 50.0), "nozzle_taper_mm": (0.0, 100.0),
+                  "nozzle_radius_mm": (0.0, 50.0), "nozzle_reach_mm": (0.0, 1000.0)}
         for key, (lo, hi) in checks.items():
             value = getattr(self, key)
             if not (math.isfinite(value) and lo <= value <= hi):

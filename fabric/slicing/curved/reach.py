@@ -1,0 +1,177 @@
+"""The nozzle's reach: axes turned where the nozzle would run into beads laid before.
+
+The axis rules of :mod:`.axis` keep the nozzle near the layer normal. Where two
+fronts of layers meet (an arch's crown, even rounded by :mod:`.crease`) the
+normal of one side points into the other side's beads a few millimetres up
+the nozzle. This rule looks along the nozzle as it will be, a tip of
+``nozzle_tip_radius_mm`` for ``nozzle_tip_length_mm`` (which lays the bead and
+may touch it), a cone widening to ``nozzle_radius_mm`` over
+``nozzle_taper_mm``, covered by the same three steps as the cell's collision
+model (:meth:`fabric.robot.model.ToolGeometry.taper_steps`), then that radius
+up to ``nozzle_reach_mm``; and it turns an axis that comes within a bead's
+half width (plus ``MARGIN_MM``) of a bead centre of this layer or one laid
+before:
+
+1. first towards +z in its own vertical plane (a fraction of its tilt at a
+   time, the least that clears);
+2. else to the clear direction nearest it of a fixed fan (vertical, and tilts
+   up to the point's tilt limit all round);
+3. else it is left as it was and counted: the slice warns of such points, and
+   the collision check of the planned program has the last word.
+
+The turned axes are then averaged along the path (as :func:`.axis.smooth_along`
+does), never ending less upright than the turn made them. A nozzle turned off
+the layer normal by ``d`` dips its tip's rim ``r sin d`` into the layer under
+(0.26 mm at most for the multi-axis cell's 0.35 mm tip and 48 degrees), which
+the collision check allows the tip and nothing else.
+
+Beads are points here (their centres, half a layer under the tip), near
+enough: the collision check measures them as the boxes they are.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from fabric.slicing.curved.axis import limit_tilt, smooth_along, unit_rows
+from fabric.slicing.curved.options import CurvedOptions
+from fabric.slicing.curved.paths import CurvedPath
+
+__all__ = ["NozzleReach", "nozzle_pieces"]
+
+MARGIN_MM = 0.1                 # kept between the nozzle and a bead's side, over its half width
+TAPER_STEPS = 3                 # as the cell's collision model covers the cone (fabric.robot.model)
+TAPER_PIECE_MM = 0.25           # the cone's steps are looked along in pieces this long
+SHANK_PIECE_MM = 1.0            # and the nozzle's cylinder in pieces this long
+SHANK_FINE_MM = 8.0             # ... up to this far from the tip, then
+SHANK_COARSE_MM = 2.0           # ... in pieces this long
+NEIGHBOURS = 24                 # bead centres measured exactly round each piece
+PASSES = 4                      # turn, smooth along the path, look again: at most this many times
+TURN_FRACTIONS = (0.15, 0.3, 0.45, 0.6, 0.75, 0.9, 1.0)
+_FAN_TILTS_DEG = (10.0, 20.0, 30.0, 40.0, 45.0)
+_FAN_AZIMUTHS_DEG = np.arange(0.0, 360.0, 20.0)
+
+
+def _fan() -> np.ndarray:
+    t, a = np.meshgrid(np.radians(_FAN_TILTS_DEG), np.radians(_FAN_AZIMUTHS_DEG))
+    t, a = t.ravel(), a.ravel()
+    return np.vstack([[0.0, 0.0, 1.0], np.column_stack([np.sin(t) * np.cos(a), np.sin(t) * np.sin(a), np.cos(t)])])
+
+
+FAN = _fan()
+FAN_TILT_DEG = np.degrees(np.arccos(np.clip(FAN[:, 2], -1.0, 1.0)))
+
+
+def nozzle_pieces(opts: CurvedOptions) -> list[tuple[float, float, float]]:
+    """The nozzle above its tip as pieces (start, end along the axis from the tip, radius), mm."""
+    pieces = []
+    s = opts.nozzle_tip_length_mm
+    if opts.nozzle_taper_mm > 0.0:
+        step = opts.nozzle_taper_mm / TAPER_STEPS
+        for k in range(TAPER_STEPS):
+            r = opts.nozzle_tip_radius_mm + (opts.nozzle_radius_mm - opts.nozzle_tip_radius_mm) * (k + 1) / TAPER_STEPS
+            n = max(1, int(np.ceil(step / TAPER_PIECE_MM)))
+            for j in range(n):
+                pieces.append((s + step * j / n, s + step * (j + 1) / n, r))
+            s += step
+    while s < opts.nozzle_reach_mm - 1e-9:
+        end = min(s + (SHANK_PIECE_MM if s < SHANK_FINE_MM else SHANK_COARSE_MM), opts.nozzle_reach_mm)
+        pieces.append((s, end, opts.nozzle_radius_mm))
+        s = end
+    return pieces
+
+
+class NozzleReach:
+    """The bead centres laid so far, layer by layer, and the rule of the module docstring."""
+
+    def __init__(self, opts: CurvedOptions) -> None:
+        self.opts = opts
+        self.pieces = nozzle_pieces(opts) if opts.nozzle_radius_mm > 0.0 else []
+        self._laid: list[np.ndarray] = []
+        self.checked = 0          # points looked at
+        self.turned = 0           # points whose axis was turned
+        self.blocked = 0          # points no axis cleared (left as they were)
+
+    def hold(self, paths: list[CurvedPath], tilt_limit_deg: list[np.ndarray]) -> list[CurvedPath]:
+        """Turn the axes of one layer's ``paths`` (each point's tilt at most ``tilt_limit_deg``) where they
+        must, then count the layer's beads as laid."""
+        if not paths:
+            return paths
+        here = np.vstack([p.points_mm - p.normals * (p.heights_mm[:, None] / 2.0) for p in paths])
+        if self.pieces:
+            beads = np.vstack([*self._laid, here])
+            tree = cKDTree(beads)
+            for path, limit in zip(paths, tilt_limit_deg):
+                self._hold_path(path, limit, tree)
+        self._laid.append(here)
+        return paths
+
+    def _hold_path(self, path: CurvedPath, limit_deg: np.ndarray, tree: cKDTree) -> None:
+        reach = 0.5 * path.width_mm + MARGIN_MM
+        self.checked += len(path.axes)
+        bad = self._blocked(path.points_mm, path.axes, tree, reach)
+        if not bad.any():
+            return
+        first = int(bad.sum())
+        for _pass in range(PASSES):
+            turned, todo = self._turn(path, bad, limit_deg, tree, reach)
+            smooth = smooth_along(path.points_mm, turned, path.closed, self.opts.path_axis_window_mm)
+            keep = bad & ~todo & (smooth[:, 2] < turned[:, 2])       # never less upright than the turn made it
+            path.axes = limit_tilt(unit_rows(np.where(keep[:, None], turned, smooth)), limit_deg)
+            bad = self._blocked(path.points_mm, path.axes, tree, reach)
+            if not bad.any():
+                break
+        left = int(bad.sum())
+        self.turned += first - left
+        self.blocked += left
+
+    def _turn(self, path: CurvedPath, bad: np.ndarray, limit_deg: np.ndarray, tree: cKDTree, reach: float
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """The axes with the ``bad`` ones turned (steps 1 and 2 of the module docstring), and which are left."""
+        turned = path.axes.copy()
+        todo = bad.copy()
+        tilt_deg = np.degrees(np.arccos(np.clip(turned[:, 2], -1.0, 1.0)))
+        for fraction in TURN_FRACTIONS:
+            idx = np.flatnonzero(todo)
+            if len(idx) == 0:
+                break
+            cand = limit_tilt(turned[idx], tilt_deg[idx] * (1.0 - fraction))
+            ok = ~self._blocked(path.points_mm[idx], cand, tree, reach)
+            turned[idx[ok]] = cand[ok]
+            todo[idx[ok]] = False
+        idx = np.flatnonzero(todo)
+        if len(idx):
+            best = np.full(len(idx), -2.0)
+            for d, d_tilt in zip(FAN, FAN_TILT_DEG):
+                ok = ~self._blocked(path.points_mm[idx], np.broadcast_to(d, (len(idx), 3)), tree, reach)
+                ok &= d_tilt <= limit_deg[idx] + 1e-9
+                score = np.where(ok, path.axes[idx] @ d, -2.0)
+                better = score > best
+                turned[idx[better]] = d
+                best = np.maximum(best, score)
+            todo[idx[best > -2.0]] = False
+        return turned, todo
+
+    def _blocked(self, points: np.ndarray, axes: np.ndarray, tree: cKDTree, reach_mm: float) -> np.ndarray:
+        """(n,) bool: the nozzle on ``axes`` at ``points`` comes within ``reach_mm`` of a bead centre."""
+        bad = np.zeros(len(points), dtype=bool)
+        beads = tree.data
+        for s0, s1, radius in self.pieces:
+            centre = points + axes * (0.5 * (s0 + s1))
+            bound = float(np.hypot(radius, 0.5 * (s1 - s0))) + reach_mm
+            # the nearest bead first (cheap): only where one is within the piece's ball, the nearest few
+            nearest, _i = tree.query(centre, k=1, distance_upper_bound=bound)
+            close = np.flatnonzero(np.isfinite(nearest))
+            if len(close) == 0:
+                continue
+            _d, near = tree.query(centre[close], k=NEIGHBOURS, distance_upper_bound=bound)
+            found = near < len(beads)
+            rows = close[np.nonzero(found)[0]]
+            rel = beads[near[found]] - points[rows]
+            a = axes[rows]
+            along = np.einsum("ij,ij->i", rel, a)
+            side = np.linalg.norm(rel - along[:, None] * a, axis=1)
+            off_end = np.maximum(np.maximum(s0 - along, along - s1), 0.0)
+            off_side = np.maximum(side - radius, 0.0)
+            bad[rows[off_end * off_end + off_side * off_side < reach_mm * reach_mm]] = True
+        return bad
