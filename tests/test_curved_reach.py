@@ -1,6 +1,8 @@
 """The curved slicer's rules for where two fronts of layers meet: the crease rounded, the nozzle turned clear."""
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 import trimesh
@@ -49,7 +51,7 @@ def test_the_nozzle_is_looked_along_as_the_cells_collision_model_covers_it():
     pieces = nozzle_pieces(opts)
     assert pieces[0][0] == opts.nozzle_tip_length_mm                            # the tip itself may touch
     assert pieces[-1][1] == pytest.approx(opts.nozzle_reach_mm)
-    assert all(a[1] == pytest.approx(b[0]) for a, b in zip(pieces, pieces[1:]))
+    assert all(a[1] == pytest.approx(b[0]) for a, b in itertools.pairwise(pieces))
     taper = [p for p in pieces if p[1] <= opts.nozzle_tip_length_mm + opts.nozzle_taper_mm + 1e-9]
     assert sorted({round(r, 6) for _a, _b, r in taper}) == pytest.approx([0.35 + 0.65 / 3, 0.35 + 1.3 / 3, 1.0])
     assert NozzleReach(CurvedOptions(nozzle_radius_mm=0.0)).pieces == []     # off

@@ -45,10 +45,10 @@ from fabric.wire.qos import BULK_QOS, command_qos
 __all__ = ["Client", "Subscription", "AliveSubscription", "wait_connected", "input_size"]
 
 DISCOVERY_WINDOW_S = 1.0   # retry a get that found no queryable for this long (declarations in flight)
-ALIVE_ATTEMPTS = 5         # liveliness queries merged to list the cells when one answer is incomplete
-ALIVE_SETTLE_S = 0.4       # how long an incomplete liveliness answer is asked again (see Client.alive)
-ALIVE_BACKOFF_S = 0.01     # the first pause between those queries (it doubles)
-ALIVE_BACKOFF_MAX_S = 0.1  # ... up to this
+ALIVE_ATTEMPTS = 5         # liveliness queries merged when an answer is incomplete (see Client.alive)
+ALIVE_BACKOFF_S = 0.01     # pause between those attempts
+ALIVE_SETTLE_S = 0.4       # how long an empty liveliness answer is asked again (see Client.alive)
+ALIVE_BACKOFF_MAX_S = 0.1  # ... the pause doubling from ALIVE_BACKOFF_S up to this
 
 
 class Client:
@@ -171,15 +171,16 @@ class Client:
         no one answers. A *peer* session's liveliness query sometimes returns at once with an
         empty or partial answer while links to other peers are busy (measured here: 53 of 300
         queries under load; 0 of 300 for a client session), so an incomplete answer is asked
-        again for up to ``ALIVE_SETTLE_S`` (within ``timeout``), 10 ms apart and then twice as long each
-        time, and the answers are merged: a service that is really gone costs that much more to report.
-        (CI saw five queries 10 ms apart all come back empty from a CLI in another network namespace,
-        right after its ``status --wait`` had seen every service.)
+        again, up to ``ALIVE_ATTEMPTS`` times within ``timeout`` (10 ms apart), and the answers are
+        merged: a service that is really gone costs some 50 ms more to report. An answer with no service
+        at all is asked again for up to ``ALIVE_SETTLE_S`` (within ``timeout``), the pause doubling: CI saw
+        five empty answers 10 ms apart from a CLI in another network namespace right after its
+        ``status --wait`` had seen every service (a cell really gone costs that much more to report).
         """
         found: set[str] = set()
         start = time.monotonic()
         end, settle_end = start + timeout, start + min(timeout, ALIVE_SETTLE_S)
-        pause_s = ALIVE_BACKOFF_S
+        pause_s, attempts = ALIVE_BACKOFF_S, 0
         while True:
             left = end - time.monotonic()
             if left <= 0:
@@ -187,10 +188,18 @@ class Client:
             for reply in self.session.liveliness().get(self.keys.alive_all(), timeout=left):
                 if reply.ok is not None:
                     found.add(parse_alive(str(reply.ok.key_expr))[1])
-            if found >= set(SERVICES) or time.monotonic() + pause_s > settle_end:
+            attempts += 1
+            if found >= set(SERVICES):
                 break
-            time.sleep(pause_s)
-            pause_s = min(2 * pause_s, ALIVE_BACKOFF_MAX_S)
+            if found and attempts >= ALIVE_ATTEMPTS:
+                break
+            if not found:
+                if time.monotonic() + pause_s > settle_end:
+                    break
+                time.sleep(pause_s)
+                pause_s = min(2 * pause_s, ALIVE_BACKOFF_MAX_S)
+            else:
+                time.sleep(ALIVE_BACKOFF_S)
         return {name: name in found for name in SERVICES}
 
     def cells(self, timeout: float = 2.0, attempts: int = 1,

@@ -101,7 +101,7 @@ class NozzleReach:
         if self.pieces:
             beads = np.vstack([*self._laid, here])
             tree = cKDTree(beads)
-            for path, limit in zip(paths, tilt_limit_deg):
+            for path, limit in zip(paths, tilt_limit_deg, strict=True):
                 self._hold_path(path, limit, tree)
         self._laid.append(here)
         return paths
@@ -142,7 +142,7 @@ class NozzleReach:
         idx = np.flatnonzero(todo)
         if len(idx):
             best = np.full(len(idx), -2.0)
-            for d, d_tilt in zip(FAN, FAN_TILT_DEG):
+            for d, d_tilt in zip(FAN, FAN_TILT_DEG, strict=True):
                 ok = ~self._blocked(path.points_mm[idx], np.broadcast_to(d, (len(idx), 3)), tree, reach)
                 ok &= d_tilt <= limit_deg[idx] + 1e-9
                 score = np.where(ok, path.axes[idx] @ d, -2.0)
