@@ -87,7 +87,7 @@ def test_a_nozzle_leaning_into_a_wall_is_turned_clear_and_one_leaning_away_is_no
     tree_check._laid = list(reach._laid[:1])
     from scipy.spatial import cKDTree
     tree = cKDTree(reach._laid[0])
-    assert not tree_check._blocked(into.points_mm, into.axes, tree, 0.5 * 0.45 + 0.1).any()
+    assert not tree_check._blocked(into.points_mm, into.axes, [tree], 0.5 * 0.45 + 0.1).any()
     assert _tilt_deg(into.axes).max() < 30.0 and (into.axes[:, 0] >= -1e-9).all()   # turned up, not past
     np.testing.assert_array_equal(away.axes, lean_before[0])
     np.testing.assert_array_equal(far.axes, lean_before[1])

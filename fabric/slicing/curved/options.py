@@ -60,7 +60,7 @@ class CurvedOptions:
     nozzle_tip_length_mm: float = 1.0
     nozzle_taper_mm: float = 3.0
     nozzle_radius_mm: float = 1.0
-    nozzle_reach_mm: float = 30.0
+    nozzle_reach_mm: float = 10.0
 
     def __post_init__(self) -> None:
         checks = {"max_tilt_deg": (0.0, 89.0), "top_slope_deg": (0.0, 89.0), "heat_time_r": (0.0, 100.0),

@@ -46,6 +46,9 @@ SHANK_PIECE_MM = 1.0            # and the nozzle's cylinder in pieces this long
 SHANK_FINE_MM = 8.0             # ... up to this far from the tip, then
 SHANK_COARSE_MM = 2.0           # ... in pieces this long
 NEIGHBOURS = 24                 # bead centres measured exactly round each piece
+BEAD_STEP_MM = 0.15             # a path's bead centres kept this far apart (the margin covers half of it)
+REBUILD_R = 0.25                # the older beads' tree is rebuilt when the newer ones reach this share of it
+LOOK_STEP_MM = 0.5              # a path is first looked at with points this far apart
 PASSES = 4                      # turn, smooth along the path, look again: at most this many times
 TURN_FRACTIONS = (0.15, 0.3, 0.45, 0.6, 0.75, 0.9, 1.0)
 _FAN_TILTS_DEG = (10.0, 20.0, 30.0, 40.0, 45.0)
@@ -60,6 +63,16 @@ def _fan() -> np.ndarray:
 
 FAN = _fan()
 FAN_TILT_DEG = np.degrees(np.arccos(np.clip(FAN[:, 2], -1.0, 1.0)))
+
+
+def _spaced(points_mm: np.ndarray, step_mm: float) -> np.ndarray:
+    """Indices of points along a path at least ``step_mm`` apart (by arc length), its first and last always."""
+    n = len(points_mm)
+    if n <= 2:
+        return np.arange(n)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points_mm, axis=0), axis=1))])
+    first = np.flatnonzero(np.diff(np.floor(s / step_mm), prepend=-1.0) > 0)
+    return np.unique(np.concatenate([first, [n - 1]]))
 
 
 def nozzle_pieces(opts: CurvedOptions) -> list[tuple[float, float, float]]:
@@ -87,7 +100,9 @@ class NozzleReach:
     def __init__(self, opts: CurvedOptions) -> None:
         self.opts = opts
         self.pieces = nozzle_pieces(opts) if opts.nozzle_radius_mm > 0.0 else []
-        self._laid: list[np.ndarray] = []
+        self._laid: list[np.ndarray] = []          # bead centres in the older tree
+        self._recent: list[np.ndarray] = []        # ... and laid since it was built
+        self._old: cKDTree | None = None
         self.checked = 0          # points looked at
         self.turned = 0           # points whose axis was turned
         self.blocked = 0          # points no axis cleared (left as they were)
@@ -95,37 +110,59 @@ class NozzleReach:
     def hold(self, paths: list[CurvedPath], tilt_limit_deg: list[np.ndarray]) -> list[CurvedPath]:
         """Turn the axes of one layer's ``paths`` (each point's tilt at most ``tilt_limit_deg``) where they
         must, then count the layer's beads as laid."""
-        if not paths:
+        if not paths or not self.pieces:
             return paths
-        here = np.vstack([p.points_mm - p.normals * (p.heights_mm[:, None] / 2.0) for p in paths])
-        if self.pieces:
-            beads = np.vstack([*self._laid, here])
-            tree = cKDTree(beads)
-            for path, limit in zip(paths, tilt_limit_deg, strict=True):
-                self._hold_path(path, limit, tree)
-        self._laid.append(here)
+        # the beads as centres at most BEAD_STEP_MM apart along their paths (a fine path is not a wider bead)
+        here = np.vstack([(p.points_mm - p.normals * (p.heights_mm[:, None] / 2.0))[_spaced(p.points_mm, BEAD_STEP_MM)]
+                          for p in paths])
+        self._recent.append(here)
+        trees = self._trees()
+        # every path's points LOOK_STEP_MM apart at once first: a path they all clear is left as it is
+        # (most are); the others are looked at point by point
+        some = [_spaced(p.points_mm, LOOK_STEP_MM) for p in paths]
+        points = np.vstack([p.points_mm[i] for p, i in zip(paths, some, strict=True)])
+        axes = np.vstack([p.axes[i] for p, i in zip(paths, some, strict=True)])
+        reach = np.concatenate([np.full(len(i), 0.5 * p.width_mm + MARGIN_MM) for p, i in
+                                zip(paths, some, strict=True)])
+        bad = self._blocked(points, axes, trees, reach)
+        ends = np.cumsum([len(i) for i in some])
+        for path, limit, a, b in zip(paths, tilt_limit_deg, ends - [len(i) for i in some], ends, strict=True):
+            self.checked += len(path.axes)
+            if bad[a:b].any():
+                self._hold_path(path, limit, trees)
         return paths
 
-    def _hold_path(self, path: CurvedPath, limit_deg: np.ndarray, tree: cKDTree) -> None:
+    def _trees(self) -> list[cKDTree]:
+        """The beads laid so far as two trees: the older ones, rebuilt only when the newer ones reach a
+        quarter of them (a tree of every bead at every layer cost 17 s of a 100k-triangle part's slice), and
+        the newer ones."""
+        recent = sum(len(r) for r in self._recent)
+        if self._old is None or recent > REBUILD_R * self._old.n:
+            self._laid.extend(self._recent)
+            self._recent = []
+            self._old = cKDTree(np.vstack(self._laid))
+            return [self._old]
+        return [self._old, cKDTree(np.vstack(self._recent))]
+
+    def _hold_path(self, path: CurvedPath, limit_deg: np.ndarray, trees: list[cKDTree]) -> None:
         reach = 0.5 * path.width_mm + MARGIN_MM
-        self.checked += len(path.axes)
-        bad = self._blocked(path.points_mm, path.axes, tree, reach)
+        bad = self._blocked(path.points_mm, path.axes, trees, reach)
         if not bad.any():
             return
         first = int(bad.sum())
         for _pass in range(PASSES):
-            turned, todo = self._turn(path, bad, limit_deg, tree, reach)
+            turned, todo = self._turn(path, bad, limit_deg, trees, reach)
             smooth = smooth_along(path.points_mm, turned, path.closed, self.opts.path_axis_window_mm)
             keep = bad & ~todo & (smooth[:, 2] < turned[:, 2])       # never less upright than the turn made it
             path.axes = limit_tilt(unit_rows(np.where(keep[:, None], turned, smooth)), limit_deg)
-            bad = self._blocked(path.points_mm, path.axes, tree, reach)
+            bad = self._blocked(path.points_mm, path.axes, trees, reach)
             if not bad.any():
                 break
         left = int(bad.sum())
         self.turned += first - left
         self.blocked += left
 
-    def _turn(self, path: CurvedPath, bad: np.ndarray, limit_deg: np.ndarray, tree: cKDTree, reach: float
+    def _turn(self, path: CurvedPath, bad: np.ndarray, limit_deg: np.ndarray, trees: list[cKDTree], reach: float
               ) -> tuple[np.ndarray, np.ndarray]:
         """The axes with the ``bad`` ones turned (steps 1 and 2 of the module docstring), and which are left."""
         turned = path.axes.copy()
@@ -136,14 +173,14 @@ class NozzleReach:
             if len(idx) == 0:
                 break
             cand = limit_tilt(turned[idx], tilt_deg[idx] * (1.0 - fraction))
-            ok = ~self._blocked(path.points_mm[idx], cand, tree, reach)
+            ok = ~self._blocked(path.points_mm[idx], cand, trees, reach)
             turned[idx[ok]] = cand[ok]
             todo[idx[ok]] = False
         idx = np.flatnonzero(todo)
         if len(idx):
             best = np.full(len(idx), -2.0)
             for d, d_tilt in zip(FAN, FAN_TILT_DEG, strict=True):
-                ok = ~self._blocked(path.points_mm[idx], np.broadcast_to(d, (len(idx), 3)), tree, reach)
+                ok = ~self._blocked(path.points_mm[idx], np.broadcast_to(d, (len(idx), 3)), trees, reach)
                 ok &= d_tilt <= limit_deg[idx] + 1e-9
                 score = np.where(ok, path.axes[idx] @ d, -2.0)
                 better = score > best
@@ -152,26 +189,31 @@ class NozzleReach:
             todo[idx[best > -2.0]] = False
         return turned, todo
 
-    def _blocked(self, points: np.ndarray, axes: np.ndarray, tree: cKDTree, reach_mm: float) -> np.ndarray:
-        """(n,) bool: the nozzle on ``axes`` at ``points`` comes within ``reach_mm`` of a bead centre."""
+    def _blocked(self, points: np.ndarray, axes: np.ndarray, trees: list[cKDTree], reach_mm: float | np.ndarray
+                 ) -> np.ndarray:
+        """(n,) bool: the nozzle on ``axes`` at ``points`` comes within ``reach_mm`` (one, or one per point) of a
+        bead centre."""
         bad = np.zeros(len(points), dtype=bool)
-        beads = tree.data
-        for s0, s1, radius in self.pieces:
-            centre = points + axes * (0.5 * (s0 + s1))
-            bound = float(np.hypot(radius, 0.5 * (s1 - s0))) + reach_mm
-            # the nearest bead first (cheap): only where one is within the piece's ball, the nearest few
-            nearest, _i = tree.query(centre, k=1, distance_upper_bound=bound)
-            close = np.flatnonzero(np.isfinite(nearest))
-            if len(close) == 0:
-                continue
-            _d, near = tree.query(centre[close], k=NEIGHBOURS, distance_upper_bound=bound)
-            found = near < len(beads)
-            rows = close[np.nonzero(found)[0]]
-            rel = beads[near[found]] - points[rows]
-            a = axes[rows]
-            along = np.einsum("ij,ij->i", rel, a)
-            side = np.linalg.norm(rel - along[:, None] * a, axis=1)
-            off_end = np.maximum(np.maximum(s0 - along, along - s1), 0.0)
-            off_side = np.maximum(side - radius, 0.0)
-            bad[rows[off_end * off_end + off_side * off_side < reach_mm * reach_mm]] = True
+        reach = np.broadcast_to(np.asarray(reach_mm, dtype=float), (len(points),))
+        widest = float(reach.max(initial=0.0))
+        for tree in trees:
+            beads = tree.data
+            for s0, s1, radius in self.pieces:
+                centre = points + axes * (0.5 * (s0 + s1))
+                bound = float(np.hypot(radius, 0.5 * (s1 - s0))) + widest
+                # the nearest bead first (cheap): only where one is within the piece's ball, the nearest few
+                nearest, _i = tree.query(centre, k=1, distance_upper_bound=bound)
+                close = np.flatnonzero(np.isfinite(nearest) & ~bad)
+                if len(close) == 0:
+                    continue
+                _d, near = tree.query(centre[close], k=NEIGHBOURS, distance_upper_bound=bound)
+                found = near < len(beads)
+                rows = close[np.nonzero(found)[0]]
+                rel = beads[near[found]] - points[rows]
+                a = axes[rows]
+                along = np.einsum("ij,ij->i", rel, a)
+                side = np.linalg.norm(rel - along[:, None] * a, axis=1)
+                off_end = np.maximum(np.maximum(s0 - along, along - s1), 0.0)
+                off_side = np.maximum(side - radius, 0.0)
+                bad[rows[off_end * off_end + off_side * off_side < reach[rows] ** 2]] = True
         return bad
