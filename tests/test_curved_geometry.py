@@ -239,7 +239,8 @@ def test_options_are_range_checked():
     with pytest.raises(BadRequest):
         CurvedOptions(top_band_layers=-1)
     for key, bad in (("tip_radius_mm", -1.0), ("plate_blend_mm", float("nan")), ("max_axis_deviation_deg", 91.0),
-                     ("path_axis_window_mm", float("inf"))):
+                     ("path_axis_window_mm", float("inf")), ("crease_flatten_r", 1.5), ("crease_width_mm", -1.0),
+                     ("nozzle_tip_radius_mm", float("nan")), ("nozzle_taper_mm", -3.0), ("nozzle_reach_mm", 1e6)):
         with pytest.raises(BadRequest, match=key):
             CurvedOptions(**{key: bad})
 

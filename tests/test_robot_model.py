@@ -230,7 +230,7 @@ def test_a_tapered_nozzle_is_its_tip_a_cone_of_steps_and_its_shank() -> None:
     assert ToolGeometry().taper_steps() == [] and ToolGeometry().tip_mm == 8.0
 
 
-@pytest.mark.parametrize("tip, taper", [(3.0, 3.0), (0.7, 0.0), (0.0, 3.0)])
+@pytest.mark.parametrize("tip, taper", [(3.0, 3.0), (0.7, 0.0), (0.0, 3.0), (-0.7, 3.0)])
 def test_a_taper_wider_than_its_nozzle_or_half_given_is_refused(tip: float, taper: float) -> None:
     with pytest.raises(ConfigError, match="tool\\.") as exc:
         RobotModel.from_urdf(IRB140_URDF, tool=ToolGeometry(nozzle_diameter_mm=2.0, tip_diameter_mm=tip,

@@ -238,14 +238,15 @@ def _exact_bounds(adv: Advancer, item: Item, covers: HullCovers, g: int, floor_m
         # the queries look as far as a bound over the clearance so far needs: an exact query says "at least
         # margin" beyond it, and ends that far apart bound the piece by (2 margin - motion) / 2. (A margin of
         # twice the clearance alone fed on itself: a tip 0.3 mm clear was reported 0.02 mm clear.)
-        margin = base + min(adv.piece_motion(item, k, s0, s1, qa, qb), EXACT_REACH_MM)
+        motion = adv.piece_motion(item, k, s0, s1, qa, qb)
+        margin = base + min(motion, EXACT_REACH_MM)
         da = last[2] if last is not None and last[:2] == (k, s0) else adv.exact(item, k, qa, margin).d
         db = adv.exact(item, k, qb, margin).d
         last = (k, s1, db)
         todo = [(s0, qa, da, s1, qb, db, 0)]
         while todo:
             sa, qa, da, sb, qb, db, depth = todo.pop()
-            lb = (da + db - adv.piece_motion(item, k, sa, sb, qa, qb)) / 2.0
+            lb = (da + db - (motion if depth == 0 else adv.piece_motion(item, k, sa, sb, qa, qb))) / 2.0
             if lb >= 0.5 * min(da, db) or depth >= EXACT_HALVINGS:
                 adv.bound(max(lb, floor_mm), item.name, k)
                 continue

@@ -7,7 +7,7 @@ the nozzle. This rule looks along the nozzle as it will be, a tip of
 ``nozzle_tip_radius_mm`` for ``nozzle_tip_length_mm`` (which lays the bead and
 may touch it), a cone widening to ``nozzle_radius_mm`` over
 ``nozzle_taper_mm``, covered by the same three steps as the cell's collision
-model (:meth:`fabric.robot.model.ToolGeometry.taper_steps`), then that radius
+model (:func:`fabric.robot.tool.taper_cover`), then that radius
 up to ``nozzle_reach_mm``; and it turns an axis that comes within a bead's
 half width (plus ``MARGIN_MM``) of a bead centre of this layer or one laid
 before:
@@ -33,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fabric.robot.tool import taper_cover
 from fabric.slicing.curved.axis import limit_tilt, smooth_along, unit_rows
 from fabric.slicing.curved.options import CurvedOptions
 from fabric.slicing.curved.paths import CurvedPath
@@ -40,7 +41,6 @@ from fabric.slicing.curved.paths import CurvedPath
 __all__ = ["NozzleReach", "nozzle_pieces"]
 
 MARGIN_MM = 0.1                 # kept between the nozzle and a bead's side, over its half width
-TAPER_STEPS = 3                 # as the cell's collision model covers the cone (fabric.robot.model)
 TAPER_PIECE_MM = 0.25           # the cone's steps are looked along in pieces this long
 SHANK_PIECE_MM = 1.0            # and the nozzle's cylinder in pieces this long
 SHANK_FINE_MM = 8.0             # ... up to this far from the tip, then
@@ -80,13 +80,11 @@ def nozzle_pieces(opts: CurvedOptions) -> list[tuple[float, float, float]]:
     pieces = []
     s = opts.nozzle_tip_length_mm
     if opts.nozzle_taper_mm > 0.0:
-        step = opts.nozzle_taper_mm / TAPER_STEPS
-        for k in range(TAPER_STEPS):
-            r = opts.nozzle_tip_radius_mm + (opts.nozzle_radius_mm - opts.nozzle_tip_radius_mm) * (k + 1) / TAPER_STEPS
-            n = max(1, int(np.ceil(step / TAPER_PIECE_MM)))
-            for j in range(n):
-                pieces.append((s + step * j / n, s + step * (j + 1) / n, r))
-            s += step
+        for r, length, start in taper_cover(opts.nozzle_tip_radius_mm, opts.nozzle_radius_mm, opts.nozzle_taper_mm,
+                                            s):
+            n = max(1, int(np.ceil(length / TAPER_PIECE_MM)))
+            pieces += [(start + length * j / n, start + length * (j + 1) / n, r) for j in range(n)]
+        s += opts.nozzle_taper_mm
     while s < opts.nozzle_reach_mm - 1e-9:
         end = min(s + (SHANK_PIECE_MM if s < SHANK_FINE_MM else SHANK_COARSE_MM), opts.nozzle_reach_mm)
         pieces.append((s, end, opts.nozzle_radius_mm))
@@ -126,7 +124,7 @@ class NozzleReach:
                                 zip(paths, some, strict=True)])
         bad = self._blocked(points, axes, trees, reach)
         ends = np.cumsum([len(i) for i in some])
-        for path, limit, a, b in zip(paths, tilt_limit_deg, ends - [len(i) for i in some], ends, strict=True):
+        for path, limit, b, a in zip(paths, tilt_limit_deg, ends, np.r_[0, ends[:-1]], strict=True):
             self.checked += len(path.axes)
             if bad[a:b].any():
                 self._hold_path(path, limit, trees)
