@@ -183,7 +183,6 @@ class ToolpathChunks:
     def __iter__(self) -> Iterator[tuple[Toolpath, bool]]:
         interp = Interpreter(self.chord_tol_mm, rows_hint=self.chunk_rows + 2 * (self.block_bytes // 12),
                              multiaxis=self.multiaxis)
-        pending: Toolpath | None = None
         done = 0
         with contextlib.ExitStack() as stack:
             if self.data is not None:
@@ -199,17 +198,12 @@ class ToolpathChunks:
                 if self.progress is not None:
                     self.progress(done / max(self.size, 1))
                 while (tp := interp.take_chunk(self.chunk_rows)) is not None:
-                    if pending is not None:
-                        yield pending, False
-                    pending = tp
+                    # a safe cut leaves at least the row after it: a cut chunk is never the last, so it goes
+                    # to the planner at once (it used to wait for the next cut, a whole chunk's parse)
                     self.fraction = done / max(self.size, 1)
+                    yield tp, False
         final = interp.take_chunk(0, final=True)
         assert final is not None                    # the final chunk is every row left
         self.summary = interp.chunk_summary()
         self.fraction = 1.0
-        if pending is not None:
-            if len(final) == 0 and len(final.event_row) == 0:
-                yield pending, True                 # nothing after the last cut (it cannot be: kept for safety)
-                return
-            yield pending, False
         yield final, True

@@ -49,6 +49,8 @@ class PlanOptions:
     zone_mm: float = 0.5                 # blend zone of print and travel moves
     fw_retract_mm: float = 0.8           # filament length of a firmware retraction (G10 / G11)
     chord_tol_mm: float = 0.01           # arc (G2/G3) chord tolerance
+    linear_tol_mm: float = 0.05          # joint interpolation between two rows strays at most this far from a
+    #                                      linear move's straight line: longer moves are split (refine.py)
     ik_block_rows: int = 1 << 18         # toolpath rows planned at a time (a chunk: one IK call): bounds memory
     wobj_T: np.ndarray | None = None     # work object (plate frame in the base frame, mm); None: the cell's
     allow_off_plate: bool = False        # targets off the plate or below it: counted, not fatal (envelope.py)
@@ -68,7 +70,8 @@ class PlanOptions:
                   ("max_tcp_speed_mm_s", 0.0, 10_000.0, False), ("travel_lift_mm", 0.0, 100.0, True),
                   ("lift_min_travel_mm", 0.0, 1e6, True),
                   ("zone_mm", 0.0, 50.0, True), ("fw_retract_mm", 0.0, 50.0, True),
-                  ("chord_tol_mm", 0.0, 10.0, False), ("max_turn_deg", 0.1, 90.0, False))
+                  ("chord_tol_mm", 0.0, 10.0, False), ("max_turn_deg", 0.1, 90.0, False),
+                  ("linear_tol_mm", 0.0, 10.0, False))
         for name, lo_v, hi_v, zero_ok in checks:
             v = getattr(self, name)
             ok = isinstance(v, (int, float)) and np.isfinite(v) and (lo_v <= v if zero_ok else lo_v < v) and v <= hi_v

@@ -48,6 +48,7 @@ from fabric.planning.mapping import map_toolpath
 from fabric.planning.material import resolve_material
 from fabric.planning.options import PlanOptions
 from fabric.planning.post.names import program_name
+from fabric.planning.refine import PrevRow, reach_bound_mm, refine_linear
 from fabric.planning.report import UNREACHABLE_CODES, PlanResult, PlanStats, Reachability
 from fabric.planning.turns import split_turns
 from fabric.robot.frames import inv_T, quat_from_R
@@ -434,6 +435,7 @@ class _Totals:
     lifts: int = 0
     fan_events: int = 0
     leading_dropped: int = 0
+    split_rows: int = 0              # rows added splitting linear moves (refine.py)
     approach_speed_mm_s: float = 0.0
     volume_mm3: float = 0.0
     path_mm: float = 0.0
@@ -528,6 +530,8 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
     wobj = np.asarray(cell.wobj_T() if opt.wobj_T is None else opt.wobj_T, dtype=float)
     it = _parsed_ahead(chunks) if streamed else iter(chunks)
     prev_axis: np.ndarray | None = None          # the nozzle axis the chunk before ended with (multi-axis)
+    prev_row: PrevRow | None = None              # the row the chunk before ended with (refine.py)
+    reach_mm = reach_bound_mm(cell.robot)
     try:
         first = True
         while True:
@@ -545,6 +549,14 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
             t1 = time.perf_counter()
             status, rot = _solve(prog, cell, dataclasses.replace(opt, ik_block_rows=ik_rows), None, seed, last,
                                  asm.axis)
+            # moves whose joint interpolation would stray from the straight line are split (refine.py)
+            ref = refine_linear(prog, status, rot, cell.robot, opt.linear_tol_mm, np.radians(JUMP_DEG), prev_row,
+                                reach_mm)
+            prog, status, rot = ref.program, ref.status, ref.rot_deg
+            tot.split_rows += ref.added
+            if len(prog):
+                prev_row = PrevRow(prog.xyz_mm[-1].copy(), prog.quat_wxyz[-1].copy(), prog.q_rad[-1].copy(),
+                                   int(status[-1]))
             ik_s += time.perf_counter() - t1
             _joint_speeds(prog, cell, asm.approach_speed_mm_s)
             motion = prog.op <= MOVEL
@@ -567,7 +579,8 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
         if chunks.multiaxis:                     # the twin lays beads along each row's nozzle axis
             prog_meta.update(multiaxis=True, **_stated_width(getattr(chunks, "head", b"")))
         prog_meta.update(travel_lifts=tot.lifts, fan_events_dropped=tot.fan_events,
-                         approach_speed_mm_s=tot.approach_speed_mm_s, leading_travels_dropped=tot.leading_dropped)
+                         approach_speed_mm_s=tot.approach_speed_mm_s, leading_travels_dropped=tot.leading_dropped,
+                         linear_split_rows=tot.split_rows)
         prog_meta.update(print_rows=tot.print_rows, options=opt.to_dict(), **material.meta(), **meta)
         prog, extra = sink.finish(wobj, prog_meta)
     except BaseException:
