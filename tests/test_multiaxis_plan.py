@@ -58,8 +58,14 @@ def test_every_move_is_planned_with_its_nozzle_axis(planned, cell: Cell) -> None
     radial = p.xyz_mm[ext, :2] - 125.0
     tilt = np.degrees(np.arccos(np.clip(axes[:, 2], -1, 1)))
     lay = p.layer[ext]
+    # a move's own row ends its G-code line's run of rows; the rows before it in the run lie on the move
+    # (a long move split, fabric/planning/refine.py), their axes interpolated between its ends' as the twin does
+    own = np.ones(len(ext), dtype=bool)
+    own[:-1] = p.gcode_line[ext[:-1]] != p.gcode_line[ext[:-1] + 1]
+    assert not own.all() and p.meta["linear_split_rows"] > 0
     for layer, want in ((0, 0.0), (1, 15.0), (2, 30.0)):
-        np.testing.assert_allclose(tilt[lay == layer], want, atol=1e-3)     # the G-code has 6 decimals
+        np.testing.assert_allclose(tilt[(lay == layer) & own], want, atol=1e-3)     # the G-code has 6 decimals
+        np.testing.assert_allclose(tilt[lay == layer], want, atol=0.05)
     outward = np.einsum("ij,ij->i", radial[lay > 0], axes[lay > 0, :2])
     assert np.all(outward > 0)
     # joints reproduce those poses (FK in the base frame, minus the TCP z = the axis)

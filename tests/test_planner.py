@@ -120,12 +120,19 @@ def test_acceptance_fk_of_every_target_matches_the_gcode(tmp_path: Path, cell: C
     lift = opt.travel_lift_mm
     on_point = (np.abs(got[:, :2] - want[:, :2]).max(axis=1) < 0.01) & (np.abs(dz) < 0.01)
     raised = (np.abs(got[:, :2] - want[:, :2]).max(axis=1) < 0.01) & (np.abs(dz - lift) < 0.01)
-    # the rest are the vertical lifts that start a lifted travel: straight up from the previous target
-    ups = np.flatnonzero(~on_point & ~raised)
-    assert len(ups) == res.stats.travel_lifts > 0
-    prev = T[np.searchsorted(motion, pm[ups]) - 1, :3, 3]
-    assert np.abs(got[ups] - prev - [0, 0, lift]).max() < 0.01
-    assert np.all(on_point[prog.flow_mm3_mm[pm] > 0])
+    # the vertical lifts that start a lifted travel: straight up from the previous target
+    prev = T[np.searchsorted(motion, pm) - 1, :3, 3]
+    up = ~on_point & ~raised & (np.abs(got - prev - [0, 0, lift]).max(axis=1) < 0.01)
+    assert np.count_nonzero(up) == res.stats.travel_lifts > 0
+    # the rest: rows a long move was split into (fabric/planning/refine.py), on that move, before its own row
+    rest = np.flatnonzero(~on_point & ~raised & ~up)
+    nxt = np.minimum(np.searchsorted(motion, pm[rest]) + 1, len(motion) - 1)
+    a, b = prev[rest], T[nxt, :3, 3]
+    u = np.einsum("ij,ij->i", got[rest] - a, b - a) / np.einsum("ij,ij->i", b - a, b - a)
+    assert np.all((u > 0) & (u < 1)) and np.abs(a + u[:, None] * (b - a) - got[rest]).max(initial=0) < 0.01
+    assert np.array_equal(prog.gcode_line[motion[nxt]], prog.gcode_line[pm[rest]])
+    assert 0 < len(rest) <= prog.meta["linear_split_rows"]          # (the approach has its own)
+    assert np.all((on_point | np.isin(np.arange(len(pm)), rest))[prog.flow_mm3_mm[pm] > 0])
     # extruded volume is the slicer's
     m = re.search(r"; filament used \[mm\] = ([\d.]+)|; filament used = ([\d.]+)mm", text)
     used_mm = float(next(g for g in m.groups() if g))
@@ -163,7 +170,8 @@ M104 S0
 
 
 def test_program_structure_speeds_flow_events(cell: Cell) -> None:
-    opt = PlanOptions(offset_mm=(20, 20, 0), max_tcp_speed_mm_s=100.0, speed_r=0.5, zone_mm=0.3)
+    # moves kept whole (linear_tol_mm: the approach's 50 mm descent would be split, tests/test_refine_linear.py)
+    opt = PlanOptions(offset_mm=(20, 20, 0), max_tcp_speed_mm_s=100.0, speed_r=0.5, zone_mm=0.3, linear_tol_mm=10.0)
     res = plan_gcode(GCODE, cell, opt).require_runnable()
     p = res.program
     # Approach: joint move above the first bead, heat and wait there, linear move down to the bead's start
