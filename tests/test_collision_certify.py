@@ -81,8 +81,10 @@ def test_a_travel_through_a_gap_a_box_per_layer_would_block_is_free(cell, cert):
     program = plan(cell, gcode)
     rep = report(cert, program)
     assert rep.collision_free, rep.first_hit
-    assert 0.2 < rep.min_distance_mm < 0.45           # the tip over the plate on the first layer (0.4 mm)
-    assert rep.clearance_body == "tool_tip" and rep.clearance_layer == 0
+    # the tip over the plate on the first layer (0.37 mm), or between the towers, 0.23 mm clear (the travel's
+    # pieces stray up to linear_tol_mm from its line, fabric/planning/refine.py)
+    assert 0.2 < rep.min_distance_mm < 0.45
+    assert rep.clearance_body == "tool_tip" and rep.clearance_layer in (0, 99)
     assert rep.segments > 1000 and rep.beads == 2 * 100 * 4
     # the nozzle between the towers is inside version 1's part model (one box per layer)
     from fabric.collision.sweep import layer_boxes

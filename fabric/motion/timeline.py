@@ -14,7 +14,7 @@ in the plate frame from the previous row's target to this row's target; the
 covered part starts ``s0_mm`` along it (non-zero only for a first row resumed
 mid-way). Joints along a linear move are interpolated linearly between the two
 rows' joint targets (the planner splits every move where that would take the
-TCP further than ``linear_tol_mm``, 0.05 mm by default, from the straight line:
+TCP further than ``linear_tol_mm``, 0.1 mm by default, from the straight line:
 ``fabric.planning.refine``; the Cartesian position is exact), and the orientation by normalised
 quaternion interpolation. Joint moves (MOVEJ) are Ruckig jerk-limited
 trajectories evaluated with ``Trajectory.at_time``; their TCP comes from

@@ -49,7 +49,7 @@ class PlanOptions:
     zone_mm: float = 0.5                 # blend zone of print and travel moves
     fw_retract_mm: float = 0.8           # filament length of a firmware retraction (G10 / G11)
     chord_tol_mm: float = 0.01           # arc (G2/G3) chord tolerance
-    linear_tol_mm: float = 0.05          # joint interpolation between two rows strays at most this far from a
+    linear_tol_mm: float = 0.1           # joint interpolation between two rows strays at most this far from a
     #                                      linear move's straight line: longer moves are split (refine.py)
     ik_block_rows: int = 1 << 18         # toolpath rows planned at a time (a chunk: one IK call): bounds memory
     wobj_T: np.ndarray | None = None     # work object (plate frame in the base frame, mm); None: the cell's

@@ -11,7 +11,11 @@ rightly reported the tip in the plate.
 
 :func:`refine_linear` measures that sag and splits the moves where it exceeds
 ``tol_mm`` into equal pieces, each solved on the straight line, so that every
-executor follows the straight line within ``tol_mm``:
+executor follows the straight line within ``tol_mm`` (the planner's
+``linear_tol_mm``, 0.1 mm by default: about an industrial arm's own path
+accuracy, and a first layer 0.2-0.3 mm over the plate keeps most of its
+clearance; 0.05 mm costs a million-move raster of 5 mm moves a forward
+kinematics per move, 0.1 mm one for one move in ten):
 
 1. a bound from the joint travel and the arm's offsets alone (the
    bound of :func:`sag_bound_mm`) passes over most short moves of a print
@@ -72,14 +76,41 @@ class Refined(NamedTuple):
 
 
 def reach_bound_mm(robot) -> np.ndarray:
-    """Upper bounds (nq,) in mm on the TCP's distance from each joint's axis: the offsets from that joint to
-    the next, and so on, and from the last to the TCP, summed (each is fixed in its parent joint's frame,
-    whatever the joints)."""
-    m = robot.pin_model
-    offsets = [float(np.linalg.norm(m.jointPlacements[j].translation)) for j in range(1, m.njoints)]
-    tcp = float(np.linalg.norm(m.frames[robot.tcp_frame_id].placement.translation))
-    after = np.cumsum((offsets[1:] + [tcp])[::-1])[::-1]          # joint k: offsets k+1 .. and the TCP's
-    return 1000.0 * after
+    """Upper bounds (nq,) in mm on the TCP's distance from each joint's axis, whatever the joints.
+
+    With ``c_k`` a point on axis k (the one nearest axis k+1; on the last axis, the TCP's foot), ``c_k`` and
+    ``c_k+1`` are both fixed in link k, so ``|c_k+1 - c_k|`` never changes; the TCP is at most
+    ``D_k = |c_k+1 - c_k| + D_k+1`` from ``c_k`` (``D_n = |TCP - c_n|``) and at most
+    ``dist(c_k+1, axis k) + D_k+1`` from axis k (the last axis: its own, constant distance). A spherical
+    wrist's axes meet, an axial tool lies on the last axis: both count nothing. An arm with a joint that is
+    not revolute gets the sum of every offset after each joint.
+    """
+    from fabric.robot.joint_axes import joint_axes, line_closest_points
+    ax = joint_axes(robot.pin_model, robot.tcp_frame_id)
+    tcp = ax.flange_T[:3, 3]
+    P, U = ax.points_mm, ax.directions
+    n = len(P)
+    if not ax.revolute.all():
+        m = robot.pin_model
+        offsets = [float(np.linalg.norm(m.jointPlacements[j].translation)) for j in range(1, m.njoints)]
+        last = float(np.linalg.norm(m.frames[robot.tcp_frame_id].placement.translation))
+        return 1000.0 * np.cumsum((offsets[1:] + [last])[::-1])[::-1]
+
+    def dist(x: np.ndarray, k: int) -> float:
+        d = x - P[k]
+        return float(np.linalg.norm(d - (d @ U[k]) * U[k]))
+
+    c = [line_closest_points(P[k], U[k], P[k + 1], U[k + 1])[0] for k in range(n - 1)]
+    c.append(P[-1] + ((tcp - P[-1]) @ U[-1]) * U[-1])
+    far = np.empty(n)
+    far[-1] = np.linalg.norm(tcp - c[-1])
+    for k in range(n - 2, -1, -1):
+        far[k] = np.linalg.norm(c[k + 1] - c[k]) + far[k + 1]
+    reach = np.empty(n)
+    reach[-1] = dist(tcp, n - 1)
+    for k in range(n - 1):
+        reach[k] = dist(c[k + 1], k) + far[k + 1]
+    return reach
 
 
 def sag_bound_mm(dq_rad: np.ndarray, reach_mm: np.ndarray) -> np.ndarray:
@@ -130,8 +161,21 @@ def _straying(prog: Program, status: np.ndarray, robot, tol_mm: float, prev: Pre
     n = len(prog)
     if n == 0:
         return np.zeros(0, np.int64), np.zeros(0)
-    rows = np.arange(n) if look is None else look
     ok = status == IK_OK
+    if look is None:                             # every row: slices, no gathering of a million rows
+        dq = np.empty_like(prog.q_rad)
+        np.subtract(prog.q_rad[1:], prog.q_rad[:-1], out=dq[1:])
+        dq[0] = prog.q_rad[0] - (prev.q_rad if prev is not None else prog.q_rad[0])
+        before_ok = np.empty(n, dtype=bool)
+        before_ok[1:] = ok[:-1]
+        before_ok[0] = prev is not None and prev.status == IK_OK
+        measure = (prog.op == MOVEL) & ok & before_ok
+        measure &= sag_bound_mm(dq, reach_mm) > SPLIT_R * tol_mm
+        cand = np.flatnonzero(measure)
+        q1 = prog.q_rad[cand]
+        q0 = q1 - dq[cand]
+        return _measured(prog, robot, cand, q0, q1, tol_mm, prev)
+    rows = look
     before_ok = np.where(rows > 0, ok[np.maximum(rows - 1, 0)], prev is not None and prev.status == IK_OK)
     cand = rows[(prog.op[rows] == MOVEL) & ok[rows] & before_ok]
     if not len(cand):
@@ -142,12 +186,18 @@ def _straying(prog: Program, status: np.ndarray, robot, tol_mm: float, prev: Pre
         assert prev is not None                  # before_ok of row 0 needs it
         q0[0] = prev.q_rad
     keep = sag_bound_mm(q1 - q0, reach_mm) > SPLIT_R * tol_mm
-    cand, q0, q1 = cand[keep], q0[keep], q1[keep]
+    return _measured(prog, robot, cand[keep], q0[keep], q1[keep], tol_mm, prev)
+
+
+def _measured(prog: Program, robot, cand: np.ndarray, q0: np.ndarray, q1: np.ndarray, tol_mm: float,
+              prev: PrevRow | None) -> tuple[np.ndarray, np.ndarray]:
+    """Of the moves ``cand`` (joints ``q0`` -> ``q1``), those whose joints half-way put the TCP more than
+    ``SPLIT_R * tol_mm`` from the middle of the line, and by how much."""
     if not len(cand):
         return cand, np.zeros(0)
     a = prog.xyz_mm[np.maximum(cand - 1, 0)]
     if cand[0] == 0:
-        a[0] = prev.xyz_mm                       # type: ignore[union-attr]
+        a[0] = prev.xyz_mm                       # type: ignore[union-attr]  (row 0 is a move only after prev)
     w = prog.wobj
     mid = 0.5 * (a + prog.xyz_mm[cand]) @ w[:3, :3].T + w[:3, 3]         # base frame
     sag = np.linalg.norm(robot.fk(0.5 * (q0 + q1))[:, :3, 3] - mid, axis=1)
@@ -162,11 +212,10 @@ def _split(prog: Program, status: np.ndarray, rot_deg: np.ndarray, robot, rows: 
     n = len(prog)
     counts = np.ones(n, dtype=np.int64)
     counts[rows] = pieces
-    src = np.repeat(np.arange(n), counts)                            # the row each new row copies
     end = np.cumsum(counts) - 1                                      # where each old row now is
-    cols = {name: getattr(prog, name)[src] for name in COLUMNS}
+    cols = {name: np.repeat(getattr(prog, name), counts, axis=0) for name in COLUMNS}   # each row copied
     out = Program(**cols, wobj=prog.wobj, meta=prog.meta)
-    status, rot_deg = status[src], rot_deg[src]
+    status, rot_deg = np.repeat(status, counts), np.repeat(rot_deg, counts)
     # the new rows: for move k, pieces[k] - 1 of them at s = 1/m .. (m-1)/m
     move = np.repeat(np.arange(len(rows)), pieces - 1)
     first_new = end[rows] - (pieces - 1)
