@@ -197,7 +197,8 @@ def _measured(prog: Program, robot, cand: np.ndarray, q0: np.ndarray, q1: np.nda
         return cand, np.zeros(0)
     a = prog.xyz_mm[np.maximum(cand - 1, 0)]
     if cand[0] == 0:
-        a[0] = prev.xyz_mm                       # type: ignore[union-attr]  (row 0 is a move only after prev)
+        assert prev is not None                  # row 0 is a move only after the chunk before
+        a[0] = prev.xyz_mm
     w = prog.wobj
     mid = 0.5 * (a + prog.xyz_mm[cand]) @ w[:3, :3].T + w[:3, 3]         # base frame
     sag = np.linalg.norm(robot.fk(0.5 * (q0 + q1))[:, :3, 3] - mid, axis=1)
