@@ -102,3 +102,12 @@ def test_the_bound_holds_against_the_measured_sag() -> None:
 def test_a_bad_tolerance_is_refused(bad: float) -> None:
     with pytest.raises(ValidationError, match="linear_tol_mm"):
         PlanOptions(linear_tol_mm=bad)
+
+
+@pytest.mark.parametrize("name", ["irb140", "kr6r700", "ur10", "panda"])
+def test_the_tcp_positions_measured_are_the_forward_kinematics(name: str) -> None:
+    """The sag is measured with ``tcp_xyz_mm`` (an OPW arm's own point formula, else the pose's position)."""
+    robot = Cell.builtin(name).robot
+    q = np.random.default_rng(3).uniform(np.maximum(robot.lower_rad, -3), np.minimum(robot.upper_rad, 3),
+                                         (2000, robot.nq))
+    np.testing.assert_allclose(robot.tcp_xyz_mm(q), robot.fk(q)[:, :3, 3], atol=1e-9)

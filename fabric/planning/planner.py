@@ -526,7 +526,7 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
     ik_rows = opt.ik_block_rows * 5 // 4 if streamed else opt.ik_block_rows
     seed = _Seed(np.asarray(cell.home_q_rad, dtype=float))
     reach, tot = _Reach(), _Totals()
-    ik_s = 0.0
+    ik_s = refine_s = 0.0
     wobj = np.asarray(cell.wobj_T() if opt.wobj_T is None else opt.wobj_T, dtype=float)
     it = _parsed_ahead(chunks) if streamed else iter(chunks)
     prev_axis: np.ndarray | None = None          # the nozzle axis the chunk before ended with (multi-axis)
@@ -549,6 +549,8 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
             t1 = time.perf_counter()
             status, rot = _solve(prog, cell, dataclasses.replace(opt, ik_block_rows=ik_rows), None, seed, last,
                                  asm.axis)
+            ik_s += time.perf_counter() - t1
+            t1 = time.perf_counter()
             # moves whose joint interpolation would stray from the straight line are split (refine.py)
             ref = refine_linear(prog, status, rot, cell.robot, opt.linear_tol_mm, np.radians(JUMP_DEG), prev_row,
                                 reach_mm)
@@ -557,7 +559,7 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
             if len(prog):
                 prev_row = PrevRow(prog.xyz_mm[-1].copy(), prog.quat_wxyz[-1].copy(), prog.q_rad[-1].copy(),
                                    int(status[-1]))
-            ik_s += time.perf_counter() - t1
+            refine_s += time.perf_counter() - t1
             _joint_speeds(prog, cell, asm.approach_speed_mm_s)
             motion = prog.op <= MOVEL
             if last:
@@ -619,7 +621,8 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
         extruded_volume_mm3=tot.volume_mm3, path_length_mm=tot.path_mm, print_length_mm=tot.print_mm,
         travel_lifts=tot.lifts, fan_events_dropped=tot.fan_events, gcode_lines=summary.n_lines,
         unknown_commands=dict(summary.unknown_commands), slicer=chunks.slicer, material=material,
-        warnings=list(material.warnings), parse_s=parse_s, ik_s=ik_s, timing_s=timing_s,
+        warnings=list(material.warnings), split_rows=tot.split_rows, parse_s=parse_s, ik_s=ik_s, refine_s=refine_s,
+        timing_s=timing_s,
         total_s=parse_before + time.perf_counter() - t0)
     return PlanResult(program=prog, report=report, estimate_s=estimate, stats=stats,
                       toolpath=chunks.toolpath, slowed_rows=slowed_rows, slowed_joint=slowed_joint, t_end_s=t_end)

@@ -201,7 +201,7 @@ def _measured(prog: Program, robot, cand: np.ndarray, q0: np.ndarray, q1: np.nda
         a[0] = prev.xyz_mm
     w = prog.wobj
     mid = 0.5 * (a + prog.xyz_mm[cand]) @ w[:3, :3].T + w[:3, 3]         # base frame
-    sag = np.linalg.norm(robot.fk(0.5 * (q0 + q1))[:, :3, 3] - mid, axis=1)
+    sag = np.linalg.norm(robot.tcp_xyz_mm(0.5 * (q0 + q1)) - mid, axis=1)
     far = sag > SPLIT_R * tol_mm
     return cand[far], sag[far]
 

@@ -112,8 +112,10 @@ class PlanStats:
     slicer: str = "unknown"
     material: ResolvedMaterial = field(default_factory=lambda: resolve_material(Material(), None))
     warnings: list[str] = field(default_factory=list)     # what the user should know (an assumed material...)
+    split_rows: int = 0            # rows added splitting linear moves (fabric/planning/refine.py)
     parse_s: float = 0.0
     ik_s: float = 0.0
+    refine_s: float = 0.0          # checking and splitting the linear moves
     timing_s: float = 0.0
     total_s: float = 0.0
 

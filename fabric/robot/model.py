@@ -297,6 +297,15 @@ class RobotModel:
         """TCP pose(s) in the robot base frame, mm: (4, 4) for q (nq,), (N, 4, 4) for (N, nq)."""
         return self.fk_flange(q) @ self.tool_T
 
+    def tcp_xyz_mm(self, q: np.ndarray) -> np.ndarray:
+        """TCP positions (N, 3) in the robot base frame, mm, for joints (N, nq): :meth:`fk`'s, faster where the
+        arm's family computes a point without the whole pose (OPW arms)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        arm = getattr(self.closed_form, "arm", None)
+        if arm is not None and hasattr(arm, "point_xyz"):
+            return arm.point_xyz(q, self.tool_T[:3, 3])
+        return self.fk(q)[:, :3, 3]
+
     def fk_flange(self, q: np.ndarray) -> np.ndarray:
         """Flange pose(s) in the robot base frame, mm (same shapes as :meth:`fk`)."""
         q = np.asarray(q, dtype=float)

@@ -108,7 +108,7 @@ def bench_cell(name: str, gcode: Path, moves: int, n_dls: int, tmp: Path, n_cli:
         "cell": name, "ik": "closed form (" + cell.robot.ik_family + ")" if cell.robot.closed_form is not None
         else "batched DLS", "joints": cell.robot.nq, "moves": moves, "feasible_r": res.report.feasible_r,
         "plan_s": plan_s, "ik_s": st.ik_s, "plan_moves_per_s": st.moves / plan_s, "plan_whole_s": plan_whole_s,
-        "split_rows": int(prog.meta["linear_split_rows"]),
+        "split_rows": st.split_rows, "refine_s": st.refine_s,
         "csv_s": csv_s, "csv_rows": rows_written, "csv_joint_columns": sum(c.endswith("_deg") for c in header),
         "plan_and_csv_moves_per_s": st.moves / (plan_s + csv_s),
         "dls_targets": len(rows), "dls_targets_per_s": len(rows) / dls_s, "dls_converged_r": float(ok.min()),
@@ -141,8 +141,9 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
         "",
         "| cell | IK | joints | moves | reachable | plan (s) | of which IK (s) | plan (moves/s) | CSV (s) "
         "| plan + CSV (moves/s) | DLS (targets/s) | plan / DLS | `fabric-cli plan --csv` (s: first, best) "
-        "| CLI / DLS | rows added splitting moves | plan, moves kept whole (s) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| CLI / DLS | rows added splitting moves | of the plan, checking the moves (s) "
+        "| plan, moves kept whole (s) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
@@ -150,7 +151,8 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
             f"| {100 * float(r['feasible_r']):.2f} % | {r['plan_s']:.2f} "          # type: ignore[arg-type]
             f"| {r['ik_s']:.2f} | {r['plan_moves_per_s']:,.0f} | {r['csv_s']:.2f} "
             f"| {r['plan_and_csv_moves_per_s']:,.0f} | {r['dls_targets_per_s']:,.0f} | {r['plan_vs_dls_x']:,.1f}x "
-            f"| {_cli_text(r)} | {r['cli_vs_dls_x']:,.1f}x | {r['split_rows']:,} | {r['plan_whole_s']:.2f} |")
+            f"| {_cli_text(r)} | {r['cli_vs_dls_x']:,.1f}x | {r['split_rows']:,} | {r['refine_s']:.2f} "
+            f"| {r['plan_whole_s']:.2f} |")
     lines += [
         "",
         "Every linear move is checked for how far its joints, interpolated between its two rows, would take the TCP "
