@@ -6,6 +6,11 @@ twin and the collision check interpolate the joints between rows); the check rig
 """
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -14,6 +19,7 @@ from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.refine import reach_bound_mm, sag_bound_mm
 from fabric.robot.cell import Cell
 from fabric.robot.kinematics import IK_OK
+from fabric.services.planner import PlannerService
 from fabric.wire.errors import ValidationError
 
 TOL_MM = 0.05
@@ -111,3 +117,37 @@ def test_the_tcp_positions_measured_are_the_forward_kinematics(name: str) -> Non
     q = np.random.default_rng(3).uniform(np.maximum(robot.lower_rad, -3), np.minimum(robot.upper_rad, 3),
                                          (2000, robot.nq))
     np.testing.assert_allclose(robot.tcp_xyz_mm(q), robot.fk(q)[:, :3, 3], atol=1e-9)
+
+
+def test_fabric_cli_plan_takes_the_tolerance(session, settings, tmp_path) -> None:
+    """``fabric-cli plan --linear-tol`` reaches the planner (PlanRequest version 5): a tighter tolerance, more
+    pieces, and the exported joints stay within it; a tolerance out of range is refused before any work."""
+    cell = Cell.builtin("kr6r700")
+    gcode = tmp_path / "lines.gcode"
+    gcode.write_text(long_lines())
+    planner = PlannerService(session, settings.cell, cell, data_dir=tmp_path / "planner")
+    planner.start()
+    args = replace(settings, mode="client").to_args()
+    try:
+        targets = {}
+        for tol in ("0.1", "0.02"):
+            out = tmp_path / f"p{tol}.csv"
+            r = subprocess.run([sys.executable, "-m", "fabric.cli.main", "plan", str(gcode), "--linear-tol", tol,
+                                "--csv", str(out), "--json", *args], capture_output=True, text=True, timeout=120)
+            assert r.returncode == 0, r.stderr
+            targets[tol] = json.loads(r.stdout)["summary"]["targets"]
+            data = np.genfromtxt(out, delimiter=",", names=True)
+            prog_q = np.radians(np.stack([data[f"q{j}_deg"] for j in range(1, 7)], axis=1))
+            xyz = np.stack([data["x_mm"], data["y_mm"], data["z_mm"]], axis=1)
+            lin = np.flatnonzero(np.arange(len(data)) > 1)          # after the approach's joint move
+            mid = cell.robot.tcp_xyz_mm(0.5 * (prog_q[lin] + prog_q[lin - 1]))
+            w = cell.wobj_T()
+            line = 0.5 * (xyz[lin] + xyz[lin - 1]) @ w[:3, :3].T + w[:3, 3]
+            # the CSV rounds joints to 1e-5 deg (~0.0001 mm at this reach)
+            assert np.linalg.norm(mid - line, axis=1)[:-1].max() <= float(tol) + 1e-3
+        assert targets["0.02"] > targets["0.1"]
+        bad = subprocess.run([sys.executable, "-m", "fabric.cli.main", "plan", str(gcode), "--linear-tol", "0",
+                              *args], capture_output=True, text=True, timeout=60)
+        assert bad.returncode != 0 and "linear_tol_mm" in bad.stderr
+    finally:
+        planner.close()

@@ -46,7 +46,8 @@ def _slice(c: Client, path: str, a: argparse.Namespace) -> s.PlanSummary:
     st = c.wait_job("slicer", c.slice(req).job_id)
     plan = s.PlanRequest(gcode_id=st.result_id, filename=Path(path).with_suffix(".gcode").name,
                          offset_mm=list(a.offset), speed_r=a.speed, tilt_deg=list(a.tilt), rot_step_deg=a.rot_step,
-                         filament_diameter_mm=a.filament_diameter, allow_off_plate=a.allow_off_plate)
+                         filament_diameter_mm=a.filament_diameter, allow_off_plate=a.allow_off_plate,
+                         linear_tol_mm=a.linear_tol)
     done = c.wait_job("planner", c.plan(plan).job_id)
     return c.plan_summary(done.result_id)
 
@@ -103,6 +104,9 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--tilt", nargs=2, type=float, default=(0.0, 0.0), metavar=("RX_DEG", "RY_DEG"))
     p.add_argument("--speed", type=float, default=1.0, help="feed-rate factor")
     p.add_argument("--rot-step", type=float, default=15.0, help="free-rotation search step (deg)")
+    p.add_argument("--linear-tol", type=float, default=0.1, metavar="MM",
+                   help="a linear move whose joints, interpolated between its rows, would stray further than this "
+                        "from its straight line is planned in pieces (default 0.1 mm)")
     p.add_argument("--filament-diameter", type=float, default=None, metavar="MM",
                    help="filament diameter (default: as the G-code states it)")
     p.add_argument("--allow-off-plate", action="store_true", help="plan targets off the plate as runnable")

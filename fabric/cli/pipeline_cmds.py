@@ -87,6 +87,7 @@ def plan_file(c: Client, data: bytes | LargeInput, filename: str, a: argparse.Na
     the program is final (the CSV once its times are), while the job goes on with its cycle time and id."""
     req = s.PlanRequest(**gcode_source(c, data), filename=filename, offset_mm=list(a.offset), speed_r=a.speed,
                         tilt_deg=list(a.tilt), rot_step_deg=a.rot_step, filament_diameter_mm=a.filament_diameter,
+                        linear_tol_mm=a.linear_tol,
                         allow_off_plate=a.allow_off_plate)
     acc = c.plan(req)
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="plan-progress") as follow:
@@ -160,6 +161,9 @@ def register(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -
     p.add_argument("--tilt", nargs=2, type=float, default=(0.0, 0.0), metavar=("RX_DEG", "RY_DEG"))
     p.add_argument("--speed", type=float, default=1.0, help="feed-rate factor")
     p.add_argument("--rot-step", type=float, default=15.0, help="free-rotation search step (deg)")
+    p.add_argument("--linear-tol", type=float, default=0.1, metavar="MM",
+                   help="a linear move whose joints, interpolated between its rows, would stray further than this "
+                        "from its straight line is planned in pieces (default 0.1 mm)")
     p.add_argument("--module-targets", type=int, default=5000, help="targets per RAPID/KRL module")
     p.add_argument("--filament-diameter", type=float, default=None, metavar="MM",
                    help="filament diameter (default: as the G-code states it, else 1.75 mm with a warning)")

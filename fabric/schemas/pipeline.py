@@ -71,13 +71,13 @@ class Backends:
 
 # --- planner -----------------------------------------------------------------
 
-@schema("planner.PlanRequest", version=4)
+@schema("planner.PlanRequest", version=5)
 class PlanRequest:
     """Plan G-code given inline (``gcode``), uploaded in chunks (``upload_id``, planner/upload) or by the
     slicer's artifact id (``gcode_id``).
 
     ``filament_diameter_mm`` overrides what the G-code states (None: as stated, else assumed and said so).
-    Version 4: ``max_turn_deg`` (G-code in the multi-axis dialect)."""
+    Version 4: ``max_turn_deg`` (G-code in the multi-axis dialect). Version 5: ``linear_tol_mm``."""
     gcode: bytes = b""              # the G-code itself (inline: up to 4 MB is usual; larger goes by upload)
     gcode_id: str = ""              # or the slicer's G-code artifact id
     filename: str = "part.gcode"    # a name for it (messages and the program's name)
@@ -97,6 +97,10 @@ class PlanRequest:
     upload_id: str = f(default="", max_len=64)  # or G-code sent in chunks to planner/upload
     max_turn_deg: float = f(default=5.0, ge=0.1, le=90.0)   # multi-axis G-code: a move turning the nozzle axis
                                     # more than this is planned as equal pieces
+    linear_tol_mm: float = f(default=0.1, ge=0.01, le=10.0)  # a linear move whose joints, interpolated between
+                                    # its two rows, would take the TCP further than this off its straight line is
+                                    # planned in pieces on the line (the twin, the collision check and a
+                                    # controller streamed the CSV's joints interpolate them)
 
 
 @schema("planner.UnreachableTarget", version=2)

@@ -153,7 +153,7 @@ class PlannerService(Service):
         options = PlanOptions(offset_mm=tuple(req.offset_mm), tilt_deg=tuple(req.tilt_deg), speed_r=req.speed_r,
                               rot_step_deg=req.rot_step_deg, wobj_T=wobj,
                               filament_diameter_mm=req.filament_diameter_mm, allow_off_plate=req.allow_off_plate,
-                              max_turn_deg=req.max_turn_deg)
+                              max_turn_deg=req.max_turn_deg, linear_tol_mm=req.linear_tol_mm)
         st = self.jobs.submit("plan", lambda job: self._run(job, req, options))
         return s.JobAccepted(job_id=st.job_id, kind="plan")
 
