@@ -10,7 +10,9 @@ point, then a linear move down, at the cell's approach speed, fine zones) and a
 kinematics of every motion row with the free rotation about the nozzle axis
 (``fabric.robot.path_ik.solve_path``), solved in blocks of ``ik_block_rows``
 seeded with the previous block's last joints so memory stays bounded and
-progress can be reported -> the chunk's rows appended to a sink (in memory, or
+progress can be reported (:mod:`fabric.planning.chunk_ik`) -> linear moves
+split where their joints, interpolated between two rows, would leave the
+straight line (:mod:`fabric.planning.refine`) -> the chunk's rows appended to a sink (in memory, or
 files the program is mapped from: :mod:`fabric.motion.program_file`) -> once the
 whole program is there, the cycle time from the motion model the station
 executes (``fabric.motion.timing.program_times``, in blocks of rows too).
@@ -31,7 +33,6 @@ import re
 import threading
 import time
 from collections.abc import Callable, Generator, Iterable, Iterator
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -43,16 +44,17 @@ from fabric.gcode.material import Material
 from fabric.motion.cold import first_cold_extrusion
 from fabric.motion.program import APPROACH, MOVEJ, MOVEL, PRINT, RETURN_HOME, SET_TEMP, WAIT, WAIT_TEMP, Program
 from fabric.motion.program_file import FileSink, MemorySink, ProgramSink
+from fabric.planning.chunk_ik import JUMP_DEG, Seed, solve_chunk
 from fabric.planning.envelope import envelope_status
 from fabric.planning.mapping import map_toolpath
 from fabric.planning.material import resolve_material
 from fabric.planning.options import PlanOptions
 from fabric.planning.post.names import program_name
 from fabric.planning.refine import PrevRow, reach_bound_mm, refine_linear
-from fabric.planning.report import UNREACHABLE_CODES, PlanResult, PlanStats, Reachability
+from fabric.planning.report import PlanResult, PlanStats, Reachability
+from fabric.planning.tally import Assembled, Reach, Totals
 from fabric.planning.turns import split_turns
-from fabric.robot.frames import inv_T, quat_from_R
-from fabric.robot.kinematics import IK_JUMP, IK_OK
+from fabric.robot.frames import inv_T
 from fabric.wire.errors import FabricError, ValidationError
 
 __all__ = ["plan_gcode", "plan_gcode_file", "plan_toolpath"]
@@ -60,7 +62,6 @@ __all__ = ["plan_gcode", "plan_gcode_file", "plan_toolpath"]
 Progress = Callable[[float], None]
 ProgramReady = Callable[[Program, Reachability], None]     # told the program (and its reach) once it is final
 TimesSoFar = Callable[[np.ndarray, int], None]             # told the rows' times array and how many are computed
-JUMP_DEG = 45.0          # joint step between consecutive linear targets flagged as a jump
 
 
 def _sub(progress: Progress | None, a: float, b: float) -> Progress | None:
@@ -103,7 +104,7 @@ def plan_gcode_file(path: str | os.PathLike[str], cell: Any, options: PlanOption
 
 
 def _assemble(tp: Toolpath, cell: Any, opt: PlanOptions, first: bool = True, last: bool = True
-              ) -> tuple[Program, _Assembled]:
+              ) -> tuple[Program, Assembled]:
     """Program rows of a toolpath chunk (plate frame, no joints yet): the approach before the first chunk's
     print rows, the return home after the last's. A multi-axis chunk approaches and leaves along the nozzle
     axis of its first and last point (straight down and up for a vertical nozzle)."""
@@ -154,22 +155,9 @@ def _assemble(tp: Toolpath, cell: Any, opt: PlanOptions, first: bool = True, las
     prog.xyz_mm[rest] = prog.xyz_mm[last_motion[rest]]
     if axis is not None:
         axis[rest] = axis[last_motion[rest]]
-    return prog, _Assembled(print_rows=len(pr) - dropped, lifts=pr.n_lifts - dropped_lifts,
+    return prog, Assembled(print_rows=len(pr) - dropped, lifts=pr.n_lifts - dropped_lifts,
                             fan_events=pr.n_fan_events, approach_speed_mm_s=v_app, leading_dropped=dropped,
                             axis=axis)
-
-
-@dataclass
-class _Assembled:
-    """What assembling a chunk found besides its rows (``axis``: the nozzle axis of every row, plate frame,
-    from the tip up the nozzle, for a multi-axis toolpath; None for planar G-code)."""
-
-    print_rows: int
-    lifts: int
-    fan_events: int
-    approach_speed_mm_s: float
-    leading_dropped: int
-    axis: np.ndarray | None = None
 
 
 def _start_at_first_bead(prog: Program, stop: int, axis: np.ndarray | None = None
@@ -216,115 +204,6 @@ def _start_at_first_bead(prog: Program, stop: int, axis: np.ndarray | None = Non
         axis[k:f] = axis[order].copy()
         axis = axis[k:]
     return Program(**cols, wobj=prog.wobj, meta=prog.meta), k, lifts, axis
-
-
-@dataclass
-class _Seed:
-    """Where the IK of the next block starts: the last reachable joints so far (home before any), and whether a
-    block was solved before (then its first row is tested for a jump from them)."""
-
-    q_rad: np.ndarray
-    solved: bool = False
-
-
-def _solve(prog: Program, cell: Any, opt: PlanOptions, progress: Progress | None, seed: _Seed | None = None,
-           last: bool = True, axis: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """IK of every motion row (but the final home move of the ``last`` chunk), in blocks, from ``seed`` (carried
-    to the next chunk); fills q and quat. ``axis`` (rows, 3): each row's nozzle axis in the plate frame, from
-    the tip up the nozzle (multi-axis G-code; the TCP z points the other way, out of the nozzle); None: the
-    options' one nozzle axis. Returns (status, rot_deg)."""
-    from fabric.robot.path_ik import solve_path
-
-    robot = cell.robot
-    wobj = prog.wobj
-    home = np.asarray(cell.home_q_rad, dtype=float)
-    if seed is None:
-        seed = _Seed(home)
-    n = len(prog)
-    motion = np.flatnonzero(prog.op[:-1] <= MOVEL) if last else np.flatnonzero(prog.op <= MOVEL)
-    axis_b = wobj[:3, :3] @ opt.nozzle_axis()
-    status = np.zeros(n, np.uint8)
-    rot = np.zeros(n)
-    q_wobj_inv = quat_from_R(wobj[:3, :3].T)
-    plate_is_base = bool(np.array_equal(wobj[:3, :3], np.eye(3)))     # a shifted plate: no rotation to apply
-    block = opt.ik_block_rows
-    for a in range(0, len(motion), block):
-        idx = motion[a:a + block]
-        put = _putter(idx)
-        p = prog.xyz_mm[idx]
-        if plate_is_base:
-            xyz_b = p + wobj[:3, 3]
-        else:
-            xyz_b = np.einsum("ij,kj->ik", p, wobj[:3, :3]) + wobj[:3, 3]     # no BLAS: (N,3)x(3,3)
-        if axis is None:
-            z_b = np.broadcast_to(axis_b, xyz_b.shape)
-        else:                                   # TCP z = -(nozzle axis), turned into the base frame
-            z_b = -(axis[idx] if plate_is_base else np.einsum("ij,kj->ik", axis[idx], wobj[:3, :3]))
-        res = solve_path(robot, xyz_b, z_b, seed.q_rad,
-                         rot_range_deg=opt.rot_range_deg, rot_step_deg=opt.rot_step_deg, jump_deg=JUMP_DEG)
-        put(prog.q_rad, res.q_rad)
-        st = res.status.copy()
-        if seed.solved and len(st) and st[0] == IK_OK and \
-                np.max(np.abs(res.q_rad[0] - seed.q_rad)) > np.radians(JUMP_DEG):
-            st[0] = IK_JUMP                      # across the block boundary, as solve_path does inside
-        seed.solved = seed.solved or len(idx) > 0
-        put(prog.quat_wxyz, res.quat_wxyz if plate_is_base else _quat_in_plate(q_wobj_inv, res.quat_wxyz))
-        put(status, st)
-        put(rot, res.rot_deg)
-        good = np.flatnonzero(st == IK_OK)
-        if len(good):
-            seed.q_rad = res.q_rad[good[-1]].copy()
-        if progress is not None:
-            progress(min(a + block, len(motion)) / max(len(motion), 1))
-    if last:                                 # the final joint move goes to the home joints
-        prog.q_rad[-1] = home
-        T_home = inv_T(wobj) @ robot.fk(home[None])[0]
-        prog.xyz_mm[-1] = T_home[:3, 3]
-        prog.quat_wxyz[-1] = quat_from_R(T_home[:3, :3])
-    # non-motion rows repeat the previous row's pose and status
-    is_m = prog.op <= MOVEL
-    fill = np.where(is_m, np.arange(n), -1)
-    np.maximum.accumulate(fill, out=fill)
-    fill = np.maximum(fill, 0)
-    rest = np.flatnonzero(~is_m)
-    for name in ("q_rad", "quat_wxyz", "xyz_mm"):
-        arr = getattr(prog, name)
-        arr[rest] = arr[fill[rest]]
-    status[rest], rot[rest] = status[fill[rest]], rot[fill[rest]]
-    return status, rot
-
-
-def _putter(idx: np.ndarray) -> Callable[[np.ndarray, np.ndarray], None]:
-    """``put(dst, src)`` doing ``dst[idx] = src`` for sorted ``idx``: by slices when ``idx`` is a
-    few long runs of consecutive rows (motion rows between rare events), else by fancy indexing."""
-    cut = np.flatnonzero(np.diff(idx) != 1) + 1
-    scattered = len(cut) >= 64 + len(idx) // 4096
-    starts = [] if scattered else np.concatenate([[0], cut]).tolist()
-    # no runs at all when idx is empty (starts is [0] then, the other two lists empty)
-    runs = list(zip(starts, idx[starts].tolist() if len(idx) else [], np.diff(starts + [len(idx)]).tolist(),
-                    strict=False))
-
-    def put(dst: np.ndarray, src: np.ndarray) -> None:
-        if scattered:
-            dst[idx] = src
-            return
-        for k, row, m in runs:
-            dst[row:row + m] = src[k:k + m]
-    return put
-
-
-def _quat_in_plate(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
-    """``qa * qb`` (Hamilton product, (4,) by (N, 4)), sign fixed to w >= 0: base-frame TCP
-    orientations expressed in the plate frame when ``qa`` is the inverse of the plate's."""
-    w1, x1, y1, z1 = qa
-    w2, x2, y2, z2 = qb[:, 0], qb[:, 1], qb[:, 2], qb[:, 3]
-    q = np.empty_like(qb)
-    q[:, 0] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
-    q[:, 1] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
-    q[:, 2] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
-    q[:, 3] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
-    q[q[:, 0] < 0] *= -1.0
-    return q
 
 
 def _joint_speeds(prog: Program, cell: Any, v_mm_s: float) -> None:
@@ -402,70 +281,6 @@ class _Progress:
         return lambda f: self(a + (b - a) * f)
 
 
-class _Reach:
-    """The reachability of the chunks so far (counts by reason, the first unreachable target)."""
-
-    def __init__(self) -> None:
-        self.counts: dict[str, int] = {}
-        self.ok = self.n = 0
-        self.first: tuple[int, str] | None = None
-        self.first_row = -1
-
-    def add(self, rep: Reachability, motion: np.ndarray, base: int) -> None:
-        for reason, k in rep.counts.items():
-            self.counts[reason] = self.counts.get(reason, 0) + k
-        st = rep.status[motion]
-        self.n += len(st)
-        self.ok += int(len(st) - np.count_nonzero(np.isin(st, UNREACHABLE_CODES)))
-        if self.first is None and rep.first_unreachable is not None:
-            self.first, self.first_row = rep.first_unreachable, base + rep.first_unreachable_row
-
-    def report(self, status: np.ndarray, rot_deg: np.ndarray) -> Reachability:
-        return Reachability(status=status, rot_deg=rot_deg, feasible_r=self.ok / self.n if self.n else 1.0,
-                            counts=self.counts, first_unreachable=self.first, first_unreachable_row=self.first_row)
-
-
-@dataclass
-class _Totals:
-    """The figures of the chunks so far (see :class:`PlanStats`)."""
-
-    moves: int = 0
-    targets: int = 0
-    print_rows: int = 0
-    lifts: int = 0
-    fan_events: int = 0
-    leading_dropped: int = 0
-    split_rows: int = 0              # rows added splitting linear moves (refine.py)
-    approach_speed_mm_s: float = 0.0
-    volume_mm3: float = 0.0
-    path_mm: float = 0.0
-    print_mm: float = 0.0
-    last_xyz: np.ndarray | None = None
-
-    def add(self, prog: Program, tp: Toolpath, asm: _Assembled, first: bool) -> None:
-        xyz = prog.xyz_mm
-        step = np.zeros_like(xyz)
-        np.subtract(xyz[1:], xyz[:-1], out=step[1:])
-        if self.last_xyz is not None and len(xyz):
-            step[0] = xyz[0] - self.last_xyz         # the chunk's first move starts where the last chunk ended
-        d = np.sqrt(np.einsum("ij,ij->i", step, step))
-        del step
-        lin = prog.op == MOVEL
-        pm = (prog.section == PRINT) & lin
-        self.volume_mm3 += float(np.dot(prog.flow_mm3_mm[lin], d[lin]))
-        self.path_mm += float(d[pm].sum())
-        self.print_mm += float(d[pm & (prog.flow_mm3_mm > 0)].sum())
-        self.targets += int(np.count_nonzero(prog.op <= MOVEL))
-        self.moves += len(tp)
-        self.print_rows += asm.print_rows
-        self.lifts += asm.lifts
-        self.fan_events += asm.fan_events
-        if first:
-            self.leading_dropped, self.approach_speed_mm_s = asm.leading_dropped, asm.approach_speed_mm_s
-        if len(xyz):
-            self.last_xyz = xyz[-1].copy()
-
-
 def _parsed_ahead(chunks: Iterable[tuple[Toolpath, bool]]) -> Iterator[tuple[Toolpath, bool]]:
     """The chunks, parsed by a worker thread one chunk ahead of the caller, which maps and solves the one before
     meanwhile (on the other core: NumPy lets go of the interpreter lock). An error of the parser is raised
@@ -524,8 +339,8 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
     # a streamed chunk (at most ik_block_rows toolpath rows) is solved in one IK call: a call costs ~45 ms
     # before its first row (the rotation search), so a tail block of a few rows would cost as much
     ik_rows = opt.ik_block_rows * 5 // 4 if streamed else opt.ik_block_rows
-    seed = _Seed(np.asarray(cell.home_q_rad, dtype=float))
-    reach, tot = _Reach(), _Totals()
+    seed = Seed(np.asarray(cell.home_q_rad, dtype=float))
+    reach, tot = Reach(), Totals()
     ik_s = refine_s = 0.0
     wobj = np.asarray(cell.wobj_T() if opt.wobj_T is None else opt.wobj_T, dtype=float)
     it = _parsed_ahead(chunks) if streamed else iter(chunks)
@@ -547,7 +362,7 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
             prog, asm = _assemble(split, cell, opt, first, last)
             del split
             t1 = time.perf_counter()
-            status, rot = _solve(prog, cell, dataclasses.replace(opt, ik_block_rows=ik_rows), None, seed, last,
+            status, rot = solve_chunk(prog, cell, dataclasses.replace(opt, ik_block_rows=ik_rows), None, seed, last,
                                  asm.axis)
             ik_s += time.perf_counter() - t1
             t1 = time.perf_counter()
