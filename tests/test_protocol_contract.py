@@ -285,6 +285,9 @@ def test_real_replies_and_publications_validate_against_the_description(cell_in_
         raw.ask("supervisor", "job_move", s.JobMove(job_id=acc["job_id"], position=0), ok=rec.state != "queued")
         raw.ask("supervisor", "job_next")
         second = raw.ask("supervisor", "submit", s.JobSubmit(model=CUBE_GCODE, filename="second.gcode"))
+        # the first job is on the station now: the second waits in the queue, where it can always be moved (the
+        # first may have been loaded before it could be: a fast plan, a clear plate)
+        raw.ask("supervisor", "job_move", s.JobMove(job_id=second["job_id"], position=0))
         raw.ask("supervisor", "job_remove", s.JobQuery(job_id=second["job_id"]))
         # the file library: both files are in it; one added, shown and removed
         listed = raw.ask("supervisor", "files", s.FilesQuery(limit=10))
