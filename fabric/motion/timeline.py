@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from fabric.motion.program import MOVEJ, MOVEL, Program
-from fabric.robot.frames import inv_T, quat_from_R
+from fabric.robot.frames import inv_T, nlerp_quat, quat_from_R
 
 __all__ = ["Sample", "SampleBatch", "Timeline"]
 
@@ -196,7 +196,7 @@ class Timeline:
         L = math.sqrt(float(d @ d))
         f = min(max((s0 + s) / L, 0.0), 1.0) if L > 0 else 1.0
         xyz = x0 + f * d
-        quat = _nlerp(quat0[None], p.quat_wxyz[r][None], np.array([f]))[0]
+        quat = nlerp_quat(quat0[None], p.quat_wxyz[r][None], np.array([f]))[0]
         flow = float(p.flow_mm3_mm[r])
         return Sample(r, q0 + f * (p.q_rad[r] - q0), xyz, quat, v, flow > 0, flow * v * self.flow_r, f,
                       wobj[:3, :3] @ xyz + wobj[:3, 3], s0 + s)
@@ -248,7 +248,7 @@ class Timeline:
             f = np.where(L > 0, np.clip((s0 + s) / np.where(L > 0, L, 1.0), 0.0, 1.0), 1.0)
             xyz[lin] = x0[lin] + f[:, None] * (p.xyz_mm[rows[lin]] - x0[lin])
             q[lin] = q0[lin] + f[:, None] * (p.q_rad[rows[lin]] - q0[lin])
-            quat[lin] = _nlerp(quat0[lin], p.quat_wxyz[rows[lin]], f)
+            quat[lin] = nlerp_quat(quat0[lin], p.quat_wxyz[rows[lin]], f)
             speed[lin] = v
             s_full[lin] = s0 + s
             progress[lin] = f
@@ -286,11 +286,3 @@ class Timeline:
 def _apply(T: np.ndarray, xyz: np.ndarray) -> np.ndarray:
     """Points (N, 3) mapped by the rigid transform ``T``."""
     return xyz @ T[:3, :3].T + T[:3, 3]
-
-
-def _nlerp(qa: np.ndarray, qb: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """Normalised linear quaternion interpolation (shortest arc), ``w >= 0``."""
-    sgn = np.where(np.sum(qa * qb, axis=-1) < 0, -1.0, 1.0)
-    q = (1.0 - f)[:, None] * qa + (f * sgn)[:, None] * qb
-    q /= np.linalg.norm(q, axis=-1, keepdims=True)
-    return np.where(q[:, :1] < 0, -q, q)

@@ -46,7 +46,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fabric.motion.program import COLUMNS, MOVEL, Program
-from fabric.robot.frames import R_from_quat
+from fabric.robot.frames import R_from_quat, make_T, nlerp_quat
 from fabric.robot.kinematics import IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_SINGULAR, _wrap_diff, pose_cols
 
 __all__ = ["Refined", "PrevRow", "refine_linear", "sag_bound_mm", "reach_bound_mm"]
@@ -141,17 +141,15 @@ def refine_linear(prog: Program, status: np.ndarray, rot_deg: np.ndarray, robot,
     return Refined(prog, status, rot_deg, added)
 
 
-def _ends(prog: Program, prev: PrevRow | None) -> tuple[np.ndarray, ...]:
-    """Each row's predecessor: TCP position, orientation and joints (row 0's from ``prev``, or itself)."""
-    xyz0 = np.empty_like(prog.xyz_mm)
-    quat0 = np.empty_like(prog.quat_wxyz)
-    q0 = np.empty_like(prog.q_rad)
-    xyz0[1:], quat0[1:], q0[1:] = prog.xyz_mm[:-1], prog.quat_wxyz[:-1], prog.q_rad[:-1]
-    if prev is None:
-        xyz0[:1], quat0[:1], q0[:1] = prog.xyz_mm[:1], prog.quat_wxyz[:1], prog.q_rad[:1]
-    else:
-        xyz0[0], quat0[0], q0[0] = prev.xyz_mm, prev.quat_wxyz, prev.q_rad
-    return xyz0, quat0, q0
+def _before(prog: Program, rows: np.ndarray, prev: PrevRow | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """TCP position, orientation and joints of the row before each of ``rows`` (sorted; row 0's is ``prev``,
+    which a linear move in row 0 always has: a chunk after the first starts with one)."""
+    i = np.maximum(rows - 1, 0)
+    xyz, quat, q = prog.xyz_mm[i], prog.quat_wxyz[i], prog.q_rad[i]
+    if len(rows) and rows[0] == 0:
+        assert prev is not None
+        xyz[0], quat[0], q[0] = prev.xyz_mm, prev.quat_wxyz, prev.q_rad
+    return xyz, quat, q
 
 
 def _straying(prog: Program, status: np.ndarray, robot, tol_mm: float, prev: PrevRow | None,
@@ -181,10 +179,7 @@ def _straying(prog: Program, status: np.ndarray, robot, tol_mm: float, prev: Pre
     if not len(cand):
         return cand, np.zeros(0)
     q1 = prog.q_rad[cand]
-    q0 = prog.q_rad[np.maximum(cand - 1, 0)]
-    if cand[0] == 0:
-        assert prev is not None                  # before_ok of row 0 needs it
-        q0[0] = prev.q_rad
+    q0 = _before(prog, cand, prev)[2]
     keep = sag_bound_mm(q1 - q0, reach_mm) > SPLIT_R * tol_mm
     return _measured(prog, robot, cand[keep], q0[keep], q1[keep], tol_mm, prev)
 
@@ -195,10 +190,7 @@ def _measured(prog: Program, robot, cand: np.ndarray, q0: np.ndarray, q1: np.nda
     ``SPLIT_R * tol_mm`` from the middle of the line, and by how much."""
     if not len(cand):
         return cand, np.zeros(0)
-    a = prog.xyz_mm[np.maximum(cand - 1, 0)]
-    if cand[0] == 0:
-        assert prev is not None                  # row 0 is a move only after the chunk before
-        a[0] = prev.xyz_mm
+    a = _before(prog, cand, prev)[0]
     w = prog.wobj
     mid = 0.5 * (a + prog.xyz_mm[cand]) @ w[:3, :3].T + w[:3, 3]         # base frame
     sag = np.linalg.norm(robot.tcp_xyz_mm(0.5 * (q0 + q1)) - mid, axis=1)
@@ -217,23 +209,18 @@ def _split(prog: Program, status: np.ndarray, rot_deg: np.ndarray, robot, rows: 
     cols = {name: np.repeat(getattr(prog, name), counts, axis=0) for name in COLUMNS}   # each row copied
     out = Program(**cols, wobj=prog.wobj, meta=prog.meta)
     status, rot_deg = np.repeat(status, counts), np.repeat(rot_deg, counts)
-    # the new rows: for move k, pieces[k] - 1 of them at s = 1/m .. (m-1)/m
-    move = np.repeat(np.arange(len(rows)), pieces - 1)
-    first_new = end[rows] - (pieces - 1)
-    step = np.arange(len(move)) - np.repeat(np.cumsum(pieces - 1) - (pieces - 1), pieces - 1) + 1
-    at = np.repeat(first_new, pieces - 1) + step - 1                # their places in the new program
-    s = (step / np.repeat(pieces, pieces - 1))[:, None]
-    xyz0, quat0, q0 = _ends(prog, prev)
-    r0, r1 = rows[move], rows[move]
-    a, b = xyz0[r0], prog.xyz_mm[r1]
-    out.xyz_mm[at] = a + s * (b - a)
-    qa, qb = quat0[r0], prog.quat_wxyz[r1]
-    qb = np.where(np.sum(qa * qb, axis=1, keepdims=True) < 0, -qb, qb)     # the shorter way
-    quat = qa + s * (qb - qa)
-    quat /= np.linalg.norm(quat, axis=1, keepdims=True)
-    quat[quat[:, 0] < 0] *= -1.0
+    # the new rows: move k's pieces[k] - 1 of them, at s = 1/m .. (m-1)/m, right before the move's own row
+    new = pieces - 1
+    move = np.repeat(np.arange(len(rows)), new)
+    step = np.arange(len(move)) - np.repeat(np.cumsum(new) - new, new) + 1          # 1 .. m-1 per move
+    at = np.repeat(end[rows] - new, new) + step - 1                                   # their rows now
+    f = step / np.repeat(pieces, new)
+    xyz0, quat0, q0 = (v[move] for v in _before(prog, rows, prev))
+    r = rows[move]
+    out.xyz_mm[at] = xyz0 + f[:, None] * (prog.xyz_mm[r] - xyz0)
+    quat = nlerp_quat(quat0, prog.quat_wxyz[r], f)                 # as the twin turns the tool between rows
     out.quat_wxyz[at] = quat
-    q_lerp = q0[r0] + s * (prog.q_rad[r1] - q0[r0])
+    q_lerp = q0 + f[:, None] * (prog.q_rad[r] - q0)
     q, st = _solve_near(robot, out.xyz_mm[at], quat, prog.wobj, q_lerp, jump_rad)
     out.q_rad[at] = q
     status[at] = st
@@ -246,10 +233,7 @@ def _solve_near(robot, xyz_plate: np.ndarray, quat_plate: np.ndarray, wobj: np.n
                 jump_rad: float) -> tuple[np.ndarray, np.ndarray]:
     """Joints (M, nq) and IK status (M,) of TCP poses (plate frame), each the solution nearest ``q_lerp``."""
     m = len(xyz_plate)
-    T = np.empty((m, 4, 4))
-    T[:, :3, :3] = wobj[:3, :3] @ R_from_quat(quat_plate)
-    T[:, :3, 3] = xyz_plate @ wobj[:3, :3].T + wobj[:3, 3]
-    T[:, 3] = (0.0, 0.0, 0.0, 1.0)
+    T = wobj @ make_T(R_from_quat(quat_plate), xyz_plate)                  # base frame
     cf = robot.closed_form
     if cf is None:                          # a numeric solver: each pose seeded with its interpolated joints
         q = np.empty_like(q_lerp)

@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike
 
 __all__ = [
     "rot_x", "rot_y", "rot_z", "rpy_to_R", "R_to_rpy", "make_T", "xyzrpy_to_T", "T_to_xyzrpy",
-    "inv_T", "quat_from_R", "R_from_quat", "frame_from_z_axis", "rot_about_z",
+    "inv_T", "quat_from_R", "R_from_quat", "frame_from_z_axis", "rot_about_z", "nlerp_quat",
 ]
 
 
@@ -192,3 +192,12 @@ def rot_about_z(R: np.ndarray, angle_rad: np.ndarray | float) -> np.ndarray:
     out[..., :, 1] = c * y - s * x
     out[..., :, 2] = R[..., :, 2]
     return out
+
+
+def nlerp_quat(qa: np.ndarray, qb: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Normalised linear interpolation (N, 4) of quaternions ``(w, x, y, z)`` (N, 4) at fractions ``f`` (N,),
+    the shorter way round, ``w >= 0``: how the twin turns the tool between two rows."""
+    sgn = np.where(np.sum(qa * qb, axis=-1) < 0, -1.0, 1.0)
+    q = (1.0 - f)[:, None] * qa + (f * sgn)[:, None] * qb
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    return np.where(q[:, :1] < 0, -q, q)
