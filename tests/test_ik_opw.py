@@ -142,3 +142,31 @@ def test_cross_check_against_py_opw_kinematics(name: str, irb: RobotModel, kr6: 
         d -= 2.0 * np.pi * np.rint(d / (2.0 * np.pi))
         dist = np.max(np.abs(d), axis=2)
         assert dist.min(axis=1).max() < 1e-8 and dist.min(axis=0).max() < 1e-8    # same sets
+
+
+@pytest.mark.parametrize("b_mm", [40.0, -25.0])
+def test_a_shoulder_offset_b_solves_both_shoulders(kr6: RobotModel, b_mm: float) -> None:
+    """With the arm's plane offset from axis 1 (b != 0, as on some Staubli and Fanuc arms) every branch,
+    the back shoulder's too, lands on the target, and the set of solutions is an independent solver's."""
+    import dataclasses
+    arm = OPWArm(dataclasses.replace(_arm(kr6).params, b_mm=b_mm))
+    rng = np.random.default_rng(33)
+    q = rng.uniform(kr6.lower_rad, kr6.upper_rad, (2000, 6))
+    end = arm.fk_flange(q) @ np.linalg.inv(arm.flange_T)
+    qb, reach, sing = arm.ik_branches_cols(pose_cols(end))
+    assert reach[:, 4:].any(axis=1).mean() > 0.5                   # the back shoulder is reached on many rows
+    got = arm.fk_flange(qb[reach]) @ np.linalg.inv(arm.flange_T)
+    np.testing.assert_allclose(got, np.repeat(end, reach.sum(axis=1), axis=0), atol=1e-8)
+    opw = pytest.importorskip("py_opw_kinematics")
+    p = arm.params
+    model = opw.KinematicModel(a1=p.a1_mm, a2=p.a2_mm, b=p.b_mm, c1=p.c1_mm, c2=p.c2_mm, c3=p.c3_mm, c4=p.c4_mm,
+                               offsets=tuple(-o for o in p.offsets_rad), flip_axes=tuple(s < 0 for s in p.signs))
+    other = opw.Robot(model, degrees=False)
+    np.testing.assert_allclose(end, other.batch_forward(q).as_matrix(), atol=1e-9)
+    sols = other.reach(other.batch_forward(q)).joints
+    for i in np.flatnonzero(~sing.any(axis=1))[:300]:
+        a, b = qb[i, reach[i]], sols[i][np.isfinite(sols[i]).all(axis=1)]
+        assert len(a) == len(b)
+        d = a[:, None, :] - b[None, :, :]
+        d -= 2.0 * np.pi * np.rint(d / (2.0 * np.pi))
+        assert np.max(np.abs(d), axis=2).min(axis=1).max() < 1e-8

@@ -20,7 +20,7 @@ theta4, theta5, so it also serves the q5 = 0 hold); the wrist flip is
 ``(theta4 + pi, -theta5, theta6 + pi)``. Joints are ``q = sign * (theta - offset)``.
 
 Trigonometric calls are avoided where an exact rational form exists: the
-shoulder's cosine and sine are ``(cx t + cy b, cy t - cx b) / rho^2``, and
+shoulder's cosine and sine are ``(cx u + cy b, cy u - cx b) / rho^2`` with ``u = +-t``, and
 theta2 is one atan2 of the rotated vector.
 
 Singular rows (flagged, the exact solution is still returned): ``h <
@@ -216,10 +216,9 @@ class OPWArm:
         b = self.b
         if th1h is None:
             inv = 1.0 / np.where(rho2 > 0.0, rho2, 1.0)
-            c1 = (cx * t + cy * b) * inv
-            s1 = (cy * t - cx * b) * inv
-            if shoulder:
-                c1, s1 = -c1, -s1
+            ts = -t if shoulder else t                      # the centre at (ts, b) in the arm's plane
+            c1 = (cx * ts + cy * b) * inv
+            s1 = (cy * ts - cx * b) * inv
             th1 = np.arctan2(s1, c1)
             u = (-t if shoulder else t) - self.a1
         else:
