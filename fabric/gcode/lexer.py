@@ -23,6 +23,10 @@ controllers read them (``G 1 X 5``); an ``E`` written against a number
 (``X1e30``) is noted as a possible exponent. The lexer does not judge: the
 interpreter decides which words matter (those of known commands) and raises
 :class:`GcodeError` there.
+
+Where the C helper is built, :func:`lex_block` runs the same rules as one pass
+in C (``fabric/gcode/native_lexer.py``, ``fabric/native/gclex.c``) and lets go
+of the interpreter lock meanwhile; :func:`lex_block_numpy` is the reference.
 """
 from __future__ import annotations
 
@@ -30,7 +34,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Lexed", "lex_block", "W_OK", "W_EMPTY", "W_BAD"]
+from fabric.gcode import native_lexer
+
+__all__ = ["Lexed", "lex_block", "lex_block_numpy", "W_OK", "W_EMPTY", "W_BAD"]
 
 # Character classes (the order matters: OTHER = 0 is "part of a value").
 C_OTHER, C_LETTER, C_SPACE, C_SEMI, C_STAR, C_NL, C_CR, C_OPEN = 0, 1, 2, 3, 4, 5, 6, 7
@@ -169,13 +175,24 @@ def _blank_parens(cls: np.ndarray) -> None:
     cls[cls == 255] = C_OTHER                                    # a stray ')'
 
 
+def _empty() -> Lexed:
+    z = np.zeros(0, np.int64)
+    return Lexed(0, z, z, z.astype(np.uint8), z.astype(float), z.astype(np.uint8), z.astype(bool), z, z, z, z)
+
+
 def lex_block(block: bytes | memoryview) -> Lexed:
-    """Lex whole lines of G-code (``block`` may or may not end with a newline)."""
+    """Lex whole lines of G-code (``block`` may or may not end with a newline): in C where it is built."""
+    if len(block) == 0:
+        return _empty()
+    arrays = native_lexer.lex_arrays(block)
+    return lex_block_numpy(block) if arrays is None else Lexed(**arrays)
+
+
+def lex_block_numpy(block: bytes | memoryview) -> Lexed:
+    """:func:`lex_block` by numpy (the reference the C lexer is held to)."""
     n = len(block)
     if n == 0:
-        z = np.zeros(0, np.int64)
-        return Lexed(0, z, z, z.astype(np.uint8), z.astype(float), z.astype(np.uint8),
-                     z.astype(bool), z, z, z, z)
+        return _empty()
     buf = np.zeros(_PAD + n + 1 + _PAD, np.uint8)
     buf[_PAD:_PAD + n] = np.frombuffer(block, np.uint8)
     buf[_PAD + n] = ord("\n")

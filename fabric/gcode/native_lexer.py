@@ -1,0 +1,61 @@
+"""The G-code lexer in C (``fabric/native/gclex.c``): one pass over a block's bytes, no interpreter lock held.
+
+:func:`lex_arrays` answers the arrays of :class:`fabric.gcode.lexer.Lexed`, or
+None where the C helper is not here (no compiler, ``FABRIC_NATIVE=0``): the
+lexer then takes its numpy path, which gives the same arrays (a test lexes
+fuzzed texts both ways and compares them).
+"""
+from __future__ import annotations
+
+import ctypes
+from typing import Any
+
+import numpy as np
+
+from fabric import native
+
+__all__ = ["lex_arrays", "available"]
+
+_lib: list[ctypes.CDLL | None] = []
+
+
+def _gclex() -> ctypes.CDLL | None:
+    if not _lib:
+        lib = native.library("gclex")
+        if lib is not None:
+            lib.gclex.restype = ctypes.c_long
+            lib.gclex.argtypes = [ctypes.c_char_p, ctypes.c_long] + [ctypes.c_void_p] * 12
+        _lib.append(lib)
+    return _lib[0]
+
+
+def available() -> bool:
+    """Whether blocks are lexed in C here."""
+    return _gclex() is not None
+
+
+def lex_arrays(block: bytes | memoryview) -> dict[str, Any] | None:
+    """The lexed arrays of a non-empty block of whole lines (the fields of ``Lexed``), or None without C.
+
+    The arrays are views of buffers sized for the worst case (a line or a word per byte): pages past the
+    used part are never written, so they cost address space, not memory."""
+    lib = _gclex()
+    if lib is None:
+        return None
+    data = bytes(block)
+    n = len(data)
+    cap = n + 1
+    cls = np.empty(n + 1, np.uint8)
+    line_start, code_end = np.empty(cap, np.int64), np.empty(cap, np.int64)
+    word_line, word_value = np.empty(cap, np.int64), np.empty(cap, np.float64)
+    word_letter, word_status, word_first = (np.empty(cap, np.uint8) for _ in range(3))
+    orphan, badsum, exponent = (np.empty(cap, np.int64) for _ in range(3))
+    counts = np.zeros(5, np.int64)
+    lib.gclex(data, n, *(a.ctypes.data for a in (cls, line_start, code_end, word_line, word_letter, word_value,
+                                                  word_status, word_first, orphan, badsum, exponent, counts)))
+    lines, words, n_orphan, n_bad, n_exp = (int(c) for c in counts)
+    return {"n_lines": lines, "line_start": line_start[:lines], "code_end": code_end[:lines],
+            "word_line": word_line[:words], "word_letter": word_letter[:words], "word_value": word_value[:words],
+            "word_status": word_status[:words], "word_first": word_first[:words].view(np.bool_),
+            "orphan_lines": orphan[:n_orphan], "checksum_bad_lines": badsum[:n_bad],
+            "exponent_lines": exponent[:n_exp]}
