@@ -41,7 +41,7 @@ typedef struct {
 } Joints;
 
 typedef struct {
-    double a1, a2, b, c1, c2, c3, c4, k, phi;
+    double a1, a2, b, c1, c2, c3, c4, k, phi, cos_phi, sin_phi;
 } OPW;
 
 /* A row's gap to the other branches, min over k of 2 atan2(y[k], x[k]) (x, y >= 0), left unevaluated: most
@@ -218,11 +218,17 @@ static int opw_row(const OPW *P, const Joints *J, const double m[9], int branch,
     double sabs = sqrt(1.0 - Dc * Dc > 0.0 ? 1.0 - Dc * Dc : 0.0);
     double spsi = elbow ? -sabs : sabs;
     double A = c2 + k * Dc, Bk = k * spsi;
-    double th2 = fast_atan2(u * A - v * Bk, v * A + u * Bk);
+    double y2 = u * A - v * Bk, x2 = v * A + u * Bk;
+    double th2 = fast_atan2(y2, x2);
     double th3 = fast_atan2(spsi, Dc);
     if (P->phi != 0.0)
         th3 = wrap(th3 - P->phi);
-    double th23 = th2 + th3, c23 = cos(th23), s23 = sin(th23);
+    /* cos and sin of theta2 + theta3 from their vectors, no trigonometric call: theta2's is (x2, y2) scaled,
+     * theta3's is (Dc, spsi) turned back by phi (cos_phi, sin_phi) */
+    double r2 = sqrt(x2 * x2 + y2 * y2);
+    double c2v = r2 > 0.0 ? x2 / r2 : 1.0, s2v = r2 > 0.0 ? y2 / r2 : 0.0;
+    double c3v = Dc * P->cos_phi + spsi * P->sin_phi, s3v = spsi * P->cos_phi - Dc * P->sin_phi;
+    double c23 = c2v * c3v - s2v * s3v, s23 = s2v * c3v + c2v * s3v;
     double zx1 = c1 * zx + s1 * zy, zy1 = c1 * zy - s1 * zx;
     double yx1 = c1 * yx + s1 * yy, yy1 = c1 * yy - s1 * yx;
     double R02 = c23 * zx1 - s23 * zz, R12 = zy1, R22 = s23 * zx1 + c23 * zz;
@@ -341,7 +347,7 @@ static int ur_row_fn(const void *P, const Joints *J, const double m[9], int bran
 }
 
 /* The tracking step of an OPW arm over rows 0..n-1 of C (9 rows of stride `stride`); see the file's head.
- * params: a1, a2, b, c1, c2, c3, c4, k = hypot(a2, c3), phi = atan2(a2, c3); joints: a Joints block. */
+ * params: a1, a2, b, c1, c2, c3, c4, k = hypot(a2, c3), phi = atan2(a2, c3), cos phi, sin phi; joints: a Joints block. */
 long opw_track(const double *C, long stride, long n, const double *params, const double *joints, int branch,
                const double *prev, double *q, long qstride, unsigned char *sing)
 {

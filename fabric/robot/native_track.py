@@ -74,7 +74,8 @@ def tracker(arm: Any, lower: np.ndarray, upper: np.ndarray, multi: np.ndarray) -
     if lib is None:
         return None
     if family == "opw":
-        params = [arm.a1, arm.a2, arm.b, arm.c1, arm.c2, arm.c3, arm.c4, arm.k, arm.phi]
+        params = [arm.a1, arm.a2, arm.b, arm.c1, arm.c2, arm.c3, arm.c4, arm.k, arm.phi, np.cos(arm.phi),
+                  np.sin(arm.phi)]
         fn = lib.opw_track
     else:
         params = [arm.d1, arm.a2, arm.a3, arm.d4, arm.d5, arm.d6]
