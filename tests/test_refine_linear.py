@@ -12,11 +12,13 @@ import sys
 from dataclasses import replace
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from fabric.motion.program import MOVEL, Program
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.refine import reach_bound_mm, sag_bound_mm
+from fabric.robot.chain_point import ChainPoint
 from fabric.robot.cell import Cell
 from fabric.robot.kinematics import IK_OK
 from fabric.services.planner import PlannerService
@@ -110,13 +112,36 @@ def test_a_bad_tolerance_is_refused(bad: float) -> None:
         PlanOptions(linear_tol_mm=bad)
 
 
-@pytest.mark.parametrize("name", ["irb140", "kr6r700", "ur10", "panda"])
+@pytest.mark.parametrize("name", ["irb140", "kr6r700", "ur5", "ur10", "panda"])
 def test_the_tcp_positions_measured_are_the_forward_kinematics(name: str) -> None:
-    """The sag is measured with ``tcp_xyz_mm`` (an OPW arm's own point formula, else the pose's position)."""
+    """The sag is measured with ``tcp_xyz_mm`` (an OPW arm's own point formula, else the chain walked back
+    from the TCP, else the pose's position)."""
     robot = Cell.builtin(name).robot
     q = np.random.default_rng(3).uniform(np.maximum(robot.lower_rad, -3), np.minimum(robot.upper_rad, 3),
                                          (2000, robot.nq))
     np.testing.assert_allclose(robot.tcp_xyz_mm(q), robot.fk(q)[:, :3, 3], atol=1e-9)
+    if robot.closed_form is None or robot.closed_form.family != "opw":
+        assert isinstance(robot._chain_point, ChainPoint)          # UR and Panda: the walk, not the pose
+
+
+def test_a_chain_it_cannot_walk_is_left_to_the_poses() -> None:
+    """A joint about an axis that is not x, y or z of its frame: no walk (the same chain rebuilt without the
+    tilt has one)."""
+    robot = Cell.builtin("ur5").robot
+    model = robot.pin_model
+
+    def rebuilt(tilt: bool) -> pin.Model:
+        built = pin.Model()
+        for j in range(1, model.njoints):
+            joint = pin.JointModelRevoluteUnaligned(np.array([0.0, 0.6, 0.8])) if tilt and j == 3 else model.joints[j]
+            built.addJoint(j - 1, joint, model.jointPlacements[j], model.names[j])
+        f = model.frames[robot.tcp_frame_id]
+        built.addFrame(pin.Frame("tcp", built.njoints - 1, f.placement, pin.FrameType.OP_FRAME))
+        return built
+
+    plain, tilted = rebuilt(False), rebuilt(True)
+    assert ChainPoint.of(plain, plain.getFrameId("tcp")) is not None
+    assert ChainPoint.of(tilted, tilted.getFrameId("tcp")) is None
 
 
 def test_fabric_cli_plan_takes_the_tolerance(session, settings, tmp_path) -> None:

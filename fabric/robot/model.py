@@ -39,6 +39,7 @@ import pinocchio as pin
 
 from fabric.robot import frames
 from fabric.robot.batch_dls import BatchDLSIK
+from fabric.robot.chain_point import ChainPoint
 from fabric.robot.closed_form import ClosedFormIK
 from fabric.robot.ik_family import FamilyChoice, detect_ik_family
 from fabric.robot.joint_axes import joint_axes
@@ -222,6 +223,7 @@ class RobotModel:
         self.acc_limit_rad_s2 = ACC_PER_S * self.vel_limit_rad_s
         self.jerk_limit_rad_s3 = JERK_PER_S2 * self.vel_limit_rad_s
         self._tool_inv = frames.inv_T(self.tool_T)
+        self._chain_point: ChainPoint | bool | None = None    # tcp_xyz_mm's walk (False: none for this model)
         self.family_choice: FamilyChoice = detect_ik_family(self.pin_model, self.flange_frame_id,
                                                             self.lower_rad, self.upper_rad)
         self.closed_form: ClosedFormIK | None = None
@@ -299,11 +301,16 @@ class RobotModel:
 
     def tcp_xyz_mm(self, q: np.ndarray) -> np.ndarray:
         """TCP positions (N, 3) in the robot base frame, mm, for joints (N, nq): :meth:`fk`'s, faster where the
-        arm's family computes a point without the whole pose (OPW arms)."""
+        arm's family computes a point without the whole pose (OPW arms), or the chain of joints can be walked back
+        from the TCP (``chain_point.py``: UR, Panda)."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
         arm = getattr(self.closed_form, "arm", None)
         if arm is not None and hasattr(arm, "point_xyz"):
             return arm.point_xyz(q, self.tool_T[:3, 3])
+        if self._chain_point is None:                   # built on first use, checked against Pinocchio
+            self._chain_point = ChainPoint.of(self.pin_model, self.tcp_frame_id) or False
+        if self._chain_point:
+            return self._chain_point(q)
         return self.fk(q)[:, :3, 3]
 
     def fk_flange(self, q: np.ndarray) -> np.ndarray:
