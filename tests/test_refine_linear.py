@@ -18,8 +18,8 @@ import pytest
 from fabric.motion.program import MOVEL, Program
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.refine import reach_bound_mm, sag_bound_mm
-from fabric.robot.chain_point import ChainPoint
 from fabric.robot.cell import Cell
+from fabric.robot.chain_point import ChainPoint
 from fabric.robot.kinematics import IK_OK
 from fabric.services.planner import PlannerService
 from fabric.wire.errors import ValidationError

@@ -24,7 +24,9 @@ def _gclex() -> ctypes.CDLL | None:
         lib = native.library("gclex")
         if lib is not None:
             lib.gclex.restype = ctypes.c_long
-            lib.gclex.argtypes = [ctypes.c_char_p, ctypes.c_long] + [ctypes.c_void_p] * 12
+            lib.gclex.argtypes = [ctypes.c_char_p, ctypes.c_long, *[ctypes.c_void_p] * 12]
+            lib.gclex_bounds.restype = None
+            lib.gclex_bounds.argtypes = [ctypes.c_char_p, ctypes.c_long, ctypes.c_void_p]
         _lib.append(lib)
     return _lib[0]
 
@@ -37,19 +39,20 @@ def available() -> bool:
 def lex_arrays(block: bytes | memoryview) -> dict[str, Any] | None:
     """The lexed arrays of a non-empty block of whole lines (the fields of ``Lexed``), or None without C.
 
-    The arrays are views of buffers sized for the worst case (a line or a word per byte): pages past the
-    used part are never written, so they cost address space, not memory."""
+    The arrays are views of buffers sized by a first count (line breaks, letters)."""
     lib = _gclex()
     if lib is None:
         return None
     data = bytes(block)
     n = len(data)
-    cap = n + 1
+    bounds = np.zeros(2, np.int64)
+    lib.gclex_bounds(data, n, bounds.ctypes.data)
+    lines_cap, words_cap = int(bounds[0]), int(bounds[1]) + 1
     cls = np.empty(n + 1, np.uint8)
-    line_start, code_end = np.empty(cap, np.int64), np.empty(cap, np.int64)
-    word_line, word_value = np.empty(cap, np.int64), np.empty(cap, np.float64)
-    word_letter, word_status, word_first = (np.empty(cap, np.uint8) for _ in range(3))
-    orphan, badsum, exponent = (np.empty(cap, np.int64) for _ in range(3))
+    line_start, code_end = np.empty(lines_cap, np.int64), np.empty(lines_cap, np.int64)
+    word_line, word_value = np.empty(words_cap, np.int64), np.empty(words_cap, np.float64)
+    word_letter, word_status, word_first = (np.empty(words_cap, np.uint8) for _ in range(3))
+    orphan, badsum, exponent = (np.empty(lines_cap, np.int64) for _ in range(3))
     counts = np.zeros(5, np.int64)
     lib.gclex(data, n, *(a.ctypes.data for a in (cls, line_start, code_end, word_line, word_letter, word_value,
                                                   word_status, word_first, orphan, badsum, exponent, counts)))

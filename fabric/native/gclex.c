@@ -143,7 +143,23 @@ static void add_line(int64_t *list, int64_t *count, int64_t line)
         list[(*count)++] = line;
 }
 
-/* Lex t[0:n] (cls: n + 1 bytes of scratch). Returns 0. */
+/* Room the outputs need for t[0:n]: bounds[0] >= its lines (newlines, CRs, and one), bounds[1] >= its words
+ * (letters). */
+void gclex_bounds(const uint8_t *t, long n, int64_t *bounds)
+{
+    int64_t lines = 1, letters = 0;
+    if (!lut_ready)
+        init_lut();
+    for (long i = 0; i < n; i++) {
+        uint8_t c = t[i];
+        lines += c == '\n' || c == '\r';
+        letters += LUT[c] == C_LETTER;
+    }
+    bounds[0] = lines;
+    bounds[1] = letters;
+}
+
+/* Lex t[0:n] (cls: n + 1 bytes of scratch; outputs with the room gclex_bounds gives). Returns 0. */
 long gclex(const uint8_t *t, long n, uint8_t *cls, int64_t *line_start, int64_t *code_end, int64_t *word_line,
            uint8_t *word_letter, double *word_value, uint8_t *word_status, uint8_t *word_first,
            int64_t *orphan_lines, int64_t *checksum_bad_lines, int64_t *exponent_lines, int64_t *counts)
