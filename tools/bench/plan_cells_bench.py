@@ -143,8 +143,9 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
         "same cell, run before the CLI runs and after each (the best of them, as the CLI's best: the host's load "
         "swings twofold within minutes here, and the pairing keeps it out of the ratio).",
         "",
-        f"CSV rows written by {meta.get('csv_rows_by', 'numpy')} (`fabric/native/numtext.c` where it is built; "
-        "`FABRIC_NATIVE=0` runs numpy's path).",
+        f"C helpers: {meta.get('native', 'none')} (`fabric/native/`: the CSV rows (`numtext.c`), the G-code "
+        "lexer (`gclex.c`), the IK tracking step of OPW and UR arms (`armtrack.c`), each where it is built; "
+        "`FABRIC_NATIVE=0` runs numpy's paths, which give the same results).",
         "",
         "| cell | IK | joints | moves | reachable | plan (s) | of which IK (s) | plan (moves/s) | CSV (s) "
         "| plan + CSV (moves/s) | DLS (targets/s) | plan / DLS | `fabric-cli plan --csv` (s: first, best) "
@@ -167,9 +168,20 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
         "half-way where the bound exceeds 80 % of `linear_tol_mm`, 0.1 mm) and split where they would stray "
         "further. The last column plans the same file with `linear_tol_mm` 10 (moves kept whole): the difference "
         "is what the check costs. On this raster of 5 mm moves the bound lets most 6-axis moves through without "
-        "a forward kinematics; the Panda's axes do not meet, its bound is loose and nearly every move is measured.",
+        "a forward kinematics; the Panda's axes do not meet, its bound is loose and nearly every move is measured "
+        "(by the TCP's position alone: an OPW arm's point formula, else the chain walked back from the TCP, "
+        "`fabric/robot/chain_point.py`).",
     ]
     return "\n".join(lines) + "\n"
+
+
+def _native_helpers() -> str:
+    """Which C helpers this run used (each, or numpy's path in its place)."""
+    from fabric.gcode import native_lexer
+    from fabric.robot.cell import Cell
+    used = {"CSV rows": native_rows(), "lexer": native_lexer.available(),
+            "IK tracking": Cell.builtin("irb140").robot.closed_form._tracker is not None}
+    return ", ".join(f"{name} in {'C' if on else 'numpy'}" for name, on in used.items())
 
 
 def main(argv: list[str]) -> None:
@@ -186,7 +198,7 @@ def main(argv: list[str]) -> None:
             print(json.dumps(rows[-1]), flush=True)
     meta = {"n_moves": n_moves, "n_dls": n_dls, "n_cli": n_cli, "machine": platform.machine(), "cpus": os.cpu_count(),
             "python": platform.python_version(), "numpy": np.__version__,
-            "csv_rows_by": "the C helper" if native_rows() else "numpy"}
+            "native": _native_helpers()}
     out = ROOT / "docs" / "bench"
     (out / "plan_cells.json").write_text(json.dumps({"meta": meta, "cells": rows}, indent=2))
     (out / "plan_cells.md").write_text(report(rows, meta))
