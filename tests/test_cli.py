@@ -131,6 +131,8 @@ def test_plan_garbled_gcode_names_the_line(settings, tmp_path):
     bad.write_text("G21\nG90\nG1 X1.2.3 Y4\n")
     r = cli(settings, "plan", str(bad))
     assert r.returncode == 1 and "error [gcode]" in r.stderr and "line 3" in r.stderr
+    # the error starts its own line, not the end of the progress line drawn in place before it
+    assert any(line.startswith("error [gcode]") for line in r.stderr.split("\n")), r.stderr
 
 
 def test_operator_commands_human_output(settings):

@@ -11,7 +11,7 @@ from typing import Any
 
 from fabric import schemas as s
 from fabric.cli.inputs import read_whole
-from fabric.cli.output import emit
+from fabric.cli.output import StatusLine, emit
 from fabric.cli.pipeline_cmds import parse_sets
 from fabric.cli.progress import print_progress
 from fabric.client import Client
@@ -35,7 +35,7 @@ def _settled(rec: s.JobRecord) -> bool:
             or (rec.prepared and rec.waiting_for != ""))
 
 
-def _show_change(quiet: bool):
+def _show_change(quiet: bool, status: StatusLine):
     if quiet:
         return None
 
@@ -45,7 +45,7 @@ def _show_change(quiet: bool):
     def show(rec: s.JobRecord) -> None:
         line = f"  {rec.state:<10} {rec.stage[:48]:<48}"
         if tty:
-            print(f"\r{line}", end="", file=sys.stderr, flush=True)
+            status.draw(line)
         elif shown[-1:] != [line]:
             shown.append(line)
             print(line.rstrip(), file=sys.stderr, flush=True)
@@ -144,9 +144,9 @@ def submit_and_follow(c: Client, a: argparse.Namespace, req: s.JobSubmit) -> int
     if not (a.wait or a.follow):
         emit(acc, a.json, lambda r: f"job {r.job_id} queued")
         return 0
-    rec = c.wait_print_job(acc.job_id, _settled, timeout=a.timeout or 3600.0, on_change=_show_change(a.json))
-    if not a.json and sys.stderr.isatty():
-        print(file=sys.stderr)
+    with StatusLine() as status:
+        rec = c.wait_print_job(acc.job_id, _settled, timeout=a.timeout or 3600.0,
+                               on_change=_show_change(a.json, status))
     result: dict = {"job": rec}
     if a.follow and rec.state in ("printing", "loaded") and a.start:
         try:

@@ -10,7 +10,7 @@ import numpy as np
 
 from fabric.schemas import to_plain
 
-__all__ = ["emit", "jsonable", "fail"]
+__all__ = ["emit", "jsonable", "fail", "StatusLine"]
 
 
 def jsonable(value: Any) -> Any:
@@ -80,3 +80,23 @@ def fail(message: str, as_json: bool, code: str = "error", details: dict | None 
     else:
         print(f"error [{code}]: {message}", file=sys.stderr)
     return 1
+
+
+class StatusLine:
+    """A status line redrawn in place on stderr; leaving the ``with`` block ends it with a newline if anything
+    was drawn, error or not, so what is printed next (the result, or ``error [...]``) starts on its own line."""
+
+    def __init__(self) -> None:
+        self.open = False
+
+    def draw(self, text: str) -> None:
+        print(f"\r{text}", end="", file=sys.stderr, flush=True)
+        self.open = True
+
+    def __enter__(self) -> StatusLine:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.open:
+            print(file=sys.stderr, flush=True)
+            self.open = False

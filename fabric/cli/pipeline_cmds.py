@@ -2,14 +2,13 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import BinaryIO
 
 from fabric import schemas as s
 from fabric.cli.inputs import LargeInput, gcode_source, model_source, read_input
-from fabric.cli.output import emit
+from fabric.cli.output import StatusLine, emit
 from fabric.client import Client
 from fabric.wire.errors import BadRequest
 
@@ -41,11 +40,11 @@ def _cycle_time(r: s.PlanSummary) -> str:
     return f"{r.estimate_s:.1f} s" if r.estimate_s >= 0 else "n/a (not runnable)"
 
 
-def _progress(quiet: bool):
+def _progress(quiet: bool, line: StatusLine):
     if quiet:
         return None
     def show(st: s.JobStatus) -> None:
-        print(f"\r  {st.stage or st.kind:<20} {100 * st.progress_r:5.1f} %", end="", file=sys.stderr, flush=True)
+        line.draw(f"  {st.stage or st.kind:<20} {100 * st.progress_r:5.1f} %")
     return show
 
 
@@ -54,9 +53,8 @@ def cmd_slice(c: Client, a: argparse.Namespace) -> int:
                          backend=a.backend, overrides=parse_sets(a.set),
                          center_xy_mm=list(a.center) if a.center else None, layers=a.layers)
     acc = c.slice(req)
-    st = c.wait_job("slicer", acc.job_id, on_progress=_progress(a.json))
-    if not a.json:
-        print(file=sys.stderr)
+    with StatusLine() as line:
+        st = c.wait_job("slicer", acc.job_id, on_progress=_progress(a.json, line))
     res = c.slice_result(st.result_id)
     gcode = c.artifact("slicer", st.result_id)
     Path(a.output).write_bytes(gcode.data)
@@ -90,13 +88,11 @@ def plan_file(c: Client, data: bytes | LargeInput, filename: str, a: argparse.Na
                         linear_tol_mm=a.linear_tol,
                         allow_off_plate=a.allow_off_plate)
     acc = c.plan(req)
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="plan-progress") as follow:
-        job = follow.submit(c.wait_job, "planner", acc.job_id, on_progress=_progress(a.json))
+    with StatusLine() as line, ThreadPoolExecutor(max_workers=1, thread_name_prefix="plan-progress") as follow:
+        job = follow.submit(c.wait_job, "planner", acc.job_id, on_progress=_progress(a.json, line))
         sizes = {fmt: c.export_to("", fmt, out, a.module_targets, job_id=acc.job_id)
                  for fmt, out in (exports or {}).items()}
         st = job.result()
-    if not a.json:
-        print(file=sys.stderr)
     return c.plan_summary(st.result_id), sizes
 
 
