@@ -33,8 +33,9 @@ def jog(station: StationService, req: s.JogRequest) -> s.Ack:
         return station._ack(f"jogging by ({d[0]:g}, {d[1]:g}, {d[2]:g}) mm at {req.speed_mm_s:g} mm/s "
                             f"(collision-checked)")
 
-    q_now, q_to, stamp = station._step(plan)
-    station._check_move(q_now, q_now, what, descent=(q_to, -1), kind="jog")
+    q_now, q_points, stamp = station._step(plan)
+    for q_from, q_to in zip(np.vstack([q_now, q_points[:-1]]), q_points, strict=True):   # each piece, in turn
+        station._check_move(q_from, q_from, what, descent=(q_to, -1), kind="jog")
     return station._step(act)
 
 

@@ -293,8 +293,8 @@ class Twin:
         self.s.reason = "homing"
 
     def jog_move(self, dxyz_mm: list[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(joints now, joints at the end) of a jog by ``dxyz_mm`` (plate frame), for the collision check
-        before it is made; refused as :meth:`jog` would be."""
+        """(joints now, joints of each point of the jog (M, nq), the last its end) of a jog by ``dxyz_mm``
+        (plate frame), for the collision check before it is made; refused as :meth:`jog` would be."""
         self._refuse("jog", manual.MANUAL_STATES)
         self._busy("jog")
         plan = manual.jog_plan(self.moves, dxyz_mm)
