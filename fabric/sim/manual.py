@@ -20,7 +20,8 @@ from fabric.sim.legs import Leg, PoseSpec
 from fabric.sim.moves import MotionPlanner
 from fabric.wire.errors import UnreachableError, ValidationError
 
-__all__ = ["MANUAL_STATES", "FIRMWARE_MIN_EXTRUDE_C", "MAX_JOG_MM", "JOG_LINE_TOL_MM", "Jog", "jog_plan", "jog_leg", "extrude_leg"]
+__all__ = ["MANUAL_STATES", "FIRMWARE_MIN_EXTRUDE_C", "MAX_JOG_MM", "JOG_LINE_TOL_MM", "Jog", "jog_plan", "jog_leg",
+           "extrude_leg"]
 
 MANUAL_STATES = ("idle", "ready", "stopped", "fault")     # not while a print is on (printing, paused, interrupted)
 FIRMWARE_MIN_EXTRUDE_C = DEFAULT_MIN_EXTRUDE_C   # with no program loaded: the rule printer firmware applies
