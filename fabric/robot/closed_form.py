@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from fabric.robot import native_track
 from fabric.robot.arm_family import ClosedFormArm
 from fabric.robot.kinematics import (
     _LIMIT_TOL_RAD,
@@ -105,8 +104,6 @@ class ClosedFormIK:
             j = self.free_joint
             mid = 0.5 * (max(self.lower_rad[j], -_PI) + min(self.upper_rad[j], _PI))
             self.free_rad = float(mid if free_rad is None else free_rad)
-        # the tracking step in C for OPW and UR arms (None: numpy's, the same joints)
-        self._tracker = native_track.tracker(arm, self.lower_rad, self.upper_rad, self.multi)
 
     def _free(self, q_free: float | np.ndarray | None, n: int) -> float | np.ndarray | None:
         """The redundancy joint's values for ``n`` rows (None for a 6-axis arm): ``q_free`` or the held value."""
@@ -190,7 +187,7 @@ class ClosedFormIK:
         """
         nq = self.nq
         seed = np.asarray(q_seed, dtype=float).reshape(nq)
-        C = np.ascontiguousarray(C, dtype=float)
+        C = np.asarray(C, dtype=float)
         n = C.shape[1]
         free = self._free(q_free, n)
         q1, degen = self.arm.q1_free(C)                    # A1 undefined (wrist centre on its axis): hold it
@@ -249,11 +246,25 @@ class ClosedFormIK:
                 prev, i = q[:, j - 1].copy(), j
                 continue
             j = min(n, i + block)
-            f = self._track_block(C, i, j, b, hold, free, prev, q, sing, single)
+            qt, reach_t, sg, gap = self.arm.ik_branch_cols(C[:, i:j], b, None if hold is None else hold[i:j],
+                                                           _rows(free, i, j))
+            fine = reach_t
+            for jj in single:
+                fine &= self._canon_col(jj, qt[jj])
+            d = np.diff(qt, axis=1, prepend=prev[:, None])
+            sep2 = np.minimum(gap, _PI) ** 2
+            quiet = 4.0 * np.einsum("ji,ji->i", d, d) < sep2      # unwrapped steps: all < pi/2 if it passes
+            loud = np.flatnonzero(~quiet)
+            if len(loud):                                        # compare those modulo 2*pi
+                dw = _wrap(d[:, loud])
+                quiet[loud] = 4.0 * np.einsum("ji,ji->i", dw, dw) < sep2[loud]
+            fine &= quiet
+            f = int(np.argmin(fine)) if not fine.all() else j - i
+            q[:, i:i + f], sing[i:i + f] = qt[:, :f], sg[:f]
             row_ok[i:i + f] = True
             reach_any[i:i + f] = True
             if f:
-                prev = q[:, i + f - 1].copy()
+                prev = qt[:, f - 1].copy()
             i += f
             if i < j:                                      # switch to the full method at row i
                 b = -1
@@ -261,31 +272,6 @@ class ClosedFormIK:
                 block = 2048
             else:
                 block = min(self.max_rows, block * 2)
-
-    def _track_block(self, C: np.ndarray, i: int, j: int, b: int, hold: np.ndarray | None,
-                     free: float | np.ndarray | None, prev: np.ndarray, q: np.ndarray, sing: np.ndarray,
-                     single: list[int]) -> int:
-        """Tracking over rows ``i:j``: branch ``b``'s leading rows that stay valid and quiet go to ``q`` and
-        ``sing`` (from row i on); returns how many. In C where the arm has a tracker (row by row, stopping at
-        the first row that fails), else solved as a block by numpy."""
-        if self._tracker is not None and hold is None:
-            return self._tracker(C, i, j, b, prev, q, sing)
-        qt, reach_t, sg, gap = self.arm.ik_branch_cols(C[:, i:j], b, None if hold is None else hold[i:j],
-                                                       _rows(free, i, j))
-        fine = reach_t
-        for jj in single:
-            fine &= self._canon_col(jj, qt[jj])
-        d = np.diff(qt, axis=1, prepend=prev[:, None])
-        sep2 = np.minimum(gap, _PI) ** 2
-        quiet = 4.0 * np.einsum("ji,ji->i", d, d) < sep2      # unwrapped steps: all < pi/2 if it passes
-        loud = np.flatnonzero(~quiet)
-        if len(loud):                                        # compare those modulo 2*pi
-            dw = _wrap(d[:, loud])
-            quiet[loud] = 4.0 * np.einsum("ji,ji->i", dw, dw) < sep2[loud]
-        fine &= quiet
-        f = int(np.argmin(fine)) if not fine.all() else j - i
-        q[:, i:i + f], sing[i:i + f] = qt[:, :f], sg[:f]
-        return f
 
     def _quiet(self, qb: np.ndarray, allowed: np.ndarray) -> np.ndarray:
         """Rows where every allowed branch's nearest successor is itself (module docstring).

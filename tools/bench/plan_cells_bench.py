@@ -143,9 +143,9 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
         "same cell, run before the CLI runs and after each (the best of them, as the CLI's best: the host's load "
         "swings twofold within minutes here, and the pairing keeps it out of the ratio).",
         "",
-        f"C helpers: {meta.get('native', 'none')} (`fabric/native/`: the CSV rows (`numtext.c`), the G-code "
-        "lexer (`gclex.c`), the IK tracking step of OPW and UR arms (`armtrack.c`), each where it is built; "
-        "`FABRIC_NATIVE=0` runs numpy's paths, which give the same results).",
+        f"C helpers: {meta.get('native', 'none')} (`fabric/native/`: the CSV rows (`numtext.c`) and the G-code "
+        "lexer (`gclex.c`), each where it is built; `FABRIC_NATIVE=0` runs numpy's paths, which give the same "
+        "results).",
         "",
         "| cell | IK | joints | moves | reachable | plan (s) | of which IK (s) | plan (moves/s) | CSV (s) "
         "| plan + CSV (moves/s) | DLS (targets/s) | plan / DLS | `fabric-cli plan --csv` (s: first, best) "
@@ -178,9 +178,7 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
 def _native_helpers() -> str:
     """Which C helpers this run used (each, or numpy's path in its place)."""
     from fabric.gcode import native_lexer
-    from fabric.robot.cell import Cell
-    used = {"CSV rows": native_rows(), "lexer": native_lexer.available(),
-            "IK tracking": Cell.builtin("irb140").robot.closed_form._tracker is not None}
+    used = {"CSV rows": native_rows(), "lexer": native_lexer.available()}
     return ", ".join(f"{name} in {'C' if on else 'numpy'}" for name, on in used.items())
 
 
