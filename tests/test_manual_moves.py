@@ -132,3 +132,20 @@ def test_a_long_jog_keeps_to_its_straight_line(name: str) -> None:
         far = max(far, float(np.linalg.norm(p - s * d)))
     assert far <= JOG_LINE_TOL_MM + 1e-6, far
     np.testing.assert_allclose(twin.pose().xyz_mm, a + d, atol=1e-6)
+
+
+def test_a_jog_whose_line_needs_a_new_arm_configuration_is_refused_and_changes_nothing() -> None:
+    """On the IRB 140, 200 mm towards the base then 200 mm more: the second line crosses where the wrist must
+    turn over (a joint jump on the line): refused with a typed error naming the point, nothing queued."""
+    from fabric.sim.twin import Twin
+    from fabric.wire.errors import UnreachableError
+    twin = Twin(Cell.builtin("irb140"))
+    twin.jog([-200.0, 0.0, 0.0], 200.0)
+    while twin.moving:
+        twin.advance(0.5)
+    before = twin.pose()
+    with pytest.raises(UnreachableError, match=r"straight line at .* is not a motion of the arm") as err:
+        twin.jog([-200.0, 0.0, 0.0], 200.0)
+    assert err.value.details["reason"] == "joint jump"
+    assert not twin.moving
+    np.testing.assert_array_equal(twin.pose().q_rad, before.q_rad)
