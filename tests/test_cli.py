@@ -39,6 +39,8 @@ def gcode(settings, tmp_path_factory) -> Path:
     r = cli(settings, "slice", str(sample_model()), "-o", str(out), "--profile", "robot-1.2mm")
     assert r.returncode == 0, r.stderr
     assert "layers" in r.stdout
+    # piped, the progress is a line per stage, not percentages glued together by carriage returns
+    assert "\r" not in r.stderr and r.stderr.splitlines().count("  slicing") == 1, r.stderr
     return out
 
 

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 import queue
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -39,16 +38,8 @@ def _show_change(quiet: bool, status: StatusLine):
     if quiet:
         return None
 
-    tty = sys.stderr.isatty()          # a line redrawn in place on a terminal; plain lines when piped
-    shown: list[str] = []
-
-    def show(rec: s.JobRecord) -> None:
-        line = f"  {rec.state:<10} {rec.stage[:48]:<48}"
-        if tty:
-            status.draw(line)
-        elif shown[-1:] != [line]:
-            shown.append(line)
-            print(line.rstrip(), file=sys.stderr, flush=True)
+    def show(rec: s.JobRecord) -> None:     # redrawn in place on a terminal; a line per change when piped
+        status.draw(f"  {rec.state:<10} {rec.stage[:48]:<48}")
     return show
 
 

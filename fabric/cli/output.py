@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -83,20 +83,32 @@ def fail(message: str, as_json: bool, code: str = "error", details: dict | None 
 
 
 class StatusLine:
-    """A status line redrawn in place on stderr; leaving the ``with`` block ends it with a newline if anything
-    was drawn, error or not, so what is printed next (the result, or ``error [...]``) starts on its own line."""
+    """A status line redrawn in place on stderr when stderr is a terminal; leaving the ``with`` block ends it with
+    a newline if anything was drawn, error or not, so what is printed next (the result, or ``error [...]``) starts
+    on its own line. Piped (a log, CI), nothing is redrawn: each change of what ``draw`` calls ``piped`` is one
+    plain line, so a log reads ``planning`` once, not a hundred percentages glued by carriage returns."""
 
-    def __init__(self) -> None:
+    def __init__(self, out: TextIO | None = None, tty: bool | None = None) -> None:
+        self.out = out if out is not None else sys.stderr
+        self.tty = self.out.isatty() if tty is None else tty
         self.open = False
+        self._piped_last: str | None = None
 
-    def draw(self, text: str) -> None:
-        print(f"\r{text}", end="", file=sys.stderr, flush=True)
-        self.open = True
+    def draw(self, text: str, piped: str | None = None) -> None:
+        """Show ``text``; piped, print ``piped`` (default ``text``) as a line when it differs from the last one."""
+        if self.tty:
+            print(f"\r{text}", end="", file=self.out, flush=True)
+            self.open = True
+            return
+        line = (text if piped is None else piped).rstrip()
+        if line != self._piped_last:
+            self._piped_last = line
+            print(line, file=self.out, flush=True)
 
     def __enter__(self) -> StatusLine:
         return self
 
     def __exit__(self, *exc: object) -> None:
         if self.open:
-            print(file=sys.stderr, flush=True)
+            print(file=self.out, flush=True)
             self.open = False

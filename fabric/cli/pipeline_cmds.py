@@ -43,8 +43,9 @@ def _cycle_time(r: s.PlanSummary) -> str:
 def _progress(quiet: bool, line: StatusLine):
     if quiet:
         return None
-    def show(st: s.JobStatus) -> None:
-        line.draw(f"  {st.stage or st.kind:<20} {100 * st.progress_r:5.1f} %")
+    def show(st: s.JobStatus) -> None:     # piped: the stage once, not each percentage
+        stage = st.stage or st.kind
+        line.draw(f"  {stage:<20} {100 * st.progress_r:5.1f} %", piped=f"  {stage}")
     return show
 
 

@@ -38,6 +38,8 @@ def wait_job(client: Caller, service: str, job_id: str, timeout: float = 600.0,
                 st = msg
         if st.state == "failed" and st.error is not None:
             raise error_from_code(st.error.code, st.error.message, st.error.details)
+        if on_progress:
+            on_progress(st)                 # the end too: a progress line left at 85 % reads as a job cut short
         return st
     finally:
         sub.close()
