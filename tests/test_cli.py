@@ -147,23 +147,6 @@ def test_operator_commands_human_output(settings):
     assert st.returncode == 0 and "station" in st.stdout and "alive" in st.stdout
 
 
-def test_cell_show_and_export_urdf(tmp_path):
-    r = local("cell", "show", "--json")
-    assert r.returncode == 0, r.stderr
-    cell = json.loads(r.stdout)
-    assert "irb140" in json.dumps(cell).lower()
-    out = tmp_path / "cell.urdf"
-    r = local("cell", "export-urdf", str(out))
-    assert r.returncode == 0 and 'name="tcp"' in out.read_text()
-    ur5 = Path(__file__).resolve().parents[1] / "fabric" / "cells" / "ur5.toml"
-    r = local("cell", "show", "--cell-config", str(ur5))
-    assert r.returncode == 0 and "ur5" in r.stdout.lower()
-    bad = tmp_path / "bad.toml"
-    bad.write_text(ur5.read_text() + "\n[bogus]\nx = 1\n")
-    r = local("cell", "show", "--cell-config", str(bad))
-    assert r.returncode == 1 and "error [config]" in r.stderr and "bogus" in r.stderr
-
-
 def test_cells_lists_the_cell_and_an_unknown_cell_is_named(settings):
     r = cli(settings, "cells", "--json")
     assert r.returncode == 0, r.stderr

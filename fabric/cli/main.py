@@ -7,8 +7,8 @@ import sys
 import threading
 from pathlib import Path
 
-from fabric.cli import auth_cmds, check_cmds, doctor, file_cmds, job_cmds, pipeline_cmds, station_cmds
-from fabric.cli.output import emit, fail
+from fabric.cli import auth_cmds, cell_cmds, check_cmds, doctor, file_cmds, job_cmds, pipeline_cmds, station_cmds
+from fabric.cli.output import fail
 from fabric.client import Client
 from fabric.client.sessions import CONNECT_WINDOW_S
 from fabric.extras import missing_extra, require
@@ -77,24 +77,8 @@ def build_parser() -> argparse.ArgumentParser:
     auth_cmds.register(sub, common)
     doctor.register(sub, common)                      # check and repair the cell's stores
 
-    cell = sub.add_parser("cell", help="the cell configuration")
-    csub = cell.add_subparsers(dest="cell_cmd", required=True)
-    p = csub.add_parser("show", parents=[common], help="print the cell (robot, frames, plate, home)")
-    add_cell_argument(p)
-    p.set_defaults(local=_cmd_cell_show)
-    p = csub.add_parser("list", parents=[common],
-                        help="the built-in cells: robot, joints, detected IK family, native export")
-    p.set_defaults(local=_cmd_cell_list)
-    p = csub.add_parser("export-urdf", parents=[common], help="write robot + tool as one URDF (TCP frame 'tcp')")
-    p.add_argument("output")
-    add_cell_argument(p)
-    p.set_defaults(local=_cmd_cell_urdf)
+    cell_cmds.register(sub, common)                   # cell show | list | export-urdf
     return parser
-
-
-def _load_cell(path: str | None):
-    from fabric.robot.cell import Cell
-    return Cell.load_or_builtin(path)
 
 
 def service_parser(name: str) -> argparse.ArgumentParser:
@@ -196,34 +180,6 @@ def _run_router(conf, what: str, on_open=None) -> int:
         print(f"{what} (Ctrl-C stops it)", flush=True)
         stop.wait()
         del kept
-    return 0
-
-
-def _cmd_cell_show(a: argparse.Namespace) -> int:
-    cell = _load_cell(a.cell_config)
-    emit(cell.to_dict(), a.json)
-    return 0
-
-
-def _cmd_cell_list(a: argparse.Namespace) -> int:
-    from fabric.robot.cell import DEFAULT_CELL, Cell, builtin_cell_names
-    rows = []
-    for name in builtin_cell_names():
-        cell = Cell.builtin(name)
-        r = cell.robot
-        rows.append({"cell": name, "robot": r.name, "joints": r.nq, "ik_family": r.ik_family,
-                     "export": cell.native_export, "default": name == DEFAULT_CELL})
-    emit(rows, a.json, lambda rs: "\n".join(
-        (f"{x['cell']:<10} {x['robot']:<10} {x['joints']} joints  IK {x['ik_family']:<8} export {x['export']:<8}"
-         + ("  (default)" if x["default"] else "")).rstrip() for x in rs))
-    return 0
-
-
-def _cmd_cell_urdf(a: argparse.Namespace) -> int:
-    cell = _load_cell(a.cell_config)
-    cell.robot.export_urdf(a.output)
-    emit({"path": a.output, "robot": cell.robot.name, "tcp_frame": "tcp"}, a.json,
-         lambda d: f"wrote {d['path']} ({d['robot']} + tool, TCP frame 'tcp')")
     return 0
 
 

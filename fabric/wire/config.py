@@ -95,11 +95,13 @@ def service_data_dir(root: str | Path | None, cell: str, service: str) -> Path:
     return base / cell / service
 
 
-def add_cell_argument(parser: argparse.ArgumentParser, what: str = "") -> None:
-    """The ``--cell-config`` option (read with ``Cell.load_or_builtin``); ``what`` says what the cell is used for."""
+def add_cell_argument(parser: argparse.ArgumentParser, what: str = "",
+                      default: str = "default: the built-in IRB 140 cell") -> None:
+    """The ``--cell-config`` option (read with ``Cell.load_or_builtin``); ``what`` says what the cell is used for,
+    ``default`` what is used without the option."""
     parser.add_argument("--cell-config", default=None, metavar="NAME|FILE",
                         help="a built-in cell by name ('fabric-cli cell list') or a cell file"
-                             + (f" ({what})" if what else "") + "; default: the built-in IRB 140 cell")
+                             + (f" ({what})" if what else "") + f"; {default}")
 
 
 def settings_from_args(ns: argparse.Namespace, default_mode: str = "peer") -> SessionSettings:
