@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import itertools
+import time
 
 import numpy as np
 import pytest
@@ -215,6 +216,54 @@ def test_a_simulation_failure_faults_the_job_and_the_station_keeps_serving(fabri
     assert ev.kind == "fault" and "planted" in client.state().reason
     assert station.degraded and "planted" in station.degraded
     assert len(client.position().q_deg) == 6                  # still serving
+
+
+def _stopped_in_the_first_layer(client, events) -> None:
+    """Print until the first layer has beads, then stop: the part's top is layer 1."""
+    client.start(rtf=30.0)                      # heating, fast
+    wait_event(events, ("layer",))
+    client.set_rtf(0.5)                         # the first beads, slowly
+    deadline = time.monotonic() + 30.0
+    while client.state().deposited_mm3 <= 0.0 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    client.stop()
+    wait_event(events, ("stopped",))
+
+
+def test_going_on_above_the_part_and_the_next_layer_is_refused(fabric):
+    """Stopped in layer 1, ``start --layer 3`` would lay layer 3 on nothing (a typo, and the print goes on in
+    the air): refused, naming the part's top, and nothing changes; layer 2 (and layer 1, to finish it) go on.
+    A recovery at a layer is held to the same rule."""
+    client, station, pid, _ = fabric
+    client.load(pid)
+    events = client.subscribe("station", "events")
+    try:
+        _stopped_in_the_first_layer(client, events)
+        before, seq = client.state(), client.events(0).last_seq
+        with pytest.raises(StateError, match=r"printed up to layer 1, so layer 3 would be laid 1 layer\(s\) above "
+                                             r"it, in the air; go on at layer 1 \(to finish it\) or 2") as err:
+            client.start(rtf=0, from_layer=2)
+        assert err.value.details["top_layer"] == 1 and err.value.details["from_layer"] == 3
+        after = client.state()
+        assert (after.state, after.deposited_mm3, client.events(0).last_seq) == ("stopped", before.deposited_mm3,
+                                                                                  seq)
+        with pytest.raises(ValidationError, match="no layer 7"):            # a layer the program has not
+            client.start(from_layer=6)
+        assert station.plate.top_layer() == 0
+        assert "from layer 2" in client.start(rtf=0.5, from_layer=1).message
+        wait_event(events, ("at_layer", "fault"))
+
+        def crash() -> None:                                 # the controller dies where it is, in layer 2
+            station.twin.interrupt("killed by the test")
+            station._changed()
+        station._step(crash)
+        assert client.state().state == "interrupted"
+        assert station.plate.top_layer() == 0                # arrived at layer 2, no bead of it yet
+        with pytest.raises(StateError, match="cannot recover at layer 3: .* in the air"):
+            client.recover(rtf=0, from_layer=2)
+        assert client.state().state == "interrupted"
+    finally:
+        events.close()
 
 
 def test_stop_then_start_again_at_a_layer(fabric):

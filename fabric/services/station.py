@@ -397,6 +397,7 @@ class StationService(Service):
                                  command="recover")
             if layer is None:                          # back to the interrupted spot: one move
                 return move, None, self._stamp()
+            self.plate.refuse_in_the_air("recover", layer)
             path = self._restart_path(layer, "recover")    # from a layer: the move above it, then down
             return (path.q_from_rad, path.q_above_rad), (path.q_down_rad, layer), self._stamp()
 

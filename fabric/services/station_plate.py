@@ -62,6 +62,29 @@ class PlateGuard:
             raise StateError(f"cannot {command} at layer {from_layer + 1}: the plate holds {self.text()}, not "
                              f"this program's part", state=state, command=command, plate="occupied",
                              plate_job_id=m.plate_job_id)
+        if from_layer is not None:
+            self.refuse_in_the_air(command, from_layer)
+
+    def top_layer(self) -> int:
+        """The highest layer (0-based) with a bead of the part on the plate; -1 when there is none."""
+        beads = self.twin.beads
+        return int(beads.layer.max()) if len(beads) else -1
+
+    def refuse_in_the_air(self, command: str, from_layer: int) -> None:
+        """Going on at a layer above the part's top and the one after it would lay beads on nothing: the part
+        is printed up to its top layer (partly, where a print was cut short), so it goes on at that layer or
+        the next, not higher (a typo of ``--layer 30`` for ``--layer 13`` printed layer 30 in the air).
+        Layers under the top are the collision check's to refuse (the nozzle would go through the part)."""
+        if self.twin.program is None:                      # nothing loaded: the start refuses that itself
+            return
+        self.twin.moves.layer_start_row(from_layer)       # a layer the program has not: that error first
+        top = self.top_layer()
+        if top < 0 or from_layer <= top + 1:
+            return
+        raise StateError(f"cannot {command} at layer {from_layer + 1}: the part on the plate is printed up to "
+                         f"layer {top + 1}, so layer {from_layer + 1} would be laid {from_layer - top - 1} "
+                         f"layer(s) above it, in the air; go on at layer {top + 1} (to finish it) or {top + 2}",
+                         state=self.twin.state, command=command, from_layer=from_layer + 1, top_layer=top + 1)
 
     def clear(self) -> str:
         """The operator took the part off (refused while it is being printed); what was taken off, in words
