@@ -259,7 +259,7 @@ def test_going_on_above_the_part_and_the_next_layer_is_refused(fabric):
         station._step(crash)
         assert client.state().state == "interrupted"
         assert station.plate.top_layer() == 0                # arrived at layer 2, no bead of it yet
-        with pytest.raises(StateError, match="cannot recover at layer 3: .* in the air"):
+        with pytest.raises(StateError, match=r"cannot recover at layer 3: .* in the air"):
             client.recover(rtf=0, from_layer=2)
         assert client.state().state == "interrupted"
     finally:
