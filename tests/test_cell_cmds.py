@@ -11,7 +11,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from conftest import free_port
 
 from fabric import schemas as s
 from fabric.cli import cell_cmds
@@ -19,6 +18,8 @@ from fabric.client import Client
 from fabric.robot.cell import Cell
 from fabric.services.station import StationService
 from fabric.wire.errors import NotFound
+
+from conftest import free_port
 
 pytestmark = pytest.mark.timeout(180)
 
