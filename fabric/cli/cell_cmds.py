@@ -77,13 +77,14 @@ def cmd_show(a: argparse.Namespace) -> int:
 
 def cmd_list(a: argparse.Namespace) -> int:
     from fabric.robot.cell import DEFAULT_CELL, Cell, builtin_cell_names
+    names = builtin_cell_names()
     rows = []
-    for name in builtin_cell_names():
+    for name in names:
         cell = Cell.builtin(name)
         r = cell.robot
         rows.append({"cell": name, "robot": r.name, "joints": r.nq, "ik_family": r.ik_family,
                      "export": cell.native_export, "default": name == DEFAULT_CELL})
-    w = max(len(x["cell"]) for x in rows)
+    w = max(len(name) for name in names)
     emit(rows, a.json, lambda rs: "\n".join(
         (f"{x['cell']:<{w}}  {x['robot']:<10} {x['joints']} joints  IK {x['ik_family']:<8} export {x['export']:<8}"
          + ("  (default)" if x["default"] else "")).rstrip() for x in rs))
