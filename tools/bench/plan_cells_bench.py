@@ -16,6 +16,7 @@ warm-started along the path) on ``n_dls`` consecutive planned targets of the
 same cell. Writes ``docs/bench/plan_cells.md`` and ``plan_cells.json``.
 
     .venv/bin/python tools/bench/plan_cells_bench.py [n_moves] [n_dls] [n_cli]
+    .venv/bin/python tools/bench/plan_cells_bench.py --report     # the page again from plan_cells.json
 """
 from __future__ import annotations
 
@@ -141,7 +142,10 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
         "as CSV (one `qN_deg` column per joint), in one process; the baseline is per-point Pinocchio DLS "
         "warm-started along the path (`tools/bench/ik_baseline.py`) on consecutive planned targets of the "
         "same cell, run before the CLI runs and after each (the best of them, as the CLI's best: the host's load "
-        "swings twofold within minutes here, and the pairing keeps it out of the ratio).",
+        "swings twofold within minutes here, and the pairing keeps that drift out of the ratio). What pairing "
+        "cannot remove: a busy host slows the baseline's Python loop and the planner's numpy passes unequally, "
+        "so the ratio itself moves between runs (IRB 140: 9.2x in one run, 19.8x in a later one, the same "
+        "planner code; its DLS 36k then 12k targets/s). Read one run's column together, not two runs' rows.",
         "",
         f"C helpers: {meta.get('native', 'none')} (`fabric/native/`: the CSV rows (`numtext.c`) and the G-code "
         "lexer (`gclex.c`), each where it is built; `FABRIC_NATIVE=0` runs numpy's paths, which give the same "
@@ -182,7 +186,17 @@ def _native_helpers() -> str:
     return ", ".join(f"{name} in {'C' if on else 'numpy'}" for name, on in used.items())
 
 
+def rewrite_report() -> None:
+    """The page again from ``plan_cells.json`` (its figures as measured), after a change to its words."""
+    out = ROOT / "docs" / "bench"
+    data = json.loads((out / "plan_cells.json").read_text())
+    (out / "plan_cells.md").write_text(report(data["cells"], data["meta"]))
+
+
 def main(argv: list[str]) -> None:
+    if argv[1:] == ["--report"]:
+        rewrite_report()
+        return
     n_moves = int(argv[1]) if len(argv) > 1 else 200_000
     n_dls = int(argv[2]) if len(argv) > 2 else 3000
     n_cli = int(argv[3]) if len(argv) > 3 else 2
