@@ -192,8 +192,12 @@ def test_a_new_operator_is_told_where_to_start():
         await until(pilot, lambda: isinstance(app.screen, SubmitDialog) and app.screen.query("#submit-sample"))
         tree = app.screen.query_one("#submit-tree")
         assert tree.size.height >= 7                              # it showed five rows
+        app.screen.submit()                                       # nothing picked yet: told to pick a file
+        error = app.screen.query_one("#submit-error")
+        await until(pilot, lambda: "pick a file" in str(error.render()))
         app.screen.query_one("#submit-sample").value = str(SAMPLES_DIR / "twisted_vase.stl")
         await until(pilot, lambda: app.screen.query_one("#submit-path").value.endswith("twisted_vase.stl"))
+        await until(pilot, lambda: str(error.render()) == "")    # picked: the complaint is gone
     run(scenario, StubClient())
 
 

@@ -73,6 +73,10 @@ class SubmitDialog(ModalScreen[SubmitChoice | None]):
         if event.select.id == "submit-sample" and isinstance(event.value, str):
             self.query_one("#submit-path", Input).value = event.value
 
+    def on_input_changed(self, event: Input.Changed) -> None:
+        """A new path or sim speed: the complaint about the last one goes (it read "pick a file" after one was)."""
+        self.query_one("#submit-error", Label).update("")
+
     def on_input_submitted(self, event: Input.Submitted) -> None:
         self.submit()
 
