@@ -421,3 +421,25 @@ def test_the_client_package_imports_no_service_code_and_its_helpers_no_client():
     for helper in ("job_waits.py", "transfers.py", "follow.py"):
         text = (root / helper).read_text()
         assert "from fabric.client import" not in text and "fabric.client.client" not in text, helper
+
+
+def test_clear_plate_on_a_plate_without_a_bead_lets_the_waiting_job_go_on(cell_in_process):
+    """A print stopped while heating laid no bead: the station sees the plate clear, but the supervisor's queue
+    waits for the operator's word before the next job (a print was begun there). ``clear_plate`` is that word:
+    it said "clear already" and the next job kept waiting for ``job next``; now it is noted (event
+    ``plate_cleared``, no job, no volume) and the waiting job is loaded."""
+    client, _ = cell_in_process
+    hot = b"M109 S200\n" + CUBE_GCODE                    # heats first: time to stop before any bead
+    first = client.submit(s.JobSubmit(model=hot, filename="hot.gcode", start=True)).job_id
+    client.wait_print_job(first, lambda r: r.state == "printing", timeout=120)
+    client.stop()
+    assert client.wait_print_job(first, lambda r: False, timeout=60).state == "stopped"
+    assert client.state().plate_clear and client.state().deposited_mm3 == 0.0
+    second = client.submit(s.JobSubmit(model=CUBE_GCODE, filename="cube.gcode")).job_id
+    client.wait_print_job(second, lambda r: r.waiting_for == "plate", timeout=120)
+    since = client.events(0).last_seq
+    ack = client.clear_plate()
+    assert ack.ok and "clear already" in ack.message
+    ev = _wait_event(client, since, "plate_cleared")
+    assert ev.data == {"job_id": "", "plate_mm3": 0.0}
+    assert client.wait_print_job(second, lambda r: r.state == "loaded", timeout=60).waiting_for == ""

@@ -95,9 +95,11 @@ EVENTS: dict[str, EventKind] = {
          "min_c": ("number", "the material's minimum extrusion temperature."),
          "row": ("integer", "the program row that would extrude cold.")}),
     "plate_cleared": EventKind(
-        "The operator said the part is off the plate (``station/clear_plate``, or ``supervisor/job_next``).",
-        {"job_id": ("string", "the job whose part it was (\"\" when printed by hand)."),
-         "plate_mm3": ("number", "the part's volume.")}),
+        "The operator said the plate is clear (``station/clear_plate``, or ``supervisor/job_next``): the part, "
+        "if the station had one, is off; said of a plate the station saw clear too (a print stopped before its "
+        "first bead), then with no job and no volume.",
+        {"job_id": ("string", "the job whose part it was (\"\" when printed by hand, or no part)."),
+         "plate_mm3": ("number", "the part's volume (0: no part).")}),
     "jogged": EventKind(
         "A jog (``station/jog``: a straight move by hand, collision-checked) has ended.",
         {"xyz_mm": ("array", "where the nozzle tip is now: plate frame x, y, z.")}),

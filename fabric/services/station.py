@@ -423,9 +423,9 @@ class StationService(Service):
     def on_clear_plate(self, _: s.Empty) -> s.Ack:
         def act() -> s.Ack:
             what = self.plate.clear()
-            if not what:
-                return self._ack("the plate was clear already")
             self._changed()
+            if not what:
+                return self._ack("the plate was clear already (noted: a job waiting for it goes on)")
             return self._ack(f"plate clear: {what} taken off")
         return self._step(act)
 

@@ -94,6 +94,10 @@ class PlateGuard:
                              state=self.twin.state, command="clear_plate")
         m = self.meta
         if not m.plate_occupied:
+            # no part on record (a print stopped before its first bead), but the operator's word is noted all
+            # the same: a queue waiting for the plate goes on from it (it did not: plate-clear said "clear
+            # already" and the next job kept waiting for "job next")
+            self.twin.note("plate_cleared", {"job_id": "", "plate_mm3": 0.0})
             return ""
         what = self.text()
         self.twin.note("plate_cleared", {"job_id": m.plate_job_id, "plate_mm3": round(m.plate_mm3, 3)})
