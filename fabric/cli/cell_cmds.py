@@ -27,10 +27,10 @@ ASK_WINDOW_S = 1.0      # how long to wait for the hub and the station before sh
 
 
 class RunningCell:
-    """What the station on the fabric says it runs (None: no station answered)."""
+    """What the station on the fabric says it runs (None: no station answered, ``why`` not when known)."""
 
-    def __init__(self, info: s.CellInfo | None, cell_id: str) -> None:
-        self.info, self.cell_id = info, cell_id
+    def __init__(self, info: s.CellInfo | None, cell_id: str, why: str = "") -> None:
+        self.info, self.cell_id, self.why = info, cell_id, why
 
 
 def running_cell(a: argparse.Namespace) -> RunningCell:
@@ -39,8 +39,8 @@ def running_cell(a: argparse.Namespace) -> RunningCell:
     try:
         with Client.connect(settings, ASK_WINDOW_S) as client:
             return RunningCell(client.station_cell(timeout=ASK_WINDOW_S), settings.cell)
-    except FabricError:
-        return RunningCell(None, settings.cell)
+    except FabricError as err:                  # no hub, refused credentials, ...: said with the default
+        return RunningCell(None, settings.cell, err.message)
 
 
 def _cell_of(a: argparse.Namespace) -> Cell:
@@ -51,7 +51,8 @@ def _cell_of(a: argparse.Namespace) -> Cell:
     running = running_cell(a)
     info = running.info
     if info is None:
-        _note(a, f"no station of cell '{running.cell_id}' answered: the built-in default cell {DEFAULT_CELL} "
+        why = f" ({running.why})" if running.why else ""
+        _note(a, f"no station of cell '{running.cell_id}' answered{why}: the built-in default cell {DEFAULT_CELL} "
                  "(--cell-config NAME|FILE for another)")
         return Cell.builtin(DEFAULT_CELL)
     if info.name in builtin_cell_names():
