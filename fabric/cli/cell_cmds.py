@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from fabric import schemas as s
@@ -26,11 +27,13 @@ __all__ = ["register", "RunningCell", "running_cell"]
 ASK_WINDOW_S = 1.0      # how long to wait for the hub and the station before showing the default cell
 
 
+@dataclass
 class RunningCell:
-    """What the station on the fabric says it runs (None: no station answered, ``why`` not when known)."""
+    """What the station of cell ``cell_id`` says it runs (None: no station answered; ``why`` not, when known)."""
 
-    def __init__(self, info: s.CellInfo | None, cell_id: str, why: str = "") -> None:
-        self.info, self.cell_id, self.why = info, cell_id, why
+    info: s.CellInfo | None
+    cell_id: str
+    why: str = ""
 
 
 def running_cell(a: argparse.Namespace) -> RunningCell:
