@@ -239,6 +239,9 @@ def test_going_on_above_the_part_and_the_next_layer_is_refused(fabric):
     events = client.subscribe("station", "events")
     try:
         _stopped_in_the_first_layer(client, events)
+        with pytest.raises(StateError, match=r"go on at a layer of it \(start --layer 2; it is printed up to "
+                                             r"layer 1\)"):
+            client.start(rtf=0)                              # not again from the beginning: which layer, said
         before, seq = client.state(), client.events(0).last_seq
         with pytest.raises(StateError, match=r"printed up to layer 1, so layer 3 would be laid 1 layer\(s\) above "
                                              r"it, in the air; go on at layer 1 \(to finish it\) or 2") as err:

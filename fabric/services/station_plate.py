@@ -48,12 +48,12 @@ class PlateGuard:
         if from_layer is None and m.job_id and self.twin.s.t_ended_s is not None:
             raise StateError(f"cannot {command} job {m.job_id} from the beginning: its print ended "
                              f"({self.twin.reason}); print it again as a new job (fabric-cli job submit), or go "
-                             f"on at a layer of its part (start --layer N)", state=state, command=command,
+                             f"on at a layer of its part ({self._layer_hint()})", state=state, command=command,
                              job_id=m.job_id)
         if from_layer is None and m.plate_occupied:
             raise StateError(f"cannot {command} from the beginning: the plate holds {self.text()}; take it off "
                              f"and say so (fabric-cli plate-clear, or job next), or go on at a layer of it "
-                             f"(start --layer N)", state=state, command=command, plate="occupied",
+                             f"({self._layer_hint()})", state=state, command=command, plate="occupied",
                              plate_job_id=m.plate_job_id)
         if from_layer is not None and not m.plate_occupied:
             raise StateError(f"cannot {command} at layer {from_layer + 1}: the plate is clear, there is no part to "
@@ -64,6 +64,13 @@ class PlateGuard:
                              plate_job_id=m.plate_job_id)
         if from_layer is not None:
             self.refuse_in_the_air(command, from_layer)
+
+    def _layer_hint(self) -> str:
+        """Which ``start --layer`` goes on with the part on the plate: its top layer, or the one after it."""
+        top = self.top_layer()
+        if top < 0 or self.meta.plate_program_id != self.meta.program_id:
+            return "start --layer N"
+        return f"start --layer {top + 2}; it is printed up to layer {top + 1}"
 
     def top_layer(self) -> int:
         """The highest layer (0-based) with a bead of the part on the plate; -1 when there is none."""
