@@ -275,3 +275,28 @@ def test_joint_speed_limits_slow_linear_moves_and_say_where() -> None:
     assert 6 in lines.tolist() and 0 in res.slowed_joint.tolist()     # the sweep across the plate, A1
     fast = plan_gcode(text, Cell.builtin("irb140"), PlanOptions())
     assert res.estimate_s > fast.estimate_s
+
+
+def _layers_gcode(first_z_mm: float, layers: int, spacing_mm: float = 0.3) -> str:
+    """A small square, ``layers`` layers from ``first_z_mm`` up, extruding."""
+    out = ["G21", "G90", "M83", "G1 X100 Y100 F3000"]
+    for k in range(layers):
+        out += [f";LAYER_CHANGE\nG1 Z{first_z_mm + k * spacing_mm:.3f}", "G1 X110 Y100 E0.5 F1200",
+                "G1 X110 Y110 E0.5", "G1 X100 Y110 E0.5", "G1 X100 Y100 E0.5"]
+    return "\n".join(out) + "\n"
+
+
+def test_a_first_layer_laid_well_above_the_plate_is_warned_of(cell):
+    """``--offset 0 0 500`` planned a part 500 mm up, runnable, without a word: its beads go down onto nothing.
+    A first layer on the plate (or lifted within two layer spacings and half a millimetre) gets no warning."""
+    def warnings(text: str, offset=(0.0, 0.0, 0.0)) -> list[str]:
+        res = plan_gcode(text.encode(), cell, PlanOptions(offset_mm=offset))
+        return [w for w in res.stats.warnings if "first layer" in w]
+
+    assert warnings(_layers_gcode(0.3, 3)) == []
+    assert warnings(_layers_gcode(0.3, 3), offset=(0.0, 0.0, 0.7)) == []           # 1.0 mm: within 2 x 0.3 + 0.5
+    lifted = warnings(_layers_gcode(0.3, 3), offset=(0.0, 0.0, 50.0))
+    assert lifted == ["the first layer is laid 50.3 mm above the plate, layers 0.30 mm apart: its beads go down "
+                      "onto nothing unless an object is placed there first (--offset Z lifts the part)"]
+    assert warnings(_layers_gcode(10.0, 3, spacing_mm=10.0)) == []                # concrete: 10 mm layers
+    assert warnings(_layers_gcode(0.3, 1), offset=(0.0, 0.0, 20.0))                # one layer, 20.3 mm up

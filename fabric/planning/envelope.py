@@ -13,11 +13,15 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["ENV_OFF_PLATE", "ENV_BELOW_PLATE", "ENVELOPE_REASONS", "ENVELOPE_TOL_MM", "envelope_status"]
+__all__ = ["ENV_OFF_PLATE", "ENV_BELOW_PLATE", "ENVELOPE_REASONS", "ENVELOPE_TOL_MM", "envelope_status",
+           "floating_warning"]
 
 ENV_OFF_PLATE, ENV_BELOW_PLATE = 16, 17       # statuses after the IK ones (fabric.robot.kinematics IK_*)
 ENVELOPE_REASONS = {ENV_OFF_PLATE: "off the plate", ENV_BELOW_PLATE: "below the plate"}
 ENVELOPE_TOL_MM = 1e-3                        # rounding of G-code coordinates and offsets
+FLOAT_LAYERS = 2.0                            # a first layer more layers than this above the plate floats ...
+FLOAT_MARGIN_MM = 0.5                         # ... plus this (a first layer squashed or lifted a little is fine)
+FLOAT_ONE_LAYER_MM = 10.0                     # a one-layer print: its first layer higher than this floats
 
 
 def envelope_status(xyz_mm: np.ndarray, rows: np.ndarray, plate_size_mm: np.ndarray) -> np.ndarray:
@@ -32,3 +36,21 @@ def envelope_status(xyz_mm: np.ndarray, rows: np.ndarray, plate_size_mm: np.ndar
     out[off] = ENV_OFF_PLATE
     out[below] = ENV_BELOW_PLATE
     return out
+
+
+def floating_warning(first_layer_z_mm: float, second_layer_z_mm: float) -> str | None:
+    """A warning when the part's first layer is laid well above the plate (its lowest extruding nozzle height
+    more than ``FLOAT_LAYERS`` layer spacings, plus ``FLOAT_MARGIN_MM``, over the plate; the spacing is the
+    second layer's height over the first): its beads would go down onto nothing, unless the operator puts an
+    object there first (printing onto an insert). Found driving the cell: ``--offset 0 0 500`` planned a part
+    500 mm up, runnable, without a word. None when the first layer rests on the plate (or nothing extrudes)."""
+    z0, z1 = float(first_layer_z_mm), float(second_layer_z_mm)
+    if not np.isfinite(z0):
+        return None
+    spacing = z1 - z0 if np.isfinite(z1) and z1 > z0 else None
+    limit = FLOAT_LAYERS * spacing + FLOAT_MARGIN_MM if spacing is not None else FLOAT_ONE_LAYER_MM
+    if z0 <= limit:
+        return None
+    apart = f", layers {spacing:.2f} mm apart" if spacing is not None else ""
+    return (f"the first layer is laid {z0:.1f} mm above the plate{apart}: its beads go down onto nothing "
+            "unless an object is placed there first (--offset Z lifts the part)")

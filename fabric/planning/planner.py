@@ -45,7 +45,7 @@ from fabric.motion.cold import first_cold_extrusion
 from fabric.motion.program import APPROACH, MOVEJ, MOVEL, PRINT, RETURN_HOME, SET_TEMP, WAIT, WAIT_TEMP, Program
 from fabric.motion.program_file import FileSink, MemorySink, ProgramSink
 from fabric.planning.chunk_ik import JUMP_DEG, Seed, solve_chunk
-from fabric.planning.envelope import envelope_status
+from fabric.planning.envelope import envelope_status, floating_warning
 from fabric.planning.mapping import map_toolpath
 from fabric.planning.material import resolve_material
 from fabric.planning.options import PlanOptions
@@ -436,8 +436,14 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
         extruded_volume_mm3=tot.volume_mm3, path_length_mm=tot.path_mm, print_length_mm=tot.print_mm,
         travel_lifts=tot.lifts, fan_events_dropped=tot.fan_events, gcode_lines=summary.n_lines,
         unknown_commands=dict(summary.unknown_commands), slicer=chunks.slicer, material=material,
-        warnings=list(material.warnings), split_rows=tot.split_rows, parse_s=parse_s, ik_s=ik_s, refine_s=refine_s,
-        timing_s=timing_s,
+        warnings=list(material.warnings) + _floating(tot), split_rows=tot.split_rows, parse_s=parse_s, ik_s=ik_s,
+        refine_s=refine_s, timing_s=timing_s,
         total_s=parse_before + time.perf_counter() - t0)
     return PlanResult(program=prog, report=report, estimate_s=estimate, stats=stats,
                       toolpath=chunks.toolpath, slowed_rows=slowed_rows, slowed_joint=slowed_joint, t_end_s=t_end)
+
+
+def _floating(tot: Totals) -> list[str]:
+    """The warning of a first layer laid well above the plate, if it is (``envelope.floating_warning``)."""
+    warning = floating_warning(tot.first_layer_z_mm, tot.second_layer_z_mm)
+    return [warning] if warning else []

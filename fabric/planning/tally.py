@@ -65,6 +65,8 @@ class Totals:
     volume_mm3: float = 0.0
     path_mm: float = 0.0
     print_mm: float = 0.0
+    first_layer_z_mm: float = float("inf")     # the lowest extruding nozzle height of layer 1 (plate frame)
+    second_layer_z_mm: float = float("inf")    # ... of layer 2 (envelope.floating_warning)
     last_xyz: np.ndarray | None = None
 
     def add(self, prog: Program, tp: Toolpath, asm: Assembled, first: bool) -> None:
@@ -80,6 +82,7 @@ class Totals:
         self.volume_mm3 += float(np.dot(prog.flow_mm3_mm[lin], d[lin]))
         self.path_mm += float(d[pm].sum())
         self.print_mm += float(d[pm & (prog.flow_mm3_mm > 0)].sum())
+        self._first_layers(xyz[:, 2], lin & (prog.flow_mm3_mm > 0), prog.layer)
         self.targets += int(np.count_nonzero(prog.op <= MOVEL))
         self.moves += len(tp)
         self.print_rows += asm.print_rows
@@ -89,3 +92,12 @@ class Totals:
             self.leading_dropped, self.approach_speed_mm_s = asm.leading_dropped, asm.approach_speed_mm_s
         if len(xyz):
             self.last_xyz = xyz[-1].copy()
+
+    def _first_layers(self, z_mm: np.ndarray, extruding: np.ndarray, layer: np.ndarray) -> None:
+        """The lowest extruding nozzle height of the first two layers, so far (a chunk past them adds nothing)."""
+        if not extruding.any() or int(layer[extruding].min()) > 1:
+            return
+        for k, name in ((0, "first_layer_z_mm"), (1, "second_layer_z_mm")):
+            rows = extruding & (layer == k)
+            if rows.any():
+                setattr(self, name, min(getattr(self, name), float(z_mm[rows].min())))
