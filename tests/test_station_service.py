@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import itertools
-import time
 
 import numpy as np
 import pytest
@@ -222,10 +221,13 @@ def _stopped_in_the_first_layer(client, events) -> None:
     """Print until the first layer has beads, then stop: the part's top is layer 1."""
     client.start(rtf=30.0)                      # heating, fast
     wait_event(events, ("layer",))
-    client.set_rtf(0.5)                         # the first beads, slowly
-    deadline = time.monotonic() + 30.0
-    while client.state().deposited_mm3 <= 0.0 and time.monotonic() < deadline:
-        time.sleep(0.05)
+    extrusion = client.subscribe("station", "extrusion")
+    try:
+        client.set_rtf(0.5)                     # the first beads, slowly
+        while extrusion.get(timeout=30.0).extruded_mm3 <= 0.0:     # the telemetry says a bead is laid
+            pass
+    finally:
+        extrusion.close()
     client.stop()
     wait_event(events, ("stopped",))
 

@@ -79,10 +79,11 @@ class Totals:
         del step
         lin = prog.op == MOVEL
         pm = (prog.section == PRINT) & lin
+        extruding = lin & (prog.flow_mm3_mm > 0)
         self.volume_mm3 += float(np.dot(prog.flow_mm3_mm[lin], d[lin]))
         self.path_mm += float(d[pm].sum())
-        self.print_mm += float(d[pm & (prog.flow_mm3_mm > 0)].sum())
-        self._first_layers(xyz[:, 2], lin & (prog.flow_mm3_mm > 0), prog.layer)
+        self.print_mm += float(d[pm & extruding].sum())
+        self._first_layers(xyz[:, 2], extruding, prog.layer)
         self.targets += int(np.count_nonzero(prog.op <= MOVEL))
         self.moves += len(tp)
         self.print_rows += asm.print_rows

@@ -261,8 +261,8 @@ its typed `error`. Waiting jobs (`queued`, preparing) can be reordered (`job_mov
 part there (`station.State.plate_clear` false, `plate_mm3`, `plate_job_id`), and it stays until the
 operator says it is off with `station/clear_plate` or `supervisor/job_next` (event `plate_cleared`),
 whatever happens to the job or the station, restarts included. The operator's word is noted even when the
-station saw the plate clear (a print stopped before its first bead): a job waiting for the plate goes on. While the plate is occupied the station
-refuses (`state` error, `details.plate` `occupied`) a print from the beginning, a `load`, and a restart at
+station saw the plate clear (a print stopped before its first bead): a job waiting for the plate goes on.
+While the plate is occupied the station refuses (`state` error, `details.plate` `occupied`) a print from the beginning, a `load`, and a restart at
 a layer of another program's part; a restart at a layer of this program's part is allowed (it adds to
 it). A job whose print ended is never started from the beginning again (print it again as a new job, or
 go on at a layer). The head of the queue is loaded when it is prepared, the station holds no job (its
