@@ -35,6 +35,7 @@ from fabric.robot.kinematics import (
     multi_turn_mask,
     pose_cols,
 )
+from fabric.robot.native_track import NativeTrack
 
 __all__ = ["ClosedFormIK", "select_branches"]
 
@@ -85,6 +86,7 @@ class ClosedFormIK:
 
     max_rows = 65536          # bound on rows per vectorised step (memory: max_rows x 8 x nq floats)
     tracking = True           # False: always the full 8-branch method (reference for tests)
+    use_native = True         # False: numpy's tracking even where the C helper could answer (reference for tests)
 
     def __init__(self, arm: ClosedFormArm, lower_rad: np.ndarray, upper_rad: np.ndarray,
                  tool_T: np.ndarray | None = None, free_rad: float | None = None) -> None:
@@ -99,6 +101,7 @@ class ClosedFormIK:
         F = np.asarray(arm.flange_T, dtype=float)
         self._end_inv = None if np.array_equal(F, np.eye(4)) else _inv_T(F)     # flange -> end frame
         self._tool_inv = _inv_T(F @ self.tool_T)
+        self._native: list[NativeTrack | None] = []      # the C tracking, looked up at the first solve
         self.free_rad = 0.0                # the redundancy joint's value when a call gives none
         if self.free_joint is not None:
             j = self.free_joint
@@ -190,11 +193,13 @@ class ClosedFormIK:
         C = np.asarray(C, dtype=float)
         n = C.shape[1]
         free = self._free(q_free, n)
-        q1, degen = self.arm.q1_free(C)                    # A1 undefined (wrist centre on its axis): hold it
-        hold = _forward_fill(q1, ~degen, seed[0]) if degen.any() else None
         q = np.empty((nq, n))
         row_ok, reach_any, sing = (np.empty(n, dtype=bool) for _ in range(3))
-        self._track(C, hold, free, seed, q, row_ok, reach_any, sing)
+        fast = self.native_track()
+        if fast is None or not fast.track(C, seed, self.max_rows, q, row_ok, reach_any, sing):
+            q1, degen = self.arm.q1_free(C)                # A1 undefined (wrist centre on its axis): hold it
+            hold = _forward_fill(q1, ~degen, seed[0]) if degen.any() else None
+            self._track(C, hold, free, seed, q, row_ok, reach_any, sing)
         wdeg = reach_any & sing                             # one wrist angle free (a subset of the singular
         if wdeg.any():                                      # rows): hold it, solve the rest
             cand = np.flatnonzero(wdeg)
@@ -213,6 +218,14 @@ class ClosedFormIK:
             status[~row_ok & reach_any] = IK_JOINT_LIMIT
             status[~reach_any] = IK_OUT_OF_REACH
         return np.ascontiguousarray(q.T), status
+
+    def native_track(self) -> NativeTrack | None:
+        """:meth:`_track` in C for this arm (``fabric.robot.native_track``), or None: numpy's path answers."""
+        if not self.tracking or not self.use_native:
+            return None
+        if not self._native:
+            self._native.append(NativeTrack.of(self.arm, self.lower_rad, self.upper_rad, self.multi))
+        return self._native[0]
 
     def _track(self, C: np.ndarray, hold: np.ndarray | None, free: float | np.ndarray | None, seed: np.ndarray,
                q: np.ndarray, row_ok: np.ndarray, reach_any: np.ndarray, sing: np.ndarray) -> None:
@@ -301,9 +314,14 @@ class ClosedFormIK:
         max_step2 = np.max(np.where(step_allowed, step2, 0.0), axis=1)
         pair_allowed = allowed[1:, ::2] | allowed[1:, 1::2]
         sep = np.full(n - 1, _PI)
-        for s in range(2):
-            gap = np.abs(_wrap_diff(qb[1:, 4 * s, 2] - qb[1:, 4 * s + 2, 2]))
-            both = pair_allowed[:, 2 * s] & pair_allowed[:, 2 * s + 1]
+        # the two elbows of a shoulder: one A3 gap for a spherical wrist; a UR arm's wrist choice moves its arm
+        # plane, so each wrist has its own pair of elbows (their A3 far apart under one wrist, close under the
+        # other near a stretched elbow)
+        for s, w in ((0, 0), (0, 1), (1, 0), (1, 1)) if self.family == "ur" else ((0, 0), (1, 0)):
+            a, c = 4 * s + w, 4 * s + 2 + w
+            gap = np.abs(_wrap_diff(qb[1:, a, 2] - qb[1:, c, 2]))
+            both = (allowed[1:, a] & allowed[1:, c]) if self.family == "ur" else \
+                (pair_allowed[:, 2 * s] & pair_allowed[:, 2 * s + 1])
             sep = np.where(both, np.minimum(sep, gap), sep)
         if self.family != "abb-spherical-wrist":         # the reference model's shoulders are pi apart
             gap = np.abs(_wrap_diff(qb[1:, 0, 0] - qb[1:, 4, 0]))
