@@ -1,4 +1,4 @@
-"""The path IK's branch tracking in C (fabric/native/armik.c) against numpy's, for the OPW and UR cells.
+"""The path IK's branch tracking in C (fabric/native/armik.c) against numpy's, for the OPW, UR and Panda cells.
 
 Both paths must give the same joints and statuses on every kind of row: a smooth path (tracking), scattered
 targets (the full 8-branch method row after row), rows out of reach or past a joint limit, a path through the
@@ -17,7 +17,7 @@ from fabric.robot.opw import OPWArm
 
 pytestmark = pytest.mark.skipif(native.library("armik") is None, reason="no C compiler: numpy's path only")
 
-CELLS = ["irb140", "kr6r700", "ur5", "ur10"]
+CELLS = ["irb140", "kr6r700", "ur5", "ur10", "panda"]
 
 
 def _cf(cell: Cell) -> ClosedFormIK:
@@ -43,10 +43,18 @@ def _same(cf: ClosedFormIK, C: np.ndarray, seed: np.ndarray) -> tuple[np.ndarray
     return qa, sa
 
 
+def _held(cf: ClosedFormIK, q: np.ndarray) -> np.ndarray:
+    """``q`` with a redundant arm's parameter joint (the Panda's A7) at the value the solver holds."""
+    if cf.free_joint is not None:
+        q[:, cf.free_joint] = cf.free_rad
+    return q
+
+
 def _path(rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray, knots: int, steps: int) -> np.ndarray:
-    q0 = rng.uniform(np.maximum(lo, -np.pi) * 0.6, np.minimum(hi, np.pi) * 0.6, (knots, 6))
+    nq = len(lo)
+    q0 = lo + (hi - lo) * rng.uniform(0.2, 0.8, (knots, nq))
     t = np.linspace(0.0, 1.0, steps)[:, None, None]
-    return (q0[:-1][None] * (1 - t) + q0[1:][None] * t).transpose(1, 0, 2).reshape(-1, 6)
+    return (q0[:-1][None] * (1 - t) + q0[1:][None] * t).transpose(1, 0, 2).reshape(-1, nq)
 
 
 @pytest.fixture(scope="module", params=CELLS)
@@ -58,8 +66,8 @@ def test_a_smooth_path_and_scattered_targets_give_numpys_joints(cell: Cell) -> N
     cf = _cf(cell)
     rng = np.random.default_rng(7)
     lo, hi = cell.robot.lower_rad, cell.robot.upper_rad
-    path = _path(rng, lo, hi, 60, 120)
-    scattered = rng.uniform(np.maximum(lo, -np.pi), np.minimum(hi, np.pi), (6000, 6))
+    path = _held(cf, _path(rng, lo, hi, 60, 120))
+    scattered = _held(cf, rng.uniform(np.maximum(lo, -np.pi), np.minimum(hi, np.pi), (6000, len(lo))))
     for q in (path, scattered):
         C = pose_cols(cf.fk_flange(q), cf._end_inv)
         _, st = _same(cf, C, q[0])
@@ -69,7 +77,7 @@ def test_a_smooth_path_and_scattered_targets_give_numpys_joints(cell: Cell) -> N
 def test_rows_out_of_reach_and_past_a_limit_give_numpys_statuses(cell: Cell) -> None:
     cf = _cf(cell)
     rng = np.random.default_rng(11)
-    q = _path(rng, cell.robot.lower_rad, cell.robot.upper_rad, 20, 200)
+    q = _held(cf, _path(rng, cell.robot.lower_rad, cell.robot.upper_rad, 20, 200))
     C = pose_cols(cf.fk_flange(q), cf._end_inv)
     C[0:3, 500:700] *= 3.0                             # far out of reach
     C[0:3, 1500:1510] = 0.0                            # the base origin
@@ -87,7 +95,7 @@ def test_the_stretched_elbow_takes_the_nearest_branch(cell: Cell) -> None:
     cf = _cf(cell)
     rng = np.random.default_rng(1)
     lo, hi = cell.robot.lower_rad, cell.robot.upper_rad
-    q = _path(rng, lo, hi, 200, 100)
+    q = _held(cf, _path(rng, lo, hi, 200, 100))
     C = pose_cols(cf.fk_flange(q), cf._end_inv)
     got, _ = _same(cf, C, q[0])
     qb, ok, _reach, _ = cf.branches_cols(C)
@@ -120,3 +128,24 @@ def test_a_row_with_a1_undefined_is_held_by_numpys_path() -> None:
     assert fast is not None and not fast.track(C, seed, cf.max_rows, out, *flags)
     q, _ = _same(cf, C, seed)
     assert q[1, 0] == pytest.approx(q[0, 0])             # A1 held from the row before
+
+
+def test_the_pandas_a7_given_per_row_gives_numpys_joints() -> None:
+    cf = _cf(Cell.builtin("panda"))
+    rng = np.random.default_rng(5)
+    lo, hi = cf.lower_rad, cf.upper_rad
+    q = _path(rng, lo, hi, 30, 100)
+    C = pose_cols(cf.fk_flange(q), cf._end_inv)
+    fast = cf.native_track()
+    assert fast is not None
+    got = []
+    for use_native in (True, False):
+        cf.use_native = use_native
+        try:
+            got.append(cf.ik_cols(C, q[0], q_free=q[:, 6]))
+        finally:
+            cf.use_native = True
+    np.testing.assert_array_equal(got[0][1], got[1][1])
+    np.testing.assert_allclose(got[0][0], got[1][0], rtol=0, atol=1e-12)
+    assert np.mean(got[0][1] == IK_OK) > 0.9
+    np.testing.assert_allclose(got[0][0][:, 6], q[:, 6], atol=1e-12)     # A7 as given

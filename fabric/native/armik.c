@@ -1,9 +1,10 @@
-/* The closed-form IK of 6-axis OPW and UR arms along a path, with the branch choice: the loop of
+/* The closed-form IK of OPW, UR and Panda-type arms along a path, with the branch choice: the loop of
  * ClosedFormIK._track (fabric/robot/closed_form.py) row by row, without numpy's passes over memory.
  *
- * The formulas are those of fabric/robot/opw.py (OPWArm._terms, _solve, _wrist_variant) and
- * fabric/robot/ur.py (URArm._shoulder, _wrist, _plane, _elbow), term for term, so both paths give the same
- * joints (to the last bits of libm's and numpy's trigonometric functions). The branch choice is the same
+ * The formulas are those of fabric/robot/opw.py (OPWArm._terms, _solve, _wrist_variant),
+ * fabric/robot/ur.py (URArm._shoulder, _wrist, _plane, _elbow) and fabric/robot/panda.py (PandaArm._link6,
+ * _elbow, _wrist_reach, _wrist, _upper_arm, _shoulder, _branches), term for term and in the same order, so
+ * both paths give the same joints (to the last bits of libm's and numpy's trigonometric functions). The branch choice is the same
  * state machine as _track: *tracking* keeps the current branch while it stays valid and quiet (its step is
  * under half the distance to any other branch), in blocks whose sizes grow and reset as there; at the first
  * row that fails, the *full* method solves all 8 branches over a window of rows, each row taking the allowed
@@ -24,20 +25,35 @@
 #define ARMIK_HOLD (-1)
 #define ARMIK_BAD_FAMILY (-2)
 
-enum { FAMILY_OPW = 0, FAMILY_UR = 1 };
+enum { FAMILY_OPW = 0, FAMILY_UR = 1, FAMILY_PANDA = 2 };
+enum { NQ_MAX = 7 };
 
-/* par: the family's lengths, then 6 offsets, 6 signs, 6 lower and 6 upper limits, 6 multi-turn flags (0/1),
- * then the tolerances: wrist |sin|, elbow |cos|, shoulder mm, joint-limit rad. */
-enum { P_OFF = 10, P_SIGN = 16, P_LOWER = 22, P_UPPER = 28, P_MULTI = 34, P_WRIST = 40, P_ELBOW = 41,
-       P_SHOULDER = 42, P_LIMIT = 43, P_COUNT = 44 };
+/* par: per joint (NQ_MAX each) the offsets, signs, lower and upper limits and multi-turn flags (0/1), then the
+ * tolerances: wrist |sin|, elbow |cos|, shoulder mm, joint-limit rad. fam: the family's constants (opw_branch,
+ * ur_branch, panda_*: F_* below). */
+enum { P_OFF = 0, P_SIGN = 7, P_LOWER = 14, P_UPPER = 21, P_MULTI = 28, P_WRIST = 35, P_ELBOW = 36,
+       P_SHOULDER = 37, P_LIMIT = 38, P_COUNT = 39 };
+/* the Panda type's constants: K (3x3, row-major), kW, the turned vectors u, gv, hv (X0, X1, X2, Xk, Xs: 15
+ * each), D, 1 / (2 R4), g4, beta */
+enum { F_K = 0, F_KW = 9, F_U = 12, F_GV = 27, F_HV = 42, F_D = 57, F_INV2R4 = 58, F_G4 = 59, F_BETA = 60,
+       F_PANDA_COUNT = 61 };
 
 typedef struct {
     int family;
-    const double *p;
+    int nq;
+    const double *f;           /* the family's constants */
+    const double *p;           /* par */
 } Arm;
+
+/* A7 of a Panda-type arm, per row or one for all (cos, sin and the wrapped angle, computed by the caller) */
+typedef struct {
+    const double *c7, *s7, *q7;
+    int per_row;
+} Free;
 
 static const double PI = 3.14159265358979323846;
 static const double TWO_PI = 6.28318530717958647692;
+#define PI_GAP 3.14159265358979323846     /* the most a gap is taken for (the tracking test's min(gap, pi)) */
 
 static double wrap(double a) { return a - TWO_PI * nearbyint(a / TWO_PI); }
 
@@ -52,19 +68,70 @@ static double to_q(const Arm *arm, double theta, int j)
     return s > 0.0 ? theta : -theta;
 }
 
+/* The branch's gap (ClosedFormArm.ik_branch_cols' gap_rad) as the family writes it: the smallest over groups
+ * of twice the largest atan2(y, x) of the group (y, x >= 0), at most pi. Kept as its terms: the tracking
+ * test needs the atan2 calls only where a cheap lower bound does not settle it (gap_lower), and the full
+ * method none. */
+typedef struct {
+    double y[2][2], x[2][2];
+    int groups, size[2];
+} Gap;
+
 /* One row's solution of one branch: q (model -> joint angles, [-pi, pi]), reach, singular, gap. */
 typedef struct {
-    double q[6];
+    double q[NQ_MAX];
     int reach;
     int sing;
-    double gap;
+    Gap gap;
 } Branch;
+
+static void gap_group(Gap *g, double y0, double x0, double y1, double x1, int size)
+{
+    int k = g->groups++;
+    g->size[k] = size;
+    g->y[k][0] = y0;
+    g->x[k][0] = x0;
+    g->y[k][1] = y1;
+    g->x[k][1] = x1;
+}
+
+/* The gap exactly as the family computes it (the same atan2 calls, so the same bits). */
+static double gap_exact(const Gap *g)
+{
+    double gap = PI_GAP;
+    for (int k = 0; k < g->groups; k++) {
+        double a = 2.0 * atan2(g->y[k][0], g->x[k][0]);
+        if (g->size[k] > 1) {
+            double b = 2.0 * atan2(g->y[k][1], g->x[k][1]);
+            a = a > b ? a : b;
+        }
+        gap = a < gap ? a : gap;
+    }
+    return gap;
+}
+
+/* A lower bound of gap_exact without a trigonometric call: atan2(y, x) >= sin(atan2(y, x)) = y / |(x, y)|
+ * on [0, pi/2], less a relative 1e-12 for rounding. */
+static double gap_lower(const Gap *g)
+{
+    double gap = PI_GAP;
+    for (int k = 0; k < g->groups; k++) {
+        double a = 0.0;
+        for (int l = 0; l < g->size[k]; l++) {
+            double y = g->y[k][l], x = g->x[k][l], r2 = x * x + y * y;
+            double b = r2 > 0.0 ? 2.0 * (y / sqrt(r2)) * (1.0 - 1e-12) : 0.0;
+            a = b > a ? b : a;
+        }
+        gap = a < gap ? a : gap;
+    }
+    return gap;
+}
 
 /* OPWArm._terms + _solve + _wrist_variant for one row (c: the nine model columns). */
 static void opw_branch(const Arm *arm, const double *c, int branch, Branch *out)
 {
-    const double *p = arm->p;
-    double a1 = p[0], b = p[2], cc1 = p[3], c2 = p[4], c4 = p[6], k = p[7], phi = p[8];
+    const double *p = arm->p, *f = arm->f;
+    double a1 = f[0], b = f[2], cc1 = f[3], c2 = f[4], c4 = f[6], k = f[7], phi = f[8];
     int shoulder = branch / 4, elbow = (branch / 2) % 2, wrist = branch % 2;
     double cx = c[0] - c4 * c[3], cy = c[1] - c4 * c[4], cz = c[2] - c4 * c[5];
     double rho2 = cx * cx + cy * cy;
@@ -103,12 +170,10 @@ static void opw_branch(const Arm *arm, const double *c, int branch, Branch *out)
         th6 = atan2(sw5 * R21 - cw5 * (cw4 * R01 + sw4 * R11), cw4 * R11 - sw4 * R01);
     }
     out->sing = h < p[P_WRIST] || sabs < p[P_ELBOW] || t < p[P_SHOULDER];
-    double gap = 2.0 * atan2(sabs, fabs(Dc));
-    if (b != 0.0) {
-        double gs = 2.0 * atan2(t, fabs(b));
-        gap = gs < gap ? gs : gap;
-    }
-    out->gap = gap;
+    out->gap.groups = 0;                              /* theta3 between the two elbows, wrapped */
+    gap_group(&out->gap, sabs, fabs(Dc), 0.0, 0.0, 1);
+    if (b != 0.0)                                     /* theta1 between the two shoulders */
+        gap_group(&out->gap, t, fabs(b), 0.0, 0.0, 1);
     out->reach = ok;
     if (wrist) {
         th4 = flip(th4);
@@ -123,8 +188,8 @@ static void opw_branch(const Arm *arm, const double *c, int branch, Branch *out)
 /* URArm._branches for one row and one branch (c: the nine DH frame-6 columns). */
 static void ur_branch(const Arm *arm, const double *c, int branch, Branch *out)
 {
-    const double *p = arm->p;
-    double d1 = p[0], a2 = p[1], a3 = p[2], d4 = p[3], d5 = p[4], d6 = p[5];
+    const double *p = arm->p, *f = arm->f;
+    double d1 = f[0], a2 = f[1], a3 = f[2], d4 = f[3], d5 = f[4], d6 = f[5];
     int sh = branch / 4, e = (branch / 2) % 2, w = branch % 2;
     double px = c[0], py = c[1], pz = c[2], zx = c[3], zy = c[4], zz = c[5], yx = c[6], yy = c[7], yz = c[8];
     double xx = yy * zz - yz * zy, xy = yz * zx - yx * zz, xz = yx * zy - yy * zx;
@@ -138,7 +203,6 @@ static void ur_branch(const Arm *arm, const double *c, int branch, Branch *out)
     double c1 = (ts * p5x - d4 * p5y) * inv;
     double s1 = (ts * p5y + d4 * p5x) * inv;
     double th1 = atan2(s1, c1);
-    double sh_gap = 2.0 * atan2(t, fabs(d4));
     /* _wrist */
     double c5 = s1 * zx - c1 * zy;
     double zx6 = s1 * xx - c1 * xy;
@@ -163,8 +227,9 @@ static void ur_branch(const Arm *arm, const double *c, int branch, Branch *out)
     double sabs = sqrt(1.0 - c3 * c3);
     out->reach = ok_s && ok_p;
     out->sing = h < p[P_WRIST] || sabs < p[P_ELBOW] || t < p[P_SHOULDER];
-    double ge = 2.0 * atan2(sabs, fabs(c3));
-    out->gap = ge < sh_gap ? ge : sh_gap;
+    out->gap.groups = 0;
+    gap_group(&out->gap, sabs, fabs(c3), 0.0, 0.0, 1);
+    gap_group(&out->gap, t, fabs(d4), 0.0, 0.0, 1);
     /* _elbow */
     double s3 = e ? -sabs : sabs;
     double A = a2 + a3 * c3, Bk = a3 * s3;
@@ -183,7 +248,9 @@ static void ur_branch(const Arm *arm, const double *c, int branch, Branch *out)
  * (axis-5 point) on axis 1. */
 static int a1_undefined(const Arm *arm, const double *c)
 {
-    const double *p = arm->p;
+    const double *p = arm->f;
+    if (arm->family == FAMILY_PANDA)     /* PandaArm.q1_free: never a pre-pass (held on the chosen joints) */
+        return 0;
     if (arm->family == FAMILY_OPW) {
         if (p[2] != 0.0)
             return 0;
@@ -194,17 +261,190 @@ static int a1_undefined(const Arm *arm, const double *c)
     return p5x * p5x + p5y * p5y < 1e-12;
 }
 
-/* ClosedFormIK.branches_cols for one branch: solve, then single-turn joints into [lower, lower + 2 pi)
- * (ClosedFormIK._canon_col); returns whether the branch is valid (reachable and within the limits). */
-static int solve_branch(const Arm *arm, const double *c, int branch, Branch *out)
+/* The Panda type (panda.py), one row. */
+typedef struct {           /* PandaArm._link6 */
+    double R6[3][3];       /* R6[c]: link 6's column c */
+    double W[3], WW, v[3];
+} Link6;
+
+typedef struct {           /* PandaArm._elbow, _wrist_reach and the elbow's gap and singular flags */
+    double q4, k, sphi, u[3], gv[3], hv[3], g;
+    int ok;
+    Gap gap;
+    int sing_ew;
+} PElbow;
+
+static double lin3(const double *coef, const double *a, const double *b, const double *c, int i)
+{   /* panda._lin: coef[0] a + coef[1] b + coef[2] c, component i, zero terms left out as there */
+    double acc = 0.0;
+    int any = 0;
+    const double *vec[3] = {a, b, c};
+    for (int k = 0; k < 3; k++) {
+        double ck = coef[3 * k], term;
+        if (ck == 0.0)
+            continue;
+        term = ck == 1.0 ? vec[k][i] : (ck == -1.0 ? -vec[k][i] : ck * vec[k][i]);
+        acc = any ? acc + term : term;
+        any = 1;
+    }
+    return acc;
+}
+
+static void panda_link6(const Arm *arm, const double *c, double c7, double s7, Link6 *l)
 {
-    if (arm->family == FAMILY_OPW)
-        opw_branch(arm, c, branch, out);
-    else
-        ur_branch(arm, c, branch, out);
+    const double *f = arm->f;
+    double p[3] = {c[0], c[1], c[2]}, z[3] = {c[3], c[4], c[5]}, y[3] = {c[6], c[7], c[8]};
+    double x[3] = {y[1] * z[2] - y[2] * z[1], y[2] * z[0] - y[0] * z[2], y[0] * z[1] - y[1] * z[0]};
+    double xr[3], yr[3];
+    for (int i = 0; i < 3; i++) {
+        xr[i] = c7 * x[i] - s7 * y[i];
+        yr[i] = s7 * x[i] + c7 * y[i];
+    }
+    for (int col = 0; col < 3; col++)         /* K[:, col]: K is row-major, so its column steps by 3 */
+        for (int i = 0; i < 3; i++)
+            l->R6[col][i] = lin3(f + F_K + col, xr, yr, z, i);
+    double kw[9] = {f[F_KW], 0, 0, f[F_KW + 1], 0, 0, f[F_KW + 2], 0, 0};
+    for (int i = 0; i < 3; i++)
+        l->W[i] = p[i] + lin3(kw, xr, yr, z, i);
+    l->WW = l->W[0] * l->W[0] + l->W[1] * l->W[1] + l->W[2] * l->W[2];
+    for (int col = 0; col < 3; col++)
+        l->v[col] = -(l->R6[col][0] * l->W[0] + l->R6[col][1] * l->W[1] + l->R6[col][2] * l->W[2]);
+}
+
+static void turned_at(const double *X, double k, double esp, double *out)
+{   /* X0 + k Xk + esp Xs (PandaArm._elbow's at) */
+    for (int i = 0; i < 3; i++)
+        out[i] = X[i] + k * X[9 + i] + esp * X[12 + i];
+}
+
+static void panda_elbow(const Arm *arm, const Link6 *l, int elbow, PElbow *e)
+{
+    const double *f = arm->f, *p = arm->p;
+    double k = (f[F_D] - l->WW) * f[F_INV2R4];
+    e->ok = fabs(k) <= 1.0 + 1e-12;
+    k = k < -1.0 ? -1.0 : (k > 1.0 ? 1.0 : k);
+    double sphi = sqrt(1.0 - k * k);
+    double esp = elbow ? -sphi : sphi;
+    e->q4 = wrap(f[F_G4] + atan2(esp, k));
+    e->k = k;
+    e->sphi = sphi;
+    turned_at(f + F_U, k, esp, e->u);
+    turned_at(f + F_GV, k, esp, e->gv);
+    turned_at(f + F_HV, k, esp, e->hv);
+    double ua = e->u[0], ub = e->u[1], uc = e->u[2], va = l->v[0], vb = l->v[1], vc = l->v[2];
+    double g2 = 0.5 * ((ub * ub + uc * uc - vb * vb) + (va * va + vc * vc - ua * ua));
+    e->g = sqrt(fmax(g2, 0.0));
+    e->ok = e->ok && g2 >= -1e-12 * l->WW;
+    e->gap.groups = 0;
+    gap_group(&e->gap, sphi, fabs(k), 0.0, 0.0, 1);
+    gap_group(&e->gap, e->g, fabs(ua), e->g, fabs(vb), 2);
+    e->sing_ew = e->ok && (sphi < p[P_ELBOW] || e->g < p[P_WRIST] * sqrt(l->WW));
+}
+
+/* q5, q6 and the upper arm's d = R3 w3, m = R3 y of one wrist choice (PandaArm._wrist, _upper_arm) */
+static void panda_wrist(const Link6 *l, const PElbow *e, int wrist, double *q5, double *q6, double *d, double *m)
+{
+    double ua = e->u[0], ub = e->u[1], uc = e->u[2], va = l->v[0], vb = l->v[1], vc = l->v[2];
+    double gw = wrist ? -e->g : e->g;
+    double y5 = uc * vb - ub * gw, x5 = ub * vb + uc * gw;
+    double y6 = vc * ua - va * gw, x6 = vc * gw + va * ua;
+    double h5 = hypot(x5, y5), h6 = hypot(x6, y6);
+    double i5 = 1.0 / (h5 > 0.0 ? h5 : 1.0), i6 = 1.0 / (h6 > 0.0 ? h6 : 1.0);
+    double c5 = h5 > 0.0 ? x5 * i5 : 1.0, s5 = y5 * i5;
+    double c6 = h6 > 0.0 ? x6 * i6 : 1.0, s6 = y6 * i6;
+    *q5 = atan2(y5, x5);
+    *q6 = atan2(y6, x6);
+    const double *vecs[2] = {e->gv, e->hv};
+    double *outs[2] = {d, m};
+    for (int t = 0; t < 2; t++) {
+        double a = vecs[t][0], b = vecs[t][1], cc = vecs[t][2];
+        double b1 = c5 * b + s5 * cc, c1 = c5 * cc - s5 * b;
+        double a2 = c6 * a - s6 * c1, c2 = s6 * a + c6 * c1;
+        for (int i = 0; i < 3; i++)
+            outs[t][i] = l->R6[0][i] * a2 + l->R6[1][i] * b1 + l->R6[2][i] * c2;
+    }
+}
+
+/* PandaArm._shoulder (no A1 held): q1, q2, q3 and h = |d_xy| for a shoulder sign (+1, -1) */
+static void panda_shoulder(const Arm *arm, const double *d, const double *m, double sign, double *q)
+{
+    double beta = arm->f[F_BETA];
+    double dx = d[0], dy = d[1], dz = d[2];
+    double h = hypot(dx, dy);
+    double inv = 1.0 / (h > 0.0 ? h : 1.0);
+    double c1 = h > 0.0 ? sign * dx * inv : sign * 1.0;
+    double s1 = sign * dy * inv;
+    q[0] = atan2(s1, c1);
+    double cx = c1 * dx + s1 * dy;
+    double q2 = atan2(cx, dz);
+    if (beta != 0.0)
+        q2 = wrap(q2 - beta);
+    q[1] = q2;
+    double mx = m[0], my = m[1], mz = m[2];
+    double mx1 = c1 * mx + s1 * my, my1 = c1 * my - s1 * mx;
+    q[2] = atan2(cx * mz - dz * mx1, my1);
+    q[7 - 1] = h;          /* h rides in the slot of A7 until the caller puts A7 there */
+}
+
+static void panda_fill(const PElbow *e, double q5, double q6, double q7, const double *q123, const Arm *arm,
+                       Branch *out)
+{
+    out->q[0] = q123[0];
+    out->q[1] = q123[1];
+    out->q[2] = q123[2];
+    out->q[3] = e->q4;
+    out->q[4] = q5;
+    out->q[5] = q6;
+    out->q[6] = q7;
+    out->reach = e->ok;
+    out->sing = e->sing_ew || (e->ok && q123[6] < arm->p[P_WRIST]);
+    out->gap = e->gap;
+}
+
+/* One branch as PandaArm.ik_branch_cols solves it (its own shoulder sign, no flip) */
+static void panda_branch(const Arm *arm, const double *c, double c7, double s7, double q7, int branch, Branch *out)
+{
+    Link6 l;
+    PElbow e;
+    double q5, q6, d[3], m[3], q123[7];
+    panda_link6(arm, c, c7, s7, &l);
+    panda_elbow(arm, &l, (branch / 2) % 2, &e);
+    panda_wrist(&l, &e, branch % 2, &q5, &q6, d, m);
+    panda_shoulder(arm, d, m, branch / 4 ? -1.0 : 1.0, q123);
+    panda_fill(&e, q5, q6, q7, q123, arm, out);
+}
+
+/* All 8 branches as PandaArm.ik_branches_cols solves them: the second shoulder is the first turned over the
+ * top, (q1 + pi, -q2 - 2 beta, q3 + pi) */
+static void panda_all(const Arm *arm, const double *c, double c7, double s7, double q7, Branch *br)
+{
+    Link6 l;
+    double beta = arm->f[F_BETA];
+    panda_link6(arm, c, c7, s7, &l);
+    for (int el = 0; el < 2; el++) {
+        PElbow e;
+        panda_elbow(arm, &l, el, &e);
+        for (int w = 0; w < 2; w++) {
+            double q5, q6, d[3], m[3], q123[7], over[7];
+            panda_wrist(&l, &e, w, &q5, &q6, d, m);
+            panda_shoulder(arm, d, m, 1.0, q123);
+            panda_fill(&e, q5, q6, q7, q123, arm, &br[2 * el + w]);
+            over[0] = flip(q123[0]);
+            over[1] = wrap(-q123[1] - 2.0 * beta);
+            over[2] = flip(q123[2]);
+            over[6] = q123[6];
+            panda_fill(&e, q5, q6, q7, over, arm, &br[4 + 2 * el + w]);
+        }
+    }
+}
+
+/* Single-turn joints into [lower, lower + 2 pi) (ClosedFormIK._canon_col); whether the branch is valid
+ * (reachable and within the limits). */
+static int limit(const Arm *arm, Branch *out)
+{
     const double *p = arm->p;
     int inlim = 1;
-    for (int j = 0; j < 6; j++) {
+    for (int j = 0; j < arm->nq; j++) {
         if (p[P_MULTI + j] != 0.0)
             continue;
         double lo = p[P_LOWER + j], v = out->q[j];
@@ -221,11 +461,43 @@ static int solve_branch(const Arm *arm, const double *c, int branch, Branch *out
     return out->reach && inlim;
 }
 
+/* One branch of row r (the tracking method: ClosedFormArm.ik_branch_cols), limited; whether it is valid. */
+static int solve_branch(const Arm *arm, const double *c, const Free *fr, long r, int branch, Branch *out)
+{
+    if (arm->family == FAMILY_OPW) {
+        opw_branch(arm, c, branch, out);
+    } else if (arm->family == FAMILY_UR) {
+        ur_branch(arm, c, branch, out);
+    } else {
+        long i = fr->per_row ? r : 0;
+        panda_branch(arm, c, fr->c7[i], fr->s7[i], fr->q7[i], branch, out);
+    }
+    return limit(arm, out);
+}
+
+/* All 8 branches of row r (the full method: ClosedFormArm.ik_branches_cols), limited; valid[k] per branch. */
+static void solve_all(const Arm *arm, const double *c, const Free *fr, long r, Branch *br, int *valid)
+{
+    if (arm->family == FAMILY_PANDA) {
+        long i = fr->per_row ? r : 0;
+        panda_all(arm, c, fr->c7[i], fr->s7[i], fr->q7[i], br);
+    } else {
+        for (int k = 0; k < 8; k++) {
+            if (arm->family == FAMILY_OPW)
+                opw_branch(arm, c, k, &br[k]);
+            else
+                ur_branch(arm, c, k, &br[k]);
+        }
+    }
+    for (int k = 0; k < 8; k++)
+        valid[k] = limit(arm, &br[k]);
+}
+
 /* squared joint distance, every angle compared modulo 2 pi (closed_form._sq_dist) */
-static double sq_dist(const double *a, const double *b)
+static double sq_dist(int nq, const double *a, const double *b)
 {
     double s = 0.0;
-    for (int j = 0; j < 6; j++) {
+    for (int j = 0; j < nq; j++) {
         double d = wrap(a[j] - b[j]);
         s += d * d;
     }
@@ -238,17 +510,18 @@ static void gather(const double *C, long n, long i, double *c)
         c[k] = C[k * n + i];
 }
 
-static void put(double *q, long n, long i, const double *v)
+static void put(int nq, double *q, long n, long i, const double *v)
 {
-    for (int j = 0; j < 6; j++)
+    for (int j = 0; j < nq; j++)
         q[j * n + i] = v[j];
 }
 
 /* The full method over rows [i, j): all 8 branches, the allowed one nearest the row before (the first row:
  * nearest `prev`), select_branches' rules for a row with none allowed. Leaves the last row's chosen branch in
  * *b_last and whether it is valid in *ok_last. */
-static void full_window(const Arm *arm, const double *C, long n, long i, long j, const double *prev,
-                        double *q, uint8_t *row_ok, uint8_t *reach_any, uint8_t *sing, int *b_last, int *ok_last)
+static void full_window(const Arm *arm, const double *C, const Free *fr, long n, long i, long j,
+                        const double *prev, double *q, uint8_t *row_ok, uint8_t *reach_any, uint8_t *sing,
+                        int *b_last, int *ok_last)
 {
     Branch br[8], ref;
     int valid[8];
@@ -257,9 +530,9 @@ static void full_window(const Arm *arm, const double *C, long n, long i, long j,
     memcpy(ref.q, prev, sizeof ref.q);
     for (long r = i; r < j; r++) {
         gather(C, n, r, c);
+        solve_all(arm, c, fr, r, br, valid);
         int any_ok = 0, any_reach = 0;
         for (int k = 0; k < 8; k++) {
-            valid[k] = solve_branch(arm, c, k, &br[k]);
             any_ok |= valid[k];
             any_reach |= br[k].reach;
         }
@@ -269,7 +542,7 @@ static void full_window(const Arm *arm, const double *C, long n, long i, long j,
             int allowed = any_ok ? valid[k] : br[k].reach;
             if (!allowed)
                 continue;
-            double d = sq_dist(br[k].q, ref.q);
+            double d = sq_dist(arm->nq, br[k].q, ref.q);
             if (d < best_d || best < 0) {
                 best_d = d;
                 best = k;
@@ -278,7 +551,7 @@ static void full_window(const Arm *arm, const double *C, long n, long i, long j,
         if (best < 0)          /* none allowed: the window's first row takes branch 0, a later row keeps its own */
             best = r == i ? 0 : chosen;
         chosen = best;
-        put(q, n, r, br[chosen].q);
+        put(arm->nq, q, n, r, br[chosen].q);
         row_ok[r] = (uint8_t)valid[chosen];
         sing[r] = (uint8_t)br[chosen].sing;
         reach_any[r] = (uint8_t)any_reach;
@@ -289,33 +562,37 @@ static void full_window(const Arm *arm, const double *C, long n, long i, long j,
 }
 
 /* ClosedFormIK._track over n rows of model columns C (9 rows of n: position, z axis, y axis), from the
- * joints `seed`: fills q (6 rows of n), row_ok, reach_any and sing (0/1 per row). Returns n, ARMIK_HOLD when
- * some row's A1 is undefined (nothing written), or ARMIK_BAD_FAMILY. */
-long armik_track(int family, const double *par, long n, const double *C, const double *seed, long max_rows,
-                 double *q, uint8_t *row_ok, uint8_t *reach_any, uint8_t *sing)
+ * joints `seed` (nq): fills q (nq rows of n), row_ok, reach_any and sing (0/1 per row). A Panda-type arm's A7
+ * comes as its cosine, sine and wrapped value, per row (free_per_row) or one for all. Returns n, ARMIK_HOLD
+ * when some row's A1 is undefined (nothing written), or ARMIK_BAD_FAMILY. */
+long armik_track(int family, int nq, const double *fam, const double *par, long n, const double *C,
+                 const double *free_c7, const double *free_s7, const double *free_q7, int free_per_row,
+                 const double *seed, long max_rows, double *q, uint8_t *row_ok, uint8_t *reach_any, uint8_t *sing)
 {
-    Arm arm = {family, par};
-    double c[9], prev[6];
-    if (family != FAMILY_OPW && family != FAMILY_UR)
+    Arm arm = {family, nq, fam, par};
+    Free fr = {free_c7, free_s7, free_q7, free_per_row};
+    double c[9], prev[NQ_MAX];
+    if (!((family == FAMILY_OPW || family == FAMILY_UR) && nq == 6) && !(family == FAMILY_PANDA && nq == 7))
         return ARMIK_BAD_FAMILY;
     for (long r = 0; r < n; r++) {
         gather(C, n, r, c);
         if (a1_undefined(&arm, c))
             return ARMIK_HOLD;
     }
-    memcpy(prev, seed, sizeof prev);
+    memset(prev, 0, sizeof prev);
+    memcpy(prev, seed, (size_t)nq * sizeof *prev);
     long i = 0, window = 32, block = 2048;
     int b = -1;
     while (i < n) {
         if (b < 0) {
             long j = i + window < n ? i + window : n;
             int ok_last = 0;
-            full_window(&arm, C, n, i, j, prev, q, row_ok, reach_any, sing, &b, &ok_last);
+            full_window(&arm, C, &fr, n, i, j, prev, q, row_ok, reach_any, sing, &b, &ok_last);
             if (!ok_last)
                 b = -1;
             if (b < 0)
                 window = window * 2 < max_rows ? window * 2 : max_rows;
-            for (int k = 0; k < 6; k++)
+            for (int k = 0; k < nq; k++)
                 prev[k] = q[k * n + j - 1];
             i = j;
             continue;
@@ -325,19 +602,22 @@ long armik_track(int family, const double *par, long n, const double *C, const d
         Branch br;
         for (; r < j; r++) {
             gather(C, n, r, c);
-            if (!solve_branch(&arm, c, b, &br))
+            if (!solve_branch(&arm, c, &fr, r, b, &br))
                 break;
-            double sep = br.gap < PI ? br.gap : PI;
             double d2 = 0.0, dw2 = 0.0;
-            for (int k = 0; k < 6; k++) {
+            for (int k = 0; k < nq; k++) {
                 double d = br.q[k] - prev[k];
                 double dw = wrap(d);
                 d2 += d * d;
                 dw2 += dw * dw;
             }
-            if (!(4.0 * d2 < sep * sep) && !(4.0 * dw2 < sep * sep))
-                break;
-            put(q, n, r, br.q);
+            double sep = gap_lower(&br.gap);
+            if (!(4.0 * d2 < sep * sep) && !(4.0 * dw2 < sep * sep)) {
+                sep = gap_exact(&br.gap);          /* the bound did not settle it: the family's own gap */
+                if (!(4.0 * d2 < sep * sep) && !(4.0 * dw2 < sep * sep))
+                    break;
+            }
+            put(nq, q, n, r, br.q);
             row_ok[r] = 1;
             reach_any[r] = 1;
             sing[r] = (uint8_t)br.sing;
@@ -356,5 +636,7 @@ long armik_track(int family, const double *par, long n, const double *C, const d
     return n;
 }
 
-/* The size of par armik_track reads (a check for the caller). */
+/* The sizes of par and of a Panda-type arm's fam that armik_track reads (a check for the caller). */
 long armik_par_count(void) { return P_COUNT; }
+
+long armik_panda_count(void) { return F_PANDA_COUNT; }

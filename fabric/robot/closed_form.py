@@ -196,7 +196,7 @@ class ClosedFormIK:
         q = np.empty((nq, n))
         row_ok, reach_any, sing = (np.empty(n, dtype=bool) for _ in range(3))
         fast = self.native_track()
-        if fast is None or not fast.track(C, seed, self.max_rows, q, row_ok, reach_any, sing):
+        if fast is None or not fast.track(C, seed, self.max_rows, q, row_ok, reach_any, sing, free):
             q1, degen = self.arm.q1_free(C)                # A1 undefined (wrist centre on its axis): hold it
             hold = _forward_fill(q1, ~degen, seed[0]) if degen.any() else None
             self._track(C, hold, free, seed, q, row_ok, reach_any, sing)

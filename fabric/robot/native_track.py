@@ -1,11 +1,12 @@
-"""The path IK's branch tracking in C for 6-axis OPW and UR arms (``fabric/native/armik.c``).
+"""The path IK's branch tracking in C for OPW, UR and Panda-type arms (``fabric/native/armik.c``).
 
 :meth:`fabric.robot.closed_form.ClosedFormIK.ik_cols` hands its rows here first: the C helper runs
 ``ClosedFormIK._track`` (the family's closed form, tracking and the full 8-branch method, the same state
 machine) row by row, where numpy makes a dozen passes over memory per step. Its joints are numpy's to
 the last bits of the trigonometric functions. Where it cannot answer (no helper: no compiler, or
-``FABRIC_NATIVE=0``; another family: the Panda type, the reference arm; a row whose A1 is undefined and
-held) :meth:`NativeTrack.track` says so and numpy's path runs.
+``FABRIC_NATIVE=0``; another family: the reference arm of the tests; a row whose A1 is undefined and held)
+:meth:`NativeTrack.track` says so and numpy's path runs. A Panda-type arm's A7 (its redundancy parameter) is
+given per row or once, as numpy's path takes it; its cosine and sine are numpy's too.
 """
 from __future__ import annotations
 
@@ -15,12 +16,12 @@ from typing import Any
 import numpy as np
 
 from fabric import native
-from fabric.robot.kinematics import _LIMIT_TOL_RAD, ELBOW_SING_COS, SHOULDER_SING_MM, WRIST_SING_SIN
+from fabric.robot.kinematics import _LIMIT_TOL_RAD, ELBOW_SING_COS, SHOULDER_SING_MM, WRIST_SING_SIN, _wrap
 
 __all__ = ["NativeTrack"]
 
-FAMILIES = {"opw": 0, "ur": 1}      # armik.c's FAMILY_*
-_LENGTHS = 10                       # armik.c: the family's lengths take par[0:10]
+FAMILIES = {"opw": 0, "ur": 1, "panda": 2}      # armik.c's FAMILY_*
+_NQ_MAX = 7                         # armik.c's NQ_MAX: par holds 7 values per joint block
 _HOLD = -1                          # armik.c's ARMIK_HOLD
 
 _lib: list[ctypes.CDLL | None] = []
@@ -32,18 +33,24 @@ def _armik() -> ctypes.CDLL | None:
         if lib is not None:
             f = lib.armik_track
             f.restype = ctypes.c_long
-            f.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_long, ctypes.c_void_p, ctypes.c_void_p,
-                          ctypes.c_long, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+            ptr = ctypes.c_void_p
+            f.argtypes = [ctypes.c_int, ctypes.c_int, ptr, ptr, ctypes.c_long, ptr, ptr, ptr, ptr, ctypes.c_int,
+                          ptr, ctypes.c_long, ptr, ptr, ptr, ptr]
             lib.armik_par_count.restype = ctypes.c_long
+            lib.armik_panda_count.restype = ctypes.c_long
         _lib.append(lib)
     return _lib[0]
 
 
-def _lengths(arm: Any) -> list[float]:
-    """The family's lengths in armik.c's order (``opw_branch``, ``ur_branch``)."""
+def _constants(arm: Any) -> list[float]:
+    """The family's constants in armik.c's order (``opw_branch``, ``ur_branch``, the ``F_*`` of the Panda type)."""
     if arm.family == "opw":
         return [arm.a1, arm.a2, arm.b, arm.c1, arm.c2, arm.c3, arm.c4, arm.k, arm.phi]
-    return [arm.d1, arm.a2, arm.a3, arm.d4, arm.d5, arm.d6]
+    if arm.family == "ur":
+        return [arm.d1, arm.a2, arm.a3, arm.d4, arm.d5, arm.d6]
+    turned = [float(v) for X in (arm._u, arm._gv, arm._hv) for part in X for v in part]
+    return [*np.asarray(arm._K, dtype=float).ravel().tolist(), *np.asarray(arm._kW, dtype=float).tolist(), *turned,
+            arm._D, arm._inv2R4, arm._g4, arm.beta]
 
 
 class NativeTrack:
@@ -54,36 +61,49 @@ class NativeTrack:
         self._lib = lib
         self._arm = arm
         self._family = FAMILIES[arm.family]
-        lengths = _lengths(arm)
+        self._nq = nq = int(arm.nq)
+        self._fam = np.asarray(_constants(arm), dtype=float)
+        if arm.family == "panda" and len(self._fam) != int(lib.armik_panda_count()):
+            raise ValueError(f"{len(self._fam)} Panda constants, armik.c reads {int(lib.armik_panda_count())}")
         par = np.zeros(int(lib.armik_par_count()))
-        par[:len(lengths)] = lengths
-        k = _LENGTHS
-        for block in (arm.off, arm.sign, lower_rad, upper_rad, np.asarray(multi, dtype=float)):
-            par[k:k + 6] = block
-            k += 6
-        par[k:k + 4] = (WRIST_SING_SIN, ELBOW_SING_COS, SHOULDER_SING_MM, _LIMIT_TOL_RAD)
+        off = getattr(arm, "off", np.zeros(nq))             # the Panda type's joints are its model angles
+        sign = getattr(arm, "sign", np.ones(nq))
+        for k, block in enumerate((off, sign, lower_rad, upper_rad, np.asarray(multi, dtype=float))):
+            par[k * _NQ_MAX:k * _NQ_MAX + nq] = block
+        par[5 * _NQ_MAX:5 * _NQ_MAX + 4] = (WRIST_SING_SIN, ELBOW_SING_COS, SHOULDER_SING_MM, _LIMIT_TOL_RAD)
         self._par = par
 
     @classmethod
     def of(cls, arm: Any, lower_rad: np.ndarray, upper_rad: np.ndarray, multi: np.ndarray) -> NativeTrack | None:
         """The C tracking of ``arm``, or None where there is none (another family, no helper)."""
-        if getattr(arm, "family", None) not in FAMILIES or arm.nq != 6:
+        if getattr(arm, "family", None) not in FAMILIES or int(arm.nq) != (7 if arm.family == "panda" else 6):
             return None
         lib = _armik()
         return None if lib is None else cls(lib, arm, lower_rad, upper_rad, multi)
 
     def track(self, C: np.ndarray, seed: np.ndarray, max_rows: int, q: np.ndarray, row_ok: np.ndarray,
-              reach_any: np.ndarray, sing: np.ndarray) -> bool:
-        """``ClosedFormIK._track`` of end-frame columns ``C`` (9, N) from ``seed`` into ``q`` (6, N) and the
-        three (N,) bool arrays; False (nothing written) where a row's A1 is undefined: numpy's path holds it."""
+              reach_any: np.ndarray, sing: np.ndarray, free: float | np.ndarray | None = None) -> bool:
+        """``ClosedFormIK._track`` of end-frame columns ``C`` (9, N) from ``seed`` into ``q`` (nq, N) and the
+        three (N,) bool arrays, with a Panda-type arm's A7 ``free`` ((N,) or one value); False (nothing
+        written) where a row's A1 is undefined: numpy's path holds it."""
         n = C.shape[1]
         Cm = np.ascontiguousarray(self._arm._model_cols(C), dtype=float)
         seed = np.ascontiguousarray(seed, dtype=float)
         for a in (q, row_ok, reach_any, sing):
             assert a.flags.c_contiguous and a.shape[-1] == n and a.itemsize == (8 if a is q else 1)
-        got = self._lib.armik_track(self._family, self._par.ctypes.data, n, Cm.ctypes.data, seed.ctypes.data,
-                                    int(max_rows), q.ctypes.data, row_ok.ctypes.data, reach_any.ctypes.data,
-                                    sing.ctypes.data)
+        assert q.shape[0] == self._nq and seed.shape == (self._nq,)
+        # A7 as PandaArm._link6 and _branches take it: numpy's cos and sin of the value given, and it wrapped
+        q7 = np.atleast_1d(np.asarray(0.0 if free is None else free, dtype=float))
+        per_row = q7.shape[0] > 1 or np.ndim(free) == 1
+        if per_row and q7.shape[0] != n:
+            raise ValueError(f"A7 needs one value per row ({n}), got {q7.shape[0]}")
+        c7, s7 = (np.ascontiguousarray(np.cos(q7)), np.ascontiguousarray(np.sin(q7))) if per_row else \
+            (np.array([np.cos(q7[0])]), np.array([np.sin(q7[0])]))
+        w7 = np.ascontiguousarray(_wrap(q7))
+        got = self._lib.armik_track(self._family, self._nq, self._fam.ctypes.data, self._par.ctypes.data, n,
+                                    Cm.ctypes.data, c7.ctypes.data, s7.ctypes.data, w7.ctypes.data, int(per_row),
+                                    seed.ctypes.data, int(max_rows), q.ctypes.data, row_ok.ctypes.data,
+                                    reach_any.ctypes.data, sing.ctypes.data)
         if got == _HOLD:
             return False
         if got != n:
