@@ -93,8 +93,9 @@ class NativeTrack:
             assert a.flags.c_contiguous and a.shape[-1] == n and a.itemsize == (8 if a is q else 1)
         assert q.shape[0] == self._nq and seed.shape == (self._nq,)
         # A7 as PandaArm._link6 and _branches take it: numpy's cos and sin of the value given, and it wrapped
-        q7 = np.atleast_1d(np.asarray(0.0 if free is None else free, dtype=float))
-        per_row = q7.shape[0] > 1 or np.ndim(free) == 1
+        given = np.asarray(0.0 if free is None else free, dtype=float)
+        per_row = given.ndim == 1
+        q7 = np.atleast_1d(given)
         if per_row and q7.shape[0] != n:
             raise ValueError(f"A7 needs one value per row ({n}), got {q7.shape[0]}")
         c7, s7 = (np.ascontiguousarray(np.cos(q7)), np.ascontiguousarray(np.sin(q7))) if per_row else \
