@@ -149,3 +149,19 @@ def test_the_pandas_a7_given_per_row_gives_numpys_joints() -> None:
     np.testing.assert_allclose(got[0][0], got[1][0], rtol=0, atol=1e-12)
     assert np.mean(got[0][1] == IK_OK) > 0.9
     np.testing.assert_allclose(got[0][0][:, 6], q[:, 6], atol=1e-12)     # A7 as given
+
+
+def test_a_wrist_winding_past_its_limits_is_placed_as_numpy_places_it() -> None:
+    """A6 of the UR5 (a multi-turn joint, +-360 deg) turned on and on along a path: unwrapped from the seed
+    and shifted back by whole turns where the wind-up would pass a limit, the same in both paths."""
+    cf = _cf(Cell.builtin("ur5"))
+    assert cf.multi[5]
+    q = np.tile(np.radians([10.0, -80.0, 90.0, -100.0, -90.0, 0.0]), (3000, 1))
+    q[:, 5] = np.linspace(0.0, 5.5 * np.pi, len(q))              # nearly three turns, past +360 deg
+    q[:, 0] = np.linspace(0.0, -7.0 * np.pi, len(q))             # A1 the other way, past -360 deg
+    C = pose_cols(cf.fk_flange(q), cf._end_inv)
+    got, st = _same(cf, C, q[0])
+    assert np.all(st == IK_OK)
+    for j in (0, 5):
+        assert cf.lower_rad[j] - 1e-9 <= got[:, j].min() and got[:, j].max() <= cf.upper_rad[j] + 1e-9
+        np.testing.assert_allclose(np.angle(np.exp(1j * (got[:, j] - q[:, j]))), 0.0, atol=1e-9)

@@ -3,6 +3,7 @@ through with its pages given back, the cycle time in blocks, one plan kept by th
 shared-memory pool. Every chunked or blocked result is checked against the whole one."""
 from __future__ import annotations
 
+import errno
 import io
 import itertools
 import json
@@ -16,7 +17,8 @@ import pytest
 
 from fabric.cli.main import main
 from fabric.gcode import ToolpathChunks, parse_gcode
-from fabric.motion.program import COLUMNS
+from fabric.motion.program import COLUMNS, column_spec
+from fabric.motion.program_file import FileSink
 from fabric.motion.timing import StartState, program_times, time_program
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.planning.post.files import write_export
@@ -289,3 +291,34 @@ def test_rapid_names_a_speed_next_to_a_half(cell: Cell) -> None:
     buf = io.StringIO()
     write_export(res.program, "rapid", buf, cell)
     assert "CONST speeddata vAM66_7 := [66.7," in buf.getvalue()
+
+
+def test_a_write_error_of_the_program_files_reaches_the_planner_and_nothing_stays(tmp_path: Path) -> None:
+    """The program's files are written by a thread of their own, a block behind: a full disk there is raised
+    to the planner by its next append (or by finish), and discarding leaves no file."""
+    sink = FileSink(tmp_path / "cols")
+    cols = {k: np.zeros((100, *shape), dtype) for k, (dtype, shape) in column_spec().items()}
+
+    def full(_data: object) -> int:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    sink._files["xyz_mm"].write = full          # type: ignore[method-assign]
+    sink.append(cols)
+    with pytest.raises(OSError) as exc:
+        for _ in range(3):
+            sink.append(cols)
+        sink.finish(np.eye(4), {})
+    assert exc.value.errno == errno.ENOSPC
+    sink.discard()
+    assert not (tmp_path / "cols").exists()
+
+
+def test_the_program_files_hold_every_block_in_order(tmp_path: Path) -> None:
+    sink = FileSink(tmp_path / "cols")
+    blocks = [{k: np.full((n, *shape), n % 250, dtype) for k, (dtype, shape) in column_spec().items()}
+              for n in (5, 3000, 7)]
+    for cols in blocks:
+        sink.append(cols)
+    prog, _extra = sink.finish(np.eye(4), {})
+    assert len(prog) == 3012
+    np.testing.assert_array_equal(prog.xyz_mm[:, 0], np.repeat([5.0, 3000 % 250, 7.0], [5, 3000, 7]))

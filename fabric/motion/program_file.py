@@ -7,7 +7,8 @@ A planner writes a program chunk by chunk (:mod:`fabric.planning.planner`) into 
   trimmed in place at the end: no final copy) and makes an ordinary
   :class:`~fabric.motion.program.Program`;
 * :class:`FileSink` appends every column to a file of its own in a directory (raw
-  little-endian, C order) and maps the files read-only at the end: a program of
+  little-endian, C order; written by a thread of its own, a block behind the caller, so the
+  planner goes on with the next chunk meanwhile) and maps the files read-only at the end: a program of
   17 M rows (2.9 GB of columns) then lives in files and the page cache, not in the
   process. Its :class:`ColumnPager` is the program's ``pager``: code that walks
   such a program in blocks calls :meth:`Program.release_pages` for the rows it is
@@ -23,7 +24,9 @@ from __future__ import annotations
 
 import mmap
 import os
+import queue
 import shutil
+import threading
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -131,16 +134,25 @@ class MemorySink:
 
 
 class FileSink:
-    """Program rows appended in blocks to one file per column in ``directory`` (created; see the module doc)."""
+    """Program rows appended in blocks to one file per column in ``directory`` (created; see the module doc).
+
+    The blocks are written by a writer thread, at most ``depth`` blocks behind :meth:`append` (a block's
+    arrays must not change once appended); a write's error (a full disk) is raised by the next
+    :meth:`append` or by :meth:`finish`.
+    """
 
     def __init__(self, directory: str | os.PathLike[str],
-                 extra: Mapping[str, tuple[str, tuple[int, ...]]] | None = None, nq: int = DEFAULT_NQ) -> None:
+                 extra: Mapping[str, tuple[str, tuple[int, ...]]] | None = None, nq: int = DEFAULT_NQ,
+                 depth: int = 1) -> None:
         self.dir = Path(directory)
         self.dir.mkdir(parents=True, exist_ok=True)
         self.spec = {**column_spec(nq), **(extra or {})}
         self._files = {k: open(self.dir / f"{k}.col", "wb") for k in self.spec}  # noqa: SIM115  (closed in finish)
         self._n = 0
         self.pager = ColumnPager()
+        self._blocks: queue.Queue[dict[str, np.ndarray] | None] = queue.Queue(maxsize=depth)
+        self._error: BaseException | None = None
+        self._writer: threading.Thread | None = None
 
     @property
     def n(self) -> int:
@@ -148,16 +160,49 @@ class FileSink:
 
     def append(self, cols: dict[str, np.ndarray]) -> None:
         m = len(next(iter(cols.values())))
-        for k, (dtype, shape) in self.spec.items():
-            arr = np.ascontiguousarray(cols[k], dtype=np.dtype(dtype).newbyteorder("<"))
-            if arr.shape != (m, *shape):
-                raise ValueError(f"column {k}: shape {arr.shape}, expected {(m, *shape)}")
-            self._files[k].write(arr.data.cast("B") if arr.size else b"")
+        for k, (_dtype, shape) in self.spec.items():
+            if cols[k].shape != (m, *shape):
+                raise ValueError(f"column {k}: shape {cols[k].shape}, expected {(m, *shape)}")
+        self._raise_error()
+        if self._writer is None:
+            self._writer = threading.Thread(target=self._write_blocks, name="program-file-writer", daemon=True)
+            self._writer.start()
+        self._blocks.put({k: cols[k] for k in self.spec})
         self._n += m
+
+    def _write_blocks(self) -> None:
+        while True:
+            cols = self._blocks.get()
+            if cols is None:
+                return
+            if self._error is not None:
+                continue                        # drained, not written: the error is raised to the caller
+            try:
+                for k, (dtype, _shape) in self.spec.items():
+                    arr = np.ascontiguousarray(cols[k], dtype=np.dtype(dtype).newbyteorder("<"))
+                    self._files[k].write(arr.data.cast("B") if arr.size else b"")
+            except BaseException as exc:        # noqa: BLE001 - raised by the caller's next append or finish
+                self._error = exc
+
+    def _stop_writer(self) -> None:
+        """Wait for the blocks appended to be written (or dropped after an error); the writer ends."""
+        if self._writer is not None:
+            self._blocks.put(None)
+            self._writer.join()
+            self._writer = None
+
+    def _raise_error(self) -> None:
+        if self._error is not None:
+            err, self._error = self._error, None
+            self._stop_writer()
+            raise err
 
     def finish(self, wobj: np.ndarray, meta: dict[str, Any]) -> tuple[Program, dict[str, np.ndarray]]:
         """The program mapped from its files (read-only columns, ``pager`` set) and the extra columns."""
+        self._stop_writer()
+        self._raise_error()
         for f in self._files.values():
+            f.flush()
             f.close()
         cols = {k: self.pager.add(self.dir / f"{k}.col", np.dtype(dtype).newbyteorder("<"), shape, self._n)
                 for k, (dtype, shape) in self.spec.items()}
@@ -170,8 +215,12 @@ class FileSink:
 
     def discard(self) -> None:
         """Close the files and remove the directory (mapped columns stay readable until they are dropped)."""
+        self._stop_writer()
         for f in self._files.values():
-            f.close()
+            try:
+                f.close()
+            except OSError:                     # its last buffered bytes did not fit: the files go anyway
+                pass
         shutil.rmtree(self.dir, ignore_errors=True)
 
 

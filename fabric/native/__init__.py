@@ -29,7 +29,7 @@ __all__ = ["library", "build", "HELPERS", "cache_dir"]
 
 log = logging.getLogger(__name__)
 
-HELPERS = ("numtext", "gclex", "armik")
+HELPERS = ("numtext", "gclex", "armik", "nozzle")
 # no -Werror: a newer compiler's new warning is no reason to take the Python path
 CFLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-Wall")
 BUILD_TIMEOUT_S = 120.0

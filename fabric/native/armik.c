@@ -640,3 +640,39 @@ long armik_track(int family, int nq, const double *fam, const double *par, long 
 long armik_par_count(void) { return P_COUNT; }
 
 long armik_panda_count(void) { return F_PANDA_COUNT; }
+
+/* ClosedFormIK._place_multi_turn for joint j of q (nq rows of n): a multi-turn joint's angles (each in
+ * [-pi, pi]) unwrapped from seed_j on, as whole turns (the integer count kept apart so that a long path
+ * loses no precision), then a wind-up beyond the limits shifted back by whole turns. `turns`: room for n
+ * values. The same operations as numpy's path, in the same order. */
+void armik_place_multi_turn(long n, double *col, double seed_j, double lo, double hi, double tol, double *turns)
+{
+    int wrapped = 0, outside = 0;
+    double prev = seed_j, acc = 0.0;
+    for (long i = 0; i < n; i++) {
+        double d = col[i] - prev;
+        prev = col[i];
+        if (fabs(d) > 0.999 * PI) {
+            acc += -nearbyint(d / TWO_PI);
+            wrapped = 1;
+        } else {
+            acc += 0.0;
+        }
+        turns[i] = acc;
+    }
+    for (long i = 0; i < n; i++) {
+        double c = wrapped ? col[i] + TWO_PI * turns[i] : col[i];
+        if (!wrapped)
+            turns[i] = 0.0;
+        if (c > hi + tol) {
+            turns[i] -= ceil((c - hi) / TWO_PI);
+            outside = 1;
+        } else if (c < lo - tol) {
+            turns[i] += ceil((lo - c) / TWO_PI);
+            outside = 1;
+        }
+    }
+    if (wrapped || outside)
+        for (long i = 0; i < n; i++)
+            col[i] = col[i] + TWO_PI * turns[i];
+}

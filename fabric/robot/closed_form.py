@@ -358,7 +358,11 @@ class ClosedFormIK:
         being shifted back lose no precision. Only rows that step by more than
         pi (a wrap) or leave the limits are touched.
         """
+        fast = self.native_track()
         for j in np.flatnonzero(self.multi):
+            if fast is not None:
+                fast.place_multi_turn(q[j], float(seed[j]), float(self.lower_rad[j]), float(self.upper_rad[j]))
+                continue
             raw = q[j]
             d = np.diff(raw, prepend=seed[j])
             wraps = np.flatnonzero(np.abs(d) > 0.999 * _PI)          # superset of rint(d / 2pi) != 0

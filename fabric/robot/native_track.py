@@ -36,6 +36,9 @@ def _armik() -> ctypes.CDLL | None:
             ptr = ctypes.c_void_p
             f.argtypes = [ctypes.c_int, ctypes.c_int, ptr, ptr, ctypes.c_long, ptr, ptr, ptr, ptr, ctypes.c_int,
                           ptr, ctypes.c_long, ptr, ptr, ptr, ptr]
+            lib.armik_place_multi_turn.restype = None
+            lib.armik_place_multi_turn.argtypes = [ctypes.c_long, ptr, ctypes.c_double, ctypes.c_double,
+                                                   ctypes.c_double, ctypes.c_double, ptr]
             lib.armik_par_count.restype = ctypes.c_long
             lib.armik_panda_count.restype = ctypes.c_long
         _lib.append(lib)
@@ -110,3 +113,10 @@ class NativeTrack:
         if got != n:
             raise RuntimeError(f"armik_track answered {got} for {n} rows")
         return True
+
+    def place_multi_turn(self, col: np.ndarray, seed_rad: float, lower_rad: float, upper_rad: float) -> None:
+        """``ClosedFormIK._place_multi_turn`` of one multi-turn joint's angles ``col`` (N,), in place."""
+        assert col.dtype == np.float64 and col.flags.c_contiguous and col.flags.writeable
+        turns = np.empty(len(col))
+        self._lib.armik_place_multi_turn(len(col), col.ctypes.data, seed_rad, lower_rad, upper_rad, _LIMIT_TOL_RAD,
+                                         turns.ctypes.data)

@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from fabric.robot import frames
+from fabric.robot import frames, nozzle_native
 from fabric.wire.errors import ValidationError
 
 __all__ = ["NozzleFrames", "FrameCols", "unit_axes"]
@@ -45,9 +45,19 @@ class NozzleFrames:
     Built like :func:`fabric.robot.frames.frame_from_z_axis`: ``x_ref`` projected
     onto the plane normal to z (base x, then base y where it is parallel to z),
     ``y = z x x``. Columns keep every operation on contiguous rows of N numbers.
+    The frames and the quaternions of one nozzle axis are computed in C where the helper is built
+    (:mod:`fabric.robot.nozzle_native`, the same arithmetic), else by numpy.
     """
 
+    use_native = True           # False: numpy's path even where the C helper could answer (reference for tests)
+
     def __init__(self, z0: np.ndarray, xr: np.ndarray) -> None:
+        self.z0 = z0
+        self.const = z0.shape[1] == 1
+        done = nozzle_native.frames(z0, xr) if self.use_native else None
+        if done is not None:
+            self.x0, self.y0 = done
+            return
         n = xr.shape[1]
         bad = np.zeros(n, dtype=bool)
         for fallback in (None, (1.0, 0.0, 0.0), (0.0, 1.0, 0.0)):
@@ -60,11 +70,9 @@ class NozzleFrames:
                 break
         x /= nx
         self.x0 = x
-        self.z0 = z0
         self.y0 = np.stack([z0[1] * x[2] - z0[2] * x[1],          # z x x
                             z0[2] * x[0] - z0[0] * x[2],
                             z0[0] * x[1] - z0[1] * x[0]])
-        self.const = z0.shape[1] == 1
 
     def cols(self, rows: slice | np.ndarray) -> FrameCols:
         """``x0, y0, z0`` of some rows (z0 stays (3, 1) when constant)."""
@@ -82,7 +90,13 @@ class NozzleFrames:
         if self.const:
             B = frames.frame_from_z_axis(self.z0[:, 0], np.array([1.0, 0.0, 0.0]))[0]
             qa = frames.quat_from_R(B)
-            half = 0.5 * (np.arctan2(B[:, 1] @ self.x0, B[:, 0] @ self.x0) + theta_rad)
+            done = nozzle_native.quats(self.x0, B, qa, theta_rad) if self.use_native else None
+            if done is not None:
+                return done
+            x0 = self.x0                                   # b . x0 term by term, in order (as nozzle.c)
+            dy = B[0, 1] * x0[0] + B[1, 1] * x0[1] + B[2, 1] * x0[2]
+            dx = B[0, 0] * x0[0] + B[1, 0] * x0[1] + B[2, 0] * x0[2]
+            half = 0.5 * (np.arctan2(dy, dx) + theta_rad)
             w1, x1, y1, z1 = qa
         else:
             qa = frames.quat_from_R(np.stack([self.x0.T, self.y0.T, self.z0.T], axis=-1))

@@ -53,6 +53,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from fabric.robot import nozzle_native
 from fabric.robot.batch_dls import BatchDLSIK
 from fabric.robot.joint_jumps import joint_jumps
 from fabric.robot.kinematics import IK_JUMP, IK_OK
@@ -193,6 +194,10 @@ class _PathSolver:
         c, s = np.cos(th), np.sin(th)
         assert self.cf is not None, "flange columns feed the closed-form IK only"
         ti = self.cf.tool_inv_T
+        if isinstance(rows, slice) and rows == slice(None) and self.fr.use_native:      # every row: in C
+            done = nozzle_native.flange_cols(self.p, x0, y0, z0, c, s, ti)
+            if done is not None:
+                return done
         p = self.p[:, rows]
         out = np.empty((9, p.shape[1]))
         for k, m in enumerate((ti[:3, 3], ti[:3, 2], ti[:3, 1])):
