@@ -89,3 +89,17 @@ def test_unsigned_and_fixed_point_integer_columns() -> None:
                FixedColumn(np.array([3, 250], dtype=np.uint8), 0)]
     text = format_rows(columns).decode()
     assert text == "18446744073709551615,12.345,3\n7,-0.007,250\n"
+
+
+def test_columns_of_rows_are_read_where_they_lie() -> None:
+    """A column of rows (``xyz[:, 1]``), a reversed view, a broadcast value and big-endian values: the text
+    of the same numbers copied out (the C helper reads a whole-element stride in place, copies the rest)."""
+    rng = np.random.default_rng(2)
+    xyz = rng.normal(0, 200, (5000, 3))
+    ints = rng.integers(-10**9, 10**9, (5000, 2))
+    cols = [FixedColumn(xyz[:, 1], 4), FixedColumn(ints[:, 1], 0), FixedColumn(xyz[::-1, 2], 3),
+            FixedColumn(np.broadcast_to(np.float64(2.5), 5000), 2), FixedColumn(xyz[:, 0].astype(">f8"), 5)]
+    copied = [FixedColumn(np.array(c.values, dtype=c.values.dtype.newbyteorder("=")), c.decimals) for c in cols]
+    assert format_rows(cols) == format_rows(copied)
+    assert format_rows(cols).decode().splitlines()[0] == (
+        f"{xyz[0, 1]:.4f},{ints[0, 1]},{xyz[-1, 2]:.3f},2.50,{xyz[0, 0]:.5f}")

@@ -64,7 +64,9 @@ static char *put_fixed(char *p, double v, int d, double max_scaled, double tie_t
     if (!isfinite(v))
         return NULL;
     double scaled = fabs(v) * (double)POW10[d];
-    double rounded = nearbyint(scaled);
+    /* round half to even as nearbyint does, without the library call: exact for 0 <= scaled < 2^52, and
+     * a larger scaled value (>= max_scaled, at most 1e15) goes to snprintf below anyway */
+    double rounded = scaled < 4503599627370496.0 ? (scaled + 4503599627370496.0) - 4503599627370496.0 : scaled;
     double off = fabs(scaled - rounded);
     if (!(off < 0.5 - scaled * tie_tol_r) || !(scaled < max_scaled)) {
         int len = snprintf(p, 64, "%.*f", d, v);
@@ -82,11 +84,12 @@ static char *put_fixed(char *p, double v, int d, double max_scaled, double tie_t
 }
 
 /* Rows 0..n-1 of `ncol` columns into out (capacity `cap` bytes), `sep` between columns, '\n' after each row.
- * Column c: kind[c] KIND_FLOAT (double data[c][i], decimals[c] in 0..12), KIND_INT (int64_t data[c][i])
- * or KIND_TEXT (text[c] of text_len[c] bytes on every row). max_scaled and tie_tol_r: numtext.py's
+ * Column c: kind[c] KIND_FLOAT (double data[c][i * stride[c]], decimals[c] in 0..12), KIND_INT (int64_t
+ * data[c][i * stride[c]]) or KIND_TEXT (text[c] of text_len[c] bytes on every row). A stride (in elements)
+ * lets a column be read where it lies, e.g. one coordinate of rows of three. max_scaled and tie_tol_r: numtext.py's
  * _MAX_SCALED and _TIE_TOL_R (declared there once). Returns the bytes written, or a NUMTEXT_ code. */
-long numtext_rows(long n, int ncol, const int *kind, const void *const *data, const int *decimals,
-                  const char *const *text, const long *text_len, char sep, char *out, long cap,
+long numtext_rows(long n, int ncol, const int *kind, const void *const *data, const long *stride,
+                  const int *decimals, const char *const *text, const long *text_len, char sep, char *out, long cap,
                   double max_scaled, double tie_tol_r)
 {
     char *p = out;
@@ -102,12 +105,12 @@ long numtext_rows(long n, int ncol, const int *kind, const void *const *data, co
                 *p++ = sep;
             switch (kind[c]) {
             case KIND_FLOAT:
-                p = put_fixed(p, ((const double *)data[c])[i], decimals[c], max_scaled, tie_tol_r);
+                p = put_fixed(p, ((const double *)data[c])[i * stride[c]], decimals[c], max_scaled, tie_tol_r);
                 if (p == NULL)
                     return NUMTEXT_NOT_FINITE;
                 break;
             case KIND_INT: {
-                int64_t v = ((const int64_t *)data[c])[i];
+                int64_t v = ((const int64_t *)data[c])[i * stride[c]];
                 uint64_t u = (uint64_t)v;
                 if (v < 0) {
                     *p++ = '-';

@@ -214,6 +214,7 @@ def _native_rows(columns: Sequence[Column], sep: bytes, n: int) -> bytes | None:
     k = len(columns)
     kinds, decimals = (ctypes.c_int * k)(), (ctypes.c_int * k)()
     data, texts, text_len = (ctypes.c_void_p * k)(), (ctypes.c_char_p * k)(), (ctypes.c_long * k)()
+    stride = (ctypes.c_long * k)()
     keep: list[np.ndarray] = []             # the arrays the pointers point into, alive through the call
     cap = 1
     for j, col in enumerate(columns):
@@ -227,18 +228,27 @@ def _native_rows(columns: Sequence[Column], sep: bytes, n: int) -> bytes | None:
         ints = dt.kind in "iu"
         if ints and (col.decimals or (dt.itemsize == 8 and dt.kind == "u")):
             return None                         # integers read as fixed-point, or past int64: numpy's path
-        values = np.ascontiguousarray(col.values, dtype=np.int64 if ints else np.float64)
+        values = _readable(col.values, np.dtype(np.int64 if ints else np.float64))
         keep.append(values)
         kinds[j], decimals[j] = (_KIND_INT, 0) if ints else (_KIND_FLOAT, col.decimals)
-        data[j] = values.ctypes.data
+        data[j], stride[j] = values.ctypes.data, values.strides[0] // 8 if values.ndim and len(values) else 0
         cap += _ROW_BOUND + 1
     cap = max(cap * n + 128, 128)
     out = np.empty(cap, dtype=np.uint8)     # not zeroed: only the bytes written are read
-    written = lib.numtext_rows(n, k, kinds, data, decimals, texts, text_len, sep[:1] or b"\0", out.ctypes.data, cap,
-                               _MAX_SCALED, _TIE_TOL_R)
+    written = lib.numtext_rows(n, k, kinds, data, stride, decimals, texts, text_len, sep[:1] or b"\0",
+                               out.ctypes.data, cap, _MAX_SCALED, _TIE_TOL_R)
     if written < 0:                         # not finite or too long, or (never expected) no room: numpy writes it
         return None
     return out[:written].tobytes()
+
+
+def _readable(values: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """``values`` as the C helper reads them: 1-D of ``dtype`` (native order), any whole-element stride (a
+    column of rows, e.g. ``xyz[:, 0]``, read where it lies); copied only where that is not so."""
+    v = values.reshape(-1) if values.ndim != 1 else values
+    if v.dtype == dtype and v.dtype.isnative and v.strides[0] % dtype.itemsize == 0 and v.strides[0] >= 0:
+        return v
+    return np.ascontiguousarray(v, dtype=dtype)
 
 
 _lib: list[ctypes.CDLL | None] = []
@@ -256,7 +266,7 @@ def _numtext() -> ctypes.CDLL | None:
             f = lib.numtext_rows
             f.restype = ctypes.c_long
             f.argtypes = [ctypes.c_long, ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_void_p),
-                          ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_char_p),
+                          ctypes.POINTER(ctypes.c_long), ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_char_p),
                           ctypes.POINTER(ctypes.c_long), ctypes.c_char, ctypes.c_void_p, ctypes.c_long,
                           ctypes.c_double, ctypes.c_double]
         _lib.append(lib)
