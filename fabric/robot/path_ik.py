@@ -167,6 +167,8 @@ class _PathSolver:
         self.jump_rad = jump_rad
         self.n = p.shape[1]
         self._costs_nk: np.ndarray | None = None    # step 2's row costs, reused by step 3
+        self._gather_rows: slice | np.ndarray | None = None      # the rows _gathered last, and what it gathered
+        self._gather: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def poses(self, rows: slice | np.ndarray, theta_deg: np.ndarray | float) -> np.ndarray:
         """TCP poses (M, 4, 4) of some rows at rotation(s) ``theta_deg``."""
@@ -189,16 +191,15 @@ class _PathSolver:
         TCP -> flange transform: ``x0 * a + y0 * b + z0 * m_z`` with
         ``a, b = Rz(theta) (m_x, m_y)``, zero terms skipped.
         """
-        x0, y0, z0 = self.fr.cols(rows)
+        x0, y0, z0, p = self._gathered(rows)
         th = np.radians(theta_deg)
         c, s = np.cos(th), np.sin(th)
         assert self.cf is not None, "flange columns feed the closed-form IK only"
         ti = self.cf.tool_inv_T
         if isinstance(rows, slice) and rows == slice(None) and self.fr.use_native:      # every row: in C
-            done = nozzle_native.flange_cols(self.p, x0, y0, z0, c, s, ti)
+            done = nozzle_native.flange_cols(p, x0, y0, z0, c, s, ti)
             if done is not None:
                 return done
-        p = self.p[:, rows]
         out = np.empty((9, p.shape[1]))
         for k, m in enumerate((ti[:3, 3], ti[:3, 2], ti[:3, 1])):
             o = out[3 * k:3 * k + 3]
@@ -209,6 +210,14 @@ class _PathSolver:
             if m[2] != 0.0:
                 o += z0 * m[2]
         return out
+
+    def _gathered(self, rows: slice | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``x0, y0, z0`` and the positions of some rows, gathered once for the same ``rows`` asked again (step 1
+        asks its sample rows at every candidate rotation)."""
+        if self._gather is None or self._gather_rows is not rows:
+            self._gather = (*self.fr.cols(rows), self.p[:, rows])
+            self._gather_rows = rows
+        return self._gather
 
     def ik(self, rows: slice | np.ndarray, theta_deg: np.ndarray | float, seed: np.ndarray) -> JointSolution:
         """IK of some rows at rotation(s) ``theta_deg``, continuous from ``seed``."""
