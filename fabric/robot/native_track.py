@@ -18,7 +18,7 @@ import numpy as np
 from fabric import native
 from fabric.robot.kinematics import _LIMIT_TOL_RAD, ELBOW_SING_COS, SHOULDER_SING_MM, WRIST_SING_SIN, _wrap
 
-__all__ = ["NativeTrack"]
+__all__ = ["NativeTrack", "available"]
 
 FAMILIES = {"opw": 0, "ur": 1, "panda": 2}      # armik.c's FAMILY_*
 _NQ_MAX = 7                         # armik.c's NQ_MAX: par holds 7 values per joint block
@@ -43,6 +43,11 @@ def _armik() -> ctypes.CDLL | None:
             lib.armik_panda_count.restype = ctypes.c_long
         _lib.append(lib)
     return _lib[0]
+
+
+def available() -> bool:
+    """Whether the C helper is built and loaded here (else numpy's path answers every family)."""
+    return _armik() is not None
 
 
 def _constants(arm: Any) -> list[float]:

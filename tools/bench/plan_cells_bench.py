@@ -147,9 +147,10 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
         "so the ratio itself moves between runs (IRB 140: 9.2x in one run, 19.8x in a later one, the same "
         "planner code; its DLS 36k then 12k targets/s). Read one run's column together, not two runs' rows.",
         "",
-        f"C helpers: {meta.get('native', 'none')} (`fabric/native/`: the CSV rows (`numtext.c`) and the G-code "
-        "lexer (`gclex.c`), each where it is built; `FABRIC_NATIVE=0` runs numpy's paths, which give the same "
-        "results).",
+        f"C helpers: {meta.get('native', 'none')} (`fabric/native/`: the CSV rows (`numtext.c`), the G-code "
+        "lexer (`gclex.c`), the path IK's branch tracking of the OPW, UR and Panda-type closed forms (`armik.c`) "
+        "and the nozzle frames, flange columns and quaternions (`nozzle.c`), each where it is built; "
+        "`FABRIC_NATIVE=0` runs numpy's paths, which give the same results).",
         "",
         "| cell | IK | joints | moves | reachable | plan (s) | of which IK (s) | plan (moves/s) | CSV (s) "
         "| plan + CSV (moves/s) | DLS (targets/s) | plan / DLS | `fabric-cli plan --csv` (s: first, best) "
@@ -182,7 +183,9 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
 def _native_helpers() -> str:
     """Which C helpers this run used (each, or numpy's path in its place)."""
     from fabric.gcode import native_lexer
-    used = {"CSV rows": native_rows(), "lexer": native_lexer.available()}
+    from fabric.robot import native_track, nozzle_native
+    used = {"CSV rows": native_rows(), "lexer": native_lexer.available(), "path IK": native_track.available(),
+            "nozzle frames": nozzle_native.available()}
     return ", ".join(f"{name} in {'C' if on else 'numpy'}" for name, on in used.items())
 
 
