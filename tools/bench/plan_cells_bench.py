@@ -145,7 +145,9 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
         "swings twofold within minutes here, and the pairing keeps that drift out of the ratio). What pairing "
         "cannot remove: a busy host slows the baseline's Python loop and the planner's numpy passes unequally, "
         "so the ratio itself moves between runs (IRB 140: 9.2x in one run, 19.8x in a later one, the same "
-        "planner code; its DLS 36k then 12k targets/s). Read one run's column together, not two runs' rows.",
+        "planner code; its DLS 36k then 12k targets/s). The baseline's runs are short (3,000 targets, about "
+        "0.2 s) against the CLI's 3-4 s, so on a host whose load comes in bursts the baseline's best is likelier "
+        "to fall in a quiet moment than the CLI's. Read one run's column together, not two runs' rows.",
         "",
         f"C helpers: {meta.get('native', 'none')} (`fabric/native/`: the CSV rows (`numtext.c`), the G-code "
         "lexer (`gclex.c`), the path IK's branch tracking of the OPW, UR and Panda-type closed forms (`armik.c`) "
