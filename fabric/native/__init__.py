@@ -23,9 +23,11 @@ import shutil
 import subprocess
 import tempfile
 import threading
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
-__all__ = ["library", "build", "HELPERS", "cache_dir"]
+__all__ = ["library", "bound", "build", "HELPERS", "cache_dir"]
 
 log = logging.getLogger(__name__)
 
@@ -36,6 +38,9 @@ BUILD_TIMEOUT_S = 120.0
 
 _lock = threading.Lock()
 _loaded: dict[str, ctypes.CDLL | None] = {}
+_bound: dict[str, ctypes.CDLL | None] = {}
+
+Signature = tuple[Any, list[Any]]           # a function's restype and argtypes
 
 
 def cache_dir() -> Path:
@@ -96,3 +101,20 @@ def library(name: str) -> ctypes.CDLL | None:
                 log.warning("native helper %s not available, using Python: %s", name, e)
         _loaded[name] = lib
         return lib
+
+
+def bound(name: str, signatures: Mapping[str, Signature]) -> ctypes.CDLL | None:
+    """Helper ``name`` loaded (:func:`library`) with its functions' ``restype`` and ``argtypes`` set from
+    ``signatures`` (function name -> (restype, argtypes)), once; None where there is no helper."""
+    with _lock:
+        if name in _bound:
+            return _bound[name]
+    lib = library(name)
+    if lib is not None:
+        for fn, (restype, argtypes) in signatures.items():
+            f = getattr(lib, fn)
+            f.restype = restype
+            f.argtypes = argtypes
+    with _lock:
+        _bound.setdefault(name, lib)
+        return _bound[name]

@@ -24,25 +24,19 @@ FAMILIES = {"opw": 0, "ur": 1, "panda": 2}      # armik.c's FAMILY_*
 _NQ_MAX = 7                         # armik.c's NQ_MAX: par holds 7 values per joint block
 _HOLD = -1                          # armik.c's ARMIK_HOLD
 
-_lib: list[ctypes.CDLL | None] = []
+_P = ctypes.c_void_p
+_SIGNATURES: dict[str, native.Signature] = {
+    "armik_track": (ctypes.c_long, [ctypes.c_int, ctypes.c_int, _P, _P, ctypes.c_long, _P, _P, _P, _P, ctypes.c_int,
+                                    _P, ctypes.c_long, _P, _P, _P, _P]),
+    "armik_place_multi_turn": (None, [ctypes.c_long, _P, ctypes.c_double, ctypes.c_double, ctypes.c_double,
+                                      ctypes.c_double, _P]),
+    "armik_par_count": (ctypes.c_long, []),
+    "armik_panda_count": (ctypes.c_long, []),
+}
 
 
 def _armik() -> ctypes.CDLL | None:
-    if not _lib:
-        lib = native.library("armik")
-        if lib is not None:
-            f = lib.armik_track
-            f.restype = ctypes.c_long
-            ptr = ctypes.c_void_p
-            f.argtypes = [ctypes.c_int, ctypes.c_int, ptr, ptr, ctypes.c_long, ptr, ptr, ptr, ptr, ctypes.c_int,
-                          ptr, ctypes.c_long, ptr, ptr, ptr, ptr]
-            lib.armik_place_multi_turn.restype = None
-            lib.armik_place_multi_turn.argtypes = [ctypes.c_long, ptr, ctypes.c_double, ctypes.c_double,
-                                                   ctypes.c_double, ctypes.c_double, ptr]
-            lib.armik_par_count.restype = ctypes.c_long
-            lib.armik_panda_count.restype = ctypes.c_long
-        _lib.append(lib)
-    return _lib[0]
+    return native.bound("armik", _SIGNATURES)
 
 
 def available() -> bool:

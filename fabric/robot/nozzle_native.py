@@ -16,23 +16,16 @@ from fabric import native
 
 __all__ = ["frames", "flange_cols", "quats", "available"]
 
-_lib: list[ctypes.CDLL | None] = []
 _P = ctypes.c_void_p
+_SIGNATURES: dict[str, native.Signature] = {
+    "nozzle_frames": (None, [ctypes.c_long, _P, ctypes.c_int, _P, _P, _P]),
+    "nozzle_flange_cols": (None, [ctypes.c_long, _P, _P, _P, _P, ctypes.c_int, _P, _P, ctypes.c_int, _P, _P]),
+    "nozzle_quats": (None, [ctypes.c_long, _P, _P, _P, _P, _P, ctypes.c_int, _P]),
+}
 
 
 def _nozzle() -> ctypes.CDLL | None:
-    if not _lib:
-        lib = native.library("nozzle")
-        if lib is not None:
-            lib.nozzle_frames.restype = None
-            lib.nozzle_frames.argtypes = [ctypes.c_long, _P, ctypes.c_int, _P, _P, _P]
-            lib.nozzle_flange_cols.restype = None
-            lib.nozzle_flange_cols.argtypes = [ctypes.c_long, _P, _P, _P, _P, ctypes.c_int, _P, _P, ctypes.c_int, _P,
-                                               _P]
-            lib.nozzle_quats.restype = None
-            lib.nozzle_quats.argtypes = [ctypes.c_long, _P, _P, _P, _P, _P, ctypes.c_int, _P]
-        _lib.append(lib)
-    return _lib[0]
+    return native.bound("nozzle", _SIGNATURES)
 
 
 def available() -> bool:
