@@ -55,7 +55,16 @@ static const double PI = 3.14159265358979323846;
 static const double TWO_PI = 6.28318530717958647692;
 #define PI_GAP 3.14159265358979323846     /* the most a gap is taken for (the tracking test's min(gap, pi)) */
 
-static double wrap(double a) { return a - TWO_PI * nearbyint(a / TWO_PI); }
+/* round half to even, as nearbyint in the default rounding mode, without the library call: exact for
+ * |x| < 2^51 (adding and taking away 1.5 * 2^52 leaves the integer part) */
+static double round_even(double x)
+{
+    if (!(fabs(x) < 2251799813685248.0))
+        return nearbyint(x);
+    return (x + 6755399441055744.0) - 6755399441055744.0;
+}
+
+static double wrap(double a) { return a - TWO_PI * round_even(a / TWO_PI); }
 
 static double flip(double a) { return a >= 0.0 ? a - PI : a + PI; }
 
@@ -653,7 +662,7 @@ void armik_place_multi_turn(long n, double *col, double seed_j, double lo, doubl
         double d = col[i] - prev;
         prev = col[i];
         if (fabs(d) > 0.999 * PI) {
-            acc += -nearbyint(d / TWO_PI);
+            acc += -round_even(d / TWO_PI);
             wrapped = 1;
         } else {
             acc += 0.0;
