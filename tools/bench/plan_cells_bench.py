@@ -158,9 +158,10 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
         "swings twofold within minutes here, and the pairing keeps that drift out of the ratio). What pairing "
         "cannot remove: a busy host slows the baseline's Python loop and the planner's numpy passes unequally, "
         "so the ratio itself moves between runs (IRB 140: 9.2x in one run, 19.8x in a later one, the same "
-        "planner code; its DLS 36k then 12k targets/s). The baseline's runs are short (3,000 targets, about "
-        "0.2 s) against the CLI's 3-4 s, so on a host whose load comes in bursts the baseline's best is likelier "
-        "to fall in a quiet moment than the CLI's. Two columns therefore: the best CLI run against the best baseline "
+        "planner code; its DLS 36k then 12k targets/s). A short baseline run (3,000 targets, about 0.2 s, "
+        "against the CLI's 3-4 s) is likelier to fall in a quiet moment of a host whose load comes in bursts than "
+        f"the CLI's; this page's baseline runs take {meta['n_dls']:,} targets each. Two columns therefore: "
+        "the best CLI run against the best baseline "
         "run (as before), and the median, over the CLI runs, of each run against the mean of the baseline runs "
         "just before and just after it (the first CLI run, a planner's first plan, included). Read one run's "
         "columns together, not two runs' rows.",
