@@ -295,7 +295,7 @@ def test_rapid_names_a_speed_next_to_a_half(cell: Cell) -> None:
 
 def test_a_write_error_of_the_program_files_reaches_the_planner_and_nothing_stays(tmp_path: Path) -> None:
     """The program's files are written by a thread of their own, a block behind: a full disk there is raised
-    to the planner by its next append (or by finish), and discarding leaves no file."""
+    to the planner by its next append and by finish, and discarding leaves no file."""
     sink = FileSink(tmp_path / "cols")
     cols = {k: np.zeros((100, *shape), dtype) for k, (dtype, shape) in column_spec().items()}
 
@@ -309,6 +309,8 @@ def test_a_write_error_of_the_program_files_reaches_the_planner_and_nothing_stay
             sink.append(cols)
         sink.finish(np.eye(4), {})
     assert exc.value.errno == errno.ENOSPC
+    with pytest.raises(OSError):                 # the files lack a block: never a program made of them
+        sink.finish(np.eye(4), {})
     sink.discard()
     assert not (tmp_path / "cols").exists()
 

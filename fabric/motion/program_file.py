@@ -138,7 +138,8 @@ class FileSink:
 
     The blocks are written by a writer thread, at most ``depth`` blocks behind :meth:`append` (a block's
     arrays must not change once appended); a write's error (a full disk) is raised by the next
-    :meth:`append` or by :meth:`finish`.
+    :meth:`append` and by :meth:`finish`: the files lack blocks from then on, so the sink can only be
+    discarded.
     """
 
     def __init__(self, directory: str | os.PathLike[str],
@@ -193,16 +194,14 @@ class FileSink:
 
     def _raise_error(self) -> None:
         if self._error is not None:
-            err, self._error = self._error, None
             self._stop_writer()
-            raise err
+            raise self._error
 
     def finish(self, wobj: np.ndarray, meta: dict[str, Any]) -> tuple[Program, dict[str, np.ndarray]]:
         """The program mapped from its files (read-only columns, ``pager`` set) and the extra columns."""
         self._stop_writer()
         self._raise_error()
         for f in self._files.values():
-            f.flush()
             f.close()
         cols = {k: self.pager.add(self.dir / f"{k}.col", np.dtype(dtype).newbyteorder("<"), shape, self._n)
                 for k, (dtype, shape) in self.spec.items()}

@@ -4,8 +4,8 @@
  * The formulas are those of fabric/robot/opw.py (OPWArm._terms, _solve, _wrist_variant),
  * fabric/robot/ur.py (URArm._shoulder, _wrist, _plane, _elbow) and fabric/robot/panda.py (PandaArm._link6,
  * _elbow, _wrist_reach, _wrist, _upper_arm, _shoulder, _branches), term for term and in the same order, so
- * both paths give the same joints (to the last bits of libm's and numpy's trigonometric functions). The branch choice is the same
- * state machine as _track: *tracking* keeps the current branch while it stays valid and quiet (its step is
+ * both paths give the same joints (to the last bits of libm's and numpy's trigonometric functions).
+ * The branch choice is the same state machine as _track: *tracking* keeps the current branch while it stays valid and quiet (its step is
  * under half the distance to any other branch), in blocks whose sizes grow and reset as there; at the first
  * row that fails, the *full* method solves all 8 branches over a window of rows, each row taking the allowed
  * branch nearest the row before it (select_branches), the window growing while it ends on an invalid row.
@@ -53,7 +53,6 @@ typedef struct {
 
 static const double PI = 3.14159265358979323846;
 static const double TWO_PI = 6.28318530717958647692;
-#define PI_GAP 3.14159265358979323846     /* the most a gap is taken for (the tracking test's min(gap, pi)) */
 
 /* round half to even, as nearbyint in the default rounding mode, without the library call: exact for
  * |x| < 2^51 (adding and taking away 1.5 * 2^52 leaves the integer part) */
@@ -107,7 +106,7 @@ static void gap_group(Gap *g, double y0, double x0, double y1, double x1, int si
 /* The gap exactly as the family computes it (the same atan2 calls, so the same bits). */
 static double gap_exact(const Gap *g)
 {
-    double gap = PI_GAP;
+    double gap = PI;                  /* the most a gap is taken for (the tracking test's min(gap, pi)) */
     for (int k = 0; k < g->groups; k++) {
         double a = 2.0 * atan2(g->y[k][0], g->x[k][0]);
         if (g->size[k] > 1) {
@@ -123,7 +122,7 @@ static double gap_exact(const Gap *g)
  * on [0, pi/2], less a relative 1e-12 for rounding. */
 static double gap_lower(const Gap *g)
 {
-    double gap = PI_GAP;
+    double gap = PI;
     for (int k = 0; k < g->groups; k++) {
         double a = 0.0;
         for (int l = 0; l < g->size[k]; l++) {
@@ -374,39 +373,46 @@ static void panda_wrist(const Link6 *l, const PElbow *e, int wrist, double *q5, 
     }
 }
 
-/* PandaArm._shoulder (no A1 held): q1, q2, q3 and h = |d_xy| for a shoulder sign (+1, -1) */
-static void panda_shoulder(const Arm *arm, const double *d, const double *m, double sign, double *q)
+/* PandaArm._shoulder's result: q1, q2, q3 and h = |d_xy| (the gimbal lock's distance) */
+typedef struct {
+    double q1, q2, q3, h;
+} PShoulder;
+
+/* PandaArm._shoulder (no A1 held) for a shoulder sign (+1, -1) */
+static PShoulder panda_shoulder(const Arm *arm, const double *d, const double *m, double sign)
 {
+    PShoulder out;
     double beta = arm->f[F_BETA];
     double dx = d[0], dy = d[1], dz = d[2];
     double h = hypot(dx, dy);
     double inv = 1.0 / (h > 0.0 ? h : 1.0);
     double c1 = h > 0.0 ? sign * dx * inv : sign * 1.0;
     double s1 = sign * dy * inv;
-    q[0] = atan2(s1, c1);
+    out.q1 = atan2(s1, c1);
     double cx = c1 * dx + s1 * dy;
     double q2 = atan2(cx, dz);
     if (beta != 0.0)
         q2 = wrap(q2 - beta);
-    q[1] = q2;
+    out.q2 = q2;
     double mx = m[0], my = m[1], mz = m[2];
     double mx1 = c1 * mx + s1 * my, my1 = c1 * my - s1 * mx;
-    q[2] = atan2(cx * mz - dz * mx1, my1);
-    q[7 - 1] = h;          /* h rides in the slot of A7 until the caller puts A7 there */
+    out.q3 = atan2(cx * mz - dz * mx1, my1);
+    out.h = h;
+    return out;
 }
 
-static void panda_fill(const PElbow *e, double q5, double q6, double q7, const double *q123, const Arm *arm,
+static void panda_fill(const PElbow *e, double q5, double q6, double q7, PShoulder sh, const Arm *arm,
                        Branch *out)
 {
-    out->q[0] = q123[0];
-    out->q[1] = q123[1];
-    out->q[2] = q123[2];
+    out->q[0] = sh.q1;
+    out->q[1] = sh.q2;
+    out->q[2] = sh.q3;
     out->q[3] = e->q4;
     out->q[4] = q5;
     out->q[5] = q6;
     out->q[6] = q7;
     out->reach = e->ok;
-    out->sing = e->sing_ew || (e->ok && q123[6] < arm->p[P_WRIST]);
+    out->sing = e->sing_ew || (e->ok && sh.h < arm->p[P_WRIST]);
     out->gap = e->gap;
 }
 
@@ -415,12 +421,11 @@ static void panda_branch(const Arm *arm, const double *c, double c7, double s7, 
 {
     Link6 l;
     PElbow e;
-    double q5, q6, d[3], m[3], q123[7];
+    double q5, q6, d[3], m[3];
     panda_link6(arm, c, c7, s7, &l);
     panda_elbow(arm, &l, (branch / 2) % 2, &e);
     panda_wrist(&l, &e, branch % 2, &q5, &q6, d, m);
-    panda_shoulder(arm, d, m, branch / 4 ? -1.0 : 1.0, q123);
-    panda_fill(&e, q5, q6, q7, q123, arm, out);
+    panda_fill(&e, q5, q6, q7, panda_shoulder(arm, d, m, branch / 4 ? -1.0 : 1.0), arm, out);
 }
 
 /* All 8 branches as PandaArm.ik_branches_cols solves them: the second shoulder is the first turned over the
@@ -434,14 +439,11 @@ static void panda_all(const Arm *arm, const double *c, double c7, double s7, dou
         PElbow e;
         panda_elbow(arm, &l, el, &e);
         for (int w = 0; w < 2; w++) {
-            double q5, q6, d[3], m[3], q123[7], over[7];
+            double q5, q6, d[3], m[3];
             panda_wrist(&l, &e, w, &q5, &q6, d, m);
-            panda_shoulder(arm, d, m, 1.0, q123);
-            panda_fill(&e, q5, q6, q7, q123, arm, &br[2 * el + w]);
-            over[0] = flip(q123[0]);
-            over[1] = wrap(-q123[1] - 2.0 * beta);
-            over[2] = flip(q123[2]);
-            over[6] = q123[6];
+            PShoulder first = panda_shoulder(arm, d, m, 1.0);
+            PShoulder over = {flip(first.q1), wrap(-first.q2 - 2.0 * beta), flip(first.q3), first.h};
+            panda_fill(&e, q5, q6, q7, first, arm, &br[2 * el + w]);
             panda_fill(&e, q5, q6, q7, over, arm, &br[4 + 2 * el + w]);
         }
     }

@@ -56,7 +56,7 @@ def _constants(arm: Any) -> list[float]:
 
 
 class NativeTrack:
-    """The C tracking of one 6-axis arm within its limits (see module docstring)."""
+    """The C tracking of one arm (OPW, UR or Panda type) within its limits (see module docstring)."""
 
     def __init__(self, lib: ctypes.CDLL, arm: Any, lower_rad: np.ndarray, upper_rad: np.ndarray,
                  multi: np.ndarray) -> None:

@@ -49,9 +49,9 @@ def frames(z0: np.ndarray, xr: np.ndarray) -> tuple[np.ndarray, np.ndarray] | No
     if lib is None:
         return None
     n = xr.shape[1]
+    _check(z0.shape[1], n, "z0")
     z0, xr = _f8(z0), _f8(xr)
     x0, y0 = np.empty((3, n)), np.empty((3, n))
-    _check(z0.shape[1], n, "z0")
     lib.nozzle_frames(n, z0.ctypes.data, int(z0.shape[1] != 1), xr.ctypes.data, x0.ctypes.data, y0.ctypes.data)
     return x0, y0
 

@@ -231,7 +231,7 @@ def _native_rows(columns: Sequence[Column], sep: bytes, n: int) -> bytes | None:
         values = _readable(col.values, np.dtype(np.int64 if ints else np.float64))
         keep.append(values)
         kinds[j], decimals[j] = (_KIND_INT, 0) if ints else (_KIND_FLOAT, col.decimals)
-        data[j], stride[j] = values.ctypes.data, values.strides[0] // 8 if values.ndim and len(values) else 0
+        data[j], stride[j] = values.ctypes.data, values.strides[0] // values.itemsize
         cap += _ROW_BOUND + 1
     cap = max(cap * n + 128, 128)
     out = np.empty(cap, dtype=np.uint8)     # not zeroed: only the bytes written are read
