@@ -121,7 +121,7 @@ def test_the_tcp_positions_measured_are_the_forward_kinematics(name: str) -> Non
                                          (2000, robot.nq))
     np.testing.assert_allclose(robot.tcp_xyz_mm(q), robot.fk(q)[:, :3, 3], atol=1e-9)
     if robot.closed_form is None or robot.closed_form.family != "opw":
-        assert isinstance(robot._chain_point, ChainPoint)          # UR and Panda: the walk, not the pose
+        assert isinstance(robot.chain_point, ChainPoint)          # UR and Panda: the walk, not the pose
 
 
 def test_a_chain_it_cannot_walk_is_left_to_the_poses() -> None:

@@ -46,6 +46,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fabric.motion.program import COLUMNS, MOVEL, Program
+from fabric.robot import chain_native
 from fabric.robot.frames import R_from_quat, make_T, nlerp_quat
 from fabric.robot.kinematics import IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_SINGULAR, _wrap_diff, pose_cols
 
@@ -159,6 +160,15 @@ def _straying(prog: Program, status: np.ndarray, robot, tol_mm: float, prev: Pre
     n = len(prog)
     if n == 0:
         return np.zeros(0, np.int64), np.zeros(0)
+    if look is None:
+        walk = getattr(robot, "chain_point", None)
+        if walk is not None and walk.use_native:    # the same pass in C, a row at a time
+            got = chain_native.straying(walk, prog.q_rad, prog.op, status, prog.xyz_mm, prog.wobj, reach_mm,
+                                        SPLIT_R * tol_mm, None if prev is None else prev.q_rad,
+                                        None if prev is None else prev.xyz_mm,
+                                        prev is not None and prev.status == IK_OK, MOVEL, IK_OK)
+            if got is not None:
+                return got
     ok = status == IK_OK
     if look is None:                             # every row: slices, no gathering of a million rows
         dq = np.empty_like(prog.q_rad)

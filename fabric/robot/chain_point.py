@@ -3,14 +3,14 @@
 Forward kinematics of a whole pose multiplies a 3x3 rotation per joint and row.
 The position of one point needs far less: walking back from the TCP, the point
 in joint k's frame is turned about that joint's axis (a plane rotation for an
-axis along x, y or z: four products) and moved by the joint's fixed placement
+axis along x, y or z, either way: four products) and moved by the joint's fixed placement
 in its parent (a rotation that is mostly zeros and ones in a URDF, so only its
 other entries cost a product). The planner measures a million moves with it
 (``fabric.planning.refine``) on the arms whose family has no point formula of
 its own (UR, Panda).
 
 :meth:`ChainPoint.of` answers None for a model it cannot walk (a joint that is
-not revolute about one of its frame's axes, a branch off the chain), and checks
+not revolute about one of its frame's axes, either way, a branch off the chain), and checks
 itself against Pinocchio's forward kinematics before it is used.
 """
 from __future__ import annotations
@@ -20,6 +20,8 @@ from typing import NamedTuple
 import numpy as np
 import pinocchio as pin
 
+from fabric.robot import chain_native
+
 __all__ = ["ChainPoint"]
 
 _AXES = {"JointModelRX": 0, "JointModelRY": 1, "JointModelRZ": 2}
@@ -28,19 +30,47 @@ _CHECK_TOL_MM = 1e-7
 
 
 class _Joint(NamedTuple):
-    """One joint: its axis (0, 1, 2 for x, y, z of its frame) and its placement in its parent (mm)."""
+    """One joint: its axis (0, 1, 2 for x, y, z of its frame), the axis's sign (+1, -1: a joint turning about
+    -z turns about z by -q) and its placement in its parent (mm)."""
 
     axis: int
+    sign: int
     R: np.ndarray
     t_mm: np.ndarray
 
 
+def _axis(joint) -> tuple[int, int] | None:
+    """The axis (0, 1, 2) and sign of a revolute joint about one of its frame's axes, else None."""
+    name = joint.shortname()
+    if name in _AXES:
+        return _AXES[name], 1
+    if name != "JointModelRevoluteUnaligned":
+        return None
+    u = np.asarray(joint.extract().axis, dtype=float)
+    k = int(np.argmax(np.abs(u)))
+    if abs(abs(u[k]) - 1.0) > 1e-12 or np.sum(np.abs(u)) - abs(u[k]) > 1e-12:
+        return None
+    return k, int(np.sign(u[k]))
+
+
 class ChainPoint:
-    """TCP positions (N, 3) mm in the model's root frame for joints (N, nq)."""
+    """TCP positions (N, 3) mm in the model's root frame for joints (N, nq).
+
+    The walk runs in C where the helper is built (``chain_native.py``, the same arithmetic: the same
+    positions); ``use_native`` False keeps it in numpy (tests compare the two)."""
+
+    use_native = True
 
     def __init__(self, joints: list[_Joint], tcp_mm: np.ndarray) -> None:
         self.joints = joints
         self.tcp_mm = np.asarray(tcp_mm, dtype=float)
+        self._packed: chain_native.Packed | None = None
+
+    def packed(self) -> chain_native.Packed:
+        """The joints as the C helper reads them (made once)."""
+        if self._packed is None:
+            self._packed = chain_native.Packed(self)
+        return self._packed
 
     @classmethod
     def of(cls, model: pin.Model, tcp_frame_id: int) -> ChainPoint | None:
@@ -48,11 +78,11 @@ class ChainPoint:
         each the child of the one before (or where the walk does not reproduce Pinocchio's positions)."""
         joints: list[_Joint] = []
         for j in range(1, model.njoints):
-            axis = _AXES.get(model.joints[j].shortname())
+            axis = _axis(model.joints[j])
             if axis is None or model.parents[j] != j - 1 or model.joints[j].idx_q != j - 1:
                 return None
             M = model.jointPlacements[j]
-            joints.append(_Joint(axis, np.array(M.rotation), 1000.0 * np.array(M.translation)))
+            joints.append(_Joint(*axis, np.array(M.rotation), 1000.0 * np.array(M.translation)))
         frame = model.frames[tcp_frame_id]
         if frame.parentJoint != model.njoints - 1 or model.nq != len(joints):
             return None
@@ -73,11 +103,17 @@ class ChainPoint:
 
     def __call__(self, q_rad: np.ndarray) -> np.ndarray:
         q = np.atleast_2d(np.asarray(q_rad, dtype=float))
+        if self.use_native:
+            out = chain_native.points(self, q)
+            if out is not None:
+                return out
         n = len(q)
         v = [np.full(n, c) for c in self.tcp_mm]
         for k in range(len(self.joints) - 1, -1, -1):
             jt = self.joints[k]
             c, s = np.cos(q[:, k]), np.sin(q[:, k])
+            if jt.sign < 0:
+                s = -s
             a, b = (jt.axis + 1) % 3, (jt.axis + 2) % 3          # the plane the joint turns: (y, z), (z, x), (x, y)
             va, vb = v[a], v[b]
             v[a], v[b] = c * va - s * vb, s * va + c * vb

@@ -224,7 +224,7 @@ class RobotModel:
         self.jerk_limit_rad_s3 = JERK_PER_S2 * self.vel_limit_rad_s
         self._tool_inv = frames.inv_T(self.tool_T)
         # tcp_xyz_mm's walk back from the TCP, checked against Pinocchio (None: this model has none)
-        self._chain_point = ChainPoint.of(self.pin_model, self.tcp_frame_id)
+        self.chain_point: ChainPoint | None = ChainPoint.of(self.pin_model, self.tcp_frame_id)
         self.family_choice: FamilyChoice = detect_ik_family(self.pin_model, self.flange_frame_id,
                                                             self.lower_rad, self.upper_rad)
         self.closed_form: ClosedFormIK | None = None
@@ -308,8 +308,8 @@ class RobotModel:
         arm = getattr(self.closed_form, "arm", None)
         if arm is not None and hasattr(arm, "point_xyz"):
             return arm.point_xyz(q, self.tool_T[:3, 3])
-        if self._chain_point is not None:
-            return self._chain_point(q)
+        if self.chain_point is not None:
+            return self.chain_point(q)
         return self.fk(q)[:, :3, 3]
 
     def fk_flange(self, q: np.ndarray) -> np.ndarray:

@@ -1,0 +1,96 @@
+"""The chain walk and the sag check of linear moves in C (``fabric/native/chain.c``).
+
+:class:`fabric.robot.chain_point.ChainPoint` hands its walk here, and ``fabric.planning.refine`` its first
+pass over every row of a program (the bound from the joint travel, then the TCP half-way through the
+moves the bound does not clear). Each function answers None where there is no helper (no compiler, or
+``FABRIC_NATIVE=0``): numpy's path then runs.
+"""
+from __future__ import annotations
+
+import ctypes
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from fabric import native
+
+if TYPE_CHECKING:
+    from fabric.robot.chain_point import ChainPoint
+
+__all__ = ["Packed", "points", "straying", "available"]
+
+MAX_JOINTS = 16                 # chain.c's MAX_JOINTS
+_P = ctypes.c_void_p
+_L = ctypes.c_long
+_SIGNATURES: dict[str, native.Signature] = {
+    "chain_point": (ctypes.c_int, [_L, ctypes.c_int, _P, _P, _P, _P, _P, _L, _P]),
+    "chain_straying": (_L, [_L, ctypes.c_int, _P, _P, _P, _P, _P, _P, _P, _P, _P, _P, ctypes.c_double, _P, _P,
+                            ctypes.c_int, ctypes.c_int, ctypes.c_int, _P, _P]),
+}
+
+
+def _chain() -> ctypes.CDLL | None:
+    return native.bound("chain", _SIGNATURES)
+
+
+def available() -> bool:
+    return _chain() is not None
+
+
+class Packed:
+    """A walk's joints as the C side reads them: axes and their signs (2, nq) int32, rotations (nq, 9),
+    translations (nq, 3)."""
+
+    def __init__(self, walk: ChainPoint) -> None:
+        self.nq = len(walk.joints)
+        self.axis = np.ascontiguousarray([[jt.axis for jt in walk.joints], [jt.sign for jt in walk.joints]],
+                                         dtype=np.int32)
+        self.R = np.ascontiguousarray([np.asarray(jt.R, dtype=float).ravel() for jt in walk.joints])
+        self.t = np.ascontiguousarray([jt.t_mm for jt in walk.joints], dtype=float)
+        self.tcp = np.ascontiguousarray(walk.tcp_mm, dtype=float)
+
+    def args(self) -> tuple:
+        return self.nq, self.axis.ctypes.data, self.R.ctypes.data, self.t.ctypes.data, self.tcp.ctypes.data
+
+
+def points(walk: ChainPoint, q_rad: np.ndarray) -> np.ndarray | None:
+    """``walk(q_rad)``: TCP positions (N, 3) mm for joints (N, nq); None without the helper."""
+    lib = _chain()
+    if lib is None:
+        return None
+    q = np.asarray(q_rad, dtype=float)
+    if q.ndim != 2 or q.shape[1] != len(walk.joints):
+        raise ValueError(f"joints of shape {q.shape} for a chain of {len(walk.joints)}")
+    if q.strides[1] != q.itemsize:
+        q = np.ascontiguousarray(q)
+    out = np.empty((len(q), 3))
+    if lib.chain_point(len(q), *walk.packed().args(), q.ctypes.data, q.strides[0] // q.itemsize,
+                       out.ctypes.data) < 0:
+        raise ValueError(f"a chain of {len(walk.joints)} joints is more than the helper takes ({MAX_JOINTS})")
+    return out
+
+
+def straying(walk: ChainPoint, q_rad: np.ndarray, op: np.ndarray, status: np.ndarray, xyz_mm: np.ndarray,
+             wobj: np.ndarray, reach_mm: np.ndarray, thresh_mm: float, prev_q_rad: np.ndarray | None,
+             prev_xyz_mm: np.ndarray | None, prev_ok: bool, movel: int, ik_ok: int
+             ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The rows of a program whose joint interpolation from the row before puts the TCP half-way more than
+    ``thresh_mm`` from the middle of the straight line, and by how much (``chain.c``'s ``chain_straying``);
+    None without the helper."""
+    lib = _chain()
+    if lib is None:
+        return None
+    n = len(q_rad)
+    q, xyz = np.ascontiguousarray(q_rad, dtype=float), np.ascontiguousarray(xyz_mm, dtype=float)
+    op, status = np.ascontiguousarray(op, dtype=np.uint8), np.ascontiguousarray(status, dtype=np.uint8)
+    W, reach = np.ascontiguousarray(wobj, dtype=float), np.ascontiguousarray(reach_mm, dtype=float)
+    pq = None if prev_q_rad is None else np.ascontiguousarray(prev_q_rad, dtype=float)
+    px = np.ascontiguousarray(prev_xyz_mm if prev_xyz_mm is not None else np.zeros(3), dtype=float)
+    rows, sag = np.empty(n, dtype=np.int64), np.empty(n)
+    found = lib.chain_straying(n, *walk.packed().args(), q.ctypes.data, op.ctypes.data, status.ctypes.data,
+                               xyz.ctypes.data, W.ctypes.data, reach.ctypes.data, float(thresh_mm),
+                               None if pq is None else pq.ctypes.data, px.ctypes.data, int(prev_ok), int(movel),
+                               int(ik_ok), rows.ctypes.data, sag.ctypes.data)
+    if found < 0:
+        raise ValueError(f"a chain of {len(walk.joints)} joints is more than the helper takes ({MAX_JOINTS})")
+    return rows[:found].copy(), sag[:found].copy()
