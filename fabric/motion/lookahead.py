@@ -34,11 +34,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fabric.motion import lookahead_native
 from fabric.motion.program import MOVEL, SET_TEMP
 
 __all__ = ["EPS_MM", "LinearProfiles", "PathSteps", "linear_profiles"]
 
 EPS_MM = 1e-9
+use_native_caps = True            # False: numpy's caps (tests compare the two)
 
 
 @dataclass
@@ -100,7 +102,12 @@ def linear_profiles(path: PathSteps, vlim: np.ndarray, speed_r: float, a: float,
 def _caps(cap_prog: np.ndarray, q: np.ndarray, q0: np.ndarray, Ls: np.ndarray, seg: np.ndarray,
           vlim: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """1. Cruise caps: programmed speed and, joint by joint, the velocity limits (``|dq_j| / (vlim_j L)``
-    is joint j's rad/s per mm/s of TCP speed). Returns caps, slowed mask and joint, moving-joint rows."""
+    is joint j's rad/s per mm/s of TCP speed). Returns caps, slowed mask and joint, moving-joint rows.
+    In C where the helper is built (``lookahead_native.py``: the same caps, one pass over the rows)."""
+    if use_native_caps:
+        got = lookahead_native.caps(cap_prog, q, q0, Ls, seg, vlim)
+        if got is not None:
+            return got
     reorient = np.zeros(len(q), dtype=bool)
     worst = np.zeros(len(seg), dtype=np.intp)
     top = np.full(len(seg), -np.inf)

@@ -31,7 +31,7 @@ __all__ = ["library", "bound", "build", "HELPERS", "cache_dir"]
 
 log = logging.getLogger(__name__)
 
-HELPERS = ("numtext", "gclex", "armik", "nozzle", "chain")
+HELPERS = ("numtext", "gclex", "armik", "nozzle", "chain", "lookahead")
 # no -Werror: a newer compiler's new warning is no reason to take the Python path
 CFLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-Wall")
 BUILD_TIMEOUT_S = 120.0
