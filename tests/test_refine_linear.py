@@ -17,7 +17,7 @@ import pytest
 
 from fabric.motion.program import MOVEL, Program
 from fabric.planning import PlanOptions, plan_gcode
-from fabric.planning.refine import reach_bound_mm, sag_bound_mm
+from fabric.planning.refine import _spread, reach_bound_mm, sag_bound_mm
 from fabric.robot.cell import Cell
 from fabric.robot.chain_point import ChainPoint
 from fabric.robot.kinematics import IK_OK
@@ -176,3 +176,20 @@ def test_fabric_cli_plan_takes_the_tolerance(session, settings, tmp_path) -> Non
         assert bad.returncode != 0 and "linear_tol_mm" in bad.stderr
     finally:
         planner.close()
+
+
+def test_new_rows_are_spread_as_a_repeat_would() -> None:
+    """``_spread`` copies stretches of rows between the split moves: the same as ``np.repeat`` of every row,
+    for split moves at the first and the last row, next to each other, and none."""
+    rng = np.random.default_rng(0)
+    for n in (1, 2, 7, 500):
+        for _ in range(40):
+            rows = np.sort(rng.choice(n, rng.integers(0, n + 1), replace=False))
+            pieces = rng.integers(2, 5, len(rows))
+            counts = np.ones(n, np.int64)
+            counts[rows] = pieces
+            end = np.cumsum(counts) - 1
+            for col in (rng.normal(size=n), rng.normal(size=(n, 7)), rng.integers(0, 9, n).astype(np.uint8)):
+                got = _spread(col, rows, pieces - 1, end)
+                assert got.dtype == col.dtype
+                np.testing.assert_array_equal(got, np.repeat(col, counts, axis=0))

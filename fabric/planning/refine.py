@@ -213,14 +213,14 @@ def _split(prog: Program, status: np.ndarray, rot_deg: np.ndarray, robot, rows: 
     """``prog`` with move ``rows[k]`` cut into ``pieces[k]`` (new rows before each, on the line); returns
     it, its status and rotation, and the rows of the pieces (the new rows and the moves' own)."""
     n = len(prog)
+    new = pieces - 1
     counts = np.ones(n, dtype=np.int64)
     counts[rows] = pieces
     end = np.cumsum(counts) - 1                                      # where each old row now is
-    cols = {name: np.repeat(getattr(prog, name), counts, axis=0) for name in COLUMNS}   # each row copied
+    cols = {name: _spread(getattr(prog, name), rows, new, end) for name in COLUMNS}   # each row copied
     out = Program(**cols, wobj=prog.wobj, meta=prog.meta)
-    status, rot_deg = np.repeat(status, counts), np.repeat(rot_deg, counts)
+    status, rot_deg = _spread(status, rows, new, end), _spread(rot_deg, rows, new, end)
     # the new rows: move k's pieces[k] - 1 of them, at s = 1/m .. (m-1)/m, right before the move's own row
-    new = pieces - 1
     move = np.repeat(np.arange(len(rows)), new)
     step = np.arange(len(move)) - np.repeat(np.cumsum(new) - new, new) + 1          # 1 .. m-1 per move
     at = np.repeat(end[rows] - new, new) + step - 1                                   # their rows now
@@ -237,6 +237,22 @@ def _split(prog: Program, status: np.ndarray, rot_deg: np.ndarray, robot, rows: 
     fine = out.zone_mm[at] <= 0
     out.zone_mm[at[fine]] = PASS_ZONE_MM
     return out, status, rot_deg, np.sort(np.concatenate([at, end[rows]]))
+
+
+def _spread(col: np.ndarray, rows: np.ndarray, new: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """``col`` with ``new[k]`` copies of row ``rows[k]`` right before it (``rows`` ascending, ``end`` each old
+    row's place in the result): ``np.repeat`` of the rows, by one copy per stretch of rows between two split
+    moves (a few hundred stretches of a million rows: memory's speed, not a repeat's per row)."""
+    if not len(rows):
+        return col.copy()
+    out = np.empty((int(end[-1]) + 1, *col.shape[1:]), dtype=col.dtype)
+    bounds = [0, *rows.tolist(), len(col)]
+    at, copies = end.take(bounds[:-1]).tolist(), [0, *new.tolist()]
+    for k in range(len(bounds) - 1):
+        a, b = bounds[k], bounds[k + 1]
+        out[at[k] - copies[k]:at[k]] = col[a]
+        out[at[k]:at[k] + b - a] = col[a:b]
+    return out
 
 
 def _solve_near(robot, xyz_plate: np.ndarray, quat_plate: np.ndarray, wobj: np.ndarray, q_lerp: np.ndarray,
