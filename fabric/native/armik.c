@@ -38,11 +38,19 @@ enum { P_OFF = 0, P_SIGN = 7, P_LOWER = 14, P_UPPER = 21, P_MULTI = 28, P_WRIST 
 enum { F_K = 0, F_KW = 9, F_U = 12, F_GV = 27, F_HV = 42, F_D = 57, F_INV2R4 = 58, F_G4 = 59, F_BETA = 60,
        F_PANDA_COUNT = 61 };
 
+/* panda._lin of constant coefficients (x, y, z: c0 x + c1 y + c2 z) as a list of its terms, made once per
+ * call: the zero coefficients left out, 1 and -1 without a product, as there */
+typedef struct {
+    int n, k[3], kind[3];      /* kind 1: +v[k], -1: -v[k], 0: c v[k] */
+    double c[3];
+} Lin;
+
 typedef struct {
     int family;
     int nq;
     const double *f;           /* the family's constants */
     const double *p;           /* par */
+    Lin lin[4];                /* Panda type: K's columns (link 6's axes), then kW (the wrist's offset) */
 } Arm;
 
 /* A7 of a Panda-type arm, per row or one for all (cos, sin and the wrapped angle, computed by the caller) */
@@ -282,25 +290,41 @@ typedef struct {           /* PandaArm._elbow, _wrist_reach and the elbow's gap 
     int sing_ew;
 } PElbow;
 
-static double lin3(const double *coef, const double *a, const double *b, const double *c, int i)
-{   /* panda._lin: coef[0] a + coef[1] b + coef[2] c, component i, zero terms left out as there */
-    double acc = 0.0;
-    int any = 0;
-    const double *vec[3] = {a, b, c};
+static void lin_of(const double *coef, int stride, Lin *out)
+{   /* coefficients coef[0], coef[stride], coef[2 stride] */
+    out->n = 0;
     for (int k = 0; k < 3; k++) {
-        double ck = coef[3 * k], term;
+        double ck = coef[stride * k];
         if (ck == 0.0)
             continue;
-        term = ck == 1.0 ? vec[k][i] : (ck == -1.0 ? -vec[k][i] : ck * vec[k][i]);
-        acc = any ? acc + term : term;
-        any = 1;
+        out->k[out->n] = k;
+        out->kind[out->n] = ck == 1.0 ? 1 : (ck == -1.0 ? -1 : 0);
+        out->c[out->n] = ck;
+        out->n++;
     }
-    return acc;
+}
+
+#ifdef __GNUC__
+#define INLINE static inline __attribute__((always_inline))
+#else
+#define INLINE static inline
+#endif
+
+INLINE void lin3(const Lin *L, const double *const vec[3], double *out)
+{   /* panda._lin: the terms summed in order, component by component (0 where there are none) */
+    for (int i = 0; i < 3; i++) {
+        double acc = 0.0;
+        for (int m = 0; m < L->n; m++) {
+            double x = vec[L->k[m]][i];
+            double term = L->kind[m] == 1 ? x : (L->kind[m] == -1 ? -x : L->c[m] * x);
+            acc = m ? acc + term : term;
+        }
+        out[i] = acc;
+    }
 }
 
 static void panda_link6(const Arm *arm, const double *c, double c7, double s7, Link6 *l)
 {
-    const double *f = arm->f;
     double p[3] = {c[0], c[1], c[2]}, z[3] = {c[3], c[4], c[5]}, y[3] = {c[6], c[7], c[8]};
     double x[3] = {y[1] * z[2] - y[2] * z[1], y[2] * z[0] - y[0] * z[2], y[0] * z[1] - y[1] * z[0]};
     double xr[3], yr[3];
@@ -308,12 +332,13 @@ static void panda_link6(const Arm *arm, const double *c, double c7, double s7, L
         xr[i] = c7 * x[i] - s7 * y[i];
         yr[i] = s7 * x[i] + c7 * y[i];
     }
-    for (int col = 0; col < 3; col++)         /* K[:, col]: K is row-major, so its column steps by 3 */
-        for (int i = 0; i < 3; i++)
-            l->R6[col][i] = lin3(f + F_K + col, xr, yr, z, i);
-    double kw[9] = {f[F_KW], 0, 0, f[F_KW + 1], 0, 0, f[F_KW + 2], 0, 0};
+    const double *const vec[3] = {xr, yr, z};
+    double w[3];
+    for (int col = 0; col < 3; col++)
+        lin3(&arm->lin[col], vec, l->R6[col]);
+    lin3(&arm->lin[3], vec, w);
     for (int i = 0; i < 3; i++)
-        l->W[i] = p[i] + lin3(kw, xr, yr, z, i);
+        l->W[i] = p[i] + w[i];
     l->WW = l->W[0] * l->W[0] + l->W[1] * l->W[1] + l->W[2] * l->W[2];
     for (int col = 0; col < 3; col++)
         l->v[col] = -(l->R6[col][0] * l->W[0] + l->R6[col][1] * l->W[1] + l->R6[col][2] * l->W[2]);
@@ -580,11 +605,16 @@ long armik_track(int family, int nq, const double *fam, const double *par, long 
                  const double *free_c7, const double *free_s7, const double *free_q7, int free_per_row,
                  const double *seed, long max_rows, double *q, uint8_t *row_ok, uint8_t *reach_any, uint8_t *sing)
 {
-    Arm arm = {family, nq, fam, par};
+    Arm arm = {.family = family, .nq = nq, .f = fam, .p = par};
     Free fr = {free_c7, free_s7, free_q7, free_per_row};
     double c[9], prev[NQ_MAX];
     if (!((family == FAMILY_OPW || family == FAMILY_UR) && nq == 6) && !(family == FAMILY_PANDA && nq == 7))
         return ARMIK_BAD_FAMILY;
+    if (family == FAMILY_PANDA) {
+        for (int col = 0; col < 3; col++)          /* K[:, col]: K is row-major, so its column steps by 3 */
+            lin_of(fam + F_K + col, 3, &arm.lin[col]);
+        lin_of(fam + F_KW, 1, &arm.lin[3]);
+    }
     for (long r = 0; r < n; r++) {
         gather(C, n, r, c);
         if (a1_undefined(&arm, c))
