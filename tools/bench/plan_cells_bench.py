@@ -17,6 +17,8 @@ same cell. Writes ``docs/bench/plan_cells.md`` and ``plan_cells.json``.
 
     .venv/bin/python tools/bench/plan_cells_bench.py [n_moves] [n_dls] [n_cli]
     .venv/bin/python tools/bench/plan_cells_bench.py --report     # the page again from plan_cells.json
+    .venv/bin/python tools/bench/plan_cells_bench.py 1000000 15000 6 --cells panda,ur5   # those only, printed
+                                                                     # (the page is written for every cell)
 """
 from __future__ import annotations
 
@@ -220,6 +222,11 @@ def main(argv: list[str]) -> None:
     if argv[1:] == ["--report"]:
         rewrite_report()
         return
+    only = None
+    if "--cells" in argv:
+        k = argv.index("--cells")
+        only = argv[k + 1].split(",")
+        argv = argv[:k] + argv[k + 2:]
     n_moves = int(argv[1]) if len(argv) > 1 else 200_000
     n_dls = int(argv[2]) if len(argv) > 2 else 3000
     n_cli = int(argv[3]) if len(argv) > 3 else 2
@@ -229,11 +236,15 @@ def main(argv: list[str]) -> None:
         gcode = tmp / "raster.gcode"
         moves = write_raster(gcode, n_moves)
         for name in builtin_cell_names():
+            if only is not None and name not in only:
+                continue
             rows.append(bench_cell(name, gcode, moves, n_dls, tmp, n_cli))
             print(json.dumps(rows[-1]), flush=True)
     meta = {"n_moves": n_moves, "n_dls": n_dls, "n_cli": n_cli, "machine": platform.machine(), "cpus": os.cpu_count(),
             "python": platform.python_version(), "numpy": np.__version__,
             "native": _native_helpers()}
+    if only is not None:
+        return
     out = ROOT / "docs" / "bench"
     (out / "plan_cells.json").write_text(json.dumps({"meta": meta, "cells": rows}, indent=2))
     (out / "plan_cells.md").write_text(report(rows, meta))
