@@ -169,8 +169,9 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
         "columns together, not two runs' rows.",
         "",
         f"C helpers: {meta.get('native', 'none')} (`fabric/native/`: the CSV rows (`numtext.c`), the G-code "
-        "lexer (`gclex.c`), the path IK's branch tracking of the OPW, UR and Panda-type closed forms (`armik.c`) "
-        "and the nozzle frames, flange columns and quaternions (`nozzle.c`), each where it is built; "
+        "lexer (`gclex.c`), the path IK's branch tracking of the OPW, UR and Panda-type closed forms (`armik.c`), "
+        "the nozzle frames, flange columns and quaternions (`nozzle.c`), the check of every linear move's sag "
+        "(`chain.c`) and the look-ahead's cruise caps (`lookahead.c`), each where it is built; "
         "`FABRIC_NATIVE=0` runs numpy's paths, which give the same results).",
         "",
         "| cell | IK | joints | moves | reachable | plan (s) | of which IK (s) | plan (moves/s) | CSV (s) "
@@ -196,7 +197,8 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
         "further. The last column plans the same file with `linear_tol_mm` 10 (moves kept whole): the difference "
         "is what the check costs. On this raster of 5 mm moves the bound lets most 6-axis moves through without "
         "a forward kinematics; the Panda's axes do not meet, its bound is loose and nearly every move is measured "
-        "(by the TCP's position alone: an OPW arm's point formula, else the chain walked back from the TCP, "
+        "(by the TCP's position alone: the chain walked back from the TCP, in C with the bound in one pass over "
+        "the rows, `fabric/native/chain.c`; numpy's path: an OPW arm's point formula, else the same walk, "
         "`fabric/robot/chain_point.py`).",
     ]
     return "\n".join(lines) + "\n"
@@ -205,9 +207,11 @@ def report(rows: list[dict[str, object]], meta: dict[str, object]) -> str:
 def _native_helpers() -> str:
     """Which C helpers this run used (each, or numpy's path in its place)."""
     from fabric.gcode import native_lexer
-    from fabric.robot import native_track, nozzle_native
+    from fabric.motion import lookahead_native
+    from fabric.robot import chain_native, native_track, nozzle_native
     used = {"CSV rows": native_rows(), "lexer": native_lexer.available(), "path IK": native_track.available(),
-            "nozzle frames": nozzle_native.available()}
+            "nozzle frames": nozzle_native.available(), "sag check": chain_native.available(),
+            "cruise caps": lookahead_native.available()}
     return ", ".join(f"{name} in {'C' if on else 'numpy'}" for name, on in used.items())
 
 
