@@ -176,10 +176,13 @@ class NozzleReach:
             todo[idx[ok]] = False
         idx = np.flatnonzero(todo)
         if len(idx):
-            best = np.full(len(idx), -2.0)
-            for d, d_tilt in zip(FAN, FAN_TILT_DEG, strict=True):
-                ok = ~self._blocked(path.points_mm[idx], np.broadcast_to(d, (len(idx), 3)), trees, reach)
-                ok &= d_tilt <= limit_deg[idx] + 1e-9
+            # every point against every direction of the fan in one look (point by point, direction by direction)
+            m, n_fan = len(idx), len(FAN)
+            clear = ~self._blocked(np.repeat(path.points_mm[idx], n_fan, axis=0), np.tile(FAN, (m, 1)), trees,
+                                   reach).reshape(m, n_fan)
+            best = np.full(m, -2.0)
+            for j, (d, d_tilt) in enumerate(zip(FAN, FAN_TILT_DEG, strict=True)):
+                ok = clear[:, j] & (d_tilt <= limit_deg[idx] + 1e-9)
                 score = np.where(ok, path.axes[idx] @ d, -2.0)
                 better = score > best
                 turned[idx[better]] = d
