@@ -94,20 +94,23 @@ class FabricConsole(App):
         Binding("g", "cells", "cells", show=False),
     ]
 
+    # the app's data: the screens watch it and set their widgets' own reactives, which repaint those widgets.
+    # None of it repaints the app (a repaint of the app is one of the whole screen: with telemetry at 10 Hz a
+    # topic, an idle console took 60 % of a core re-rendering every widget)
     cell: reactive[str] = reactive("")
-    station_state: reactive[Any] = reactive(None, always_update=True)
-    pose: reactive[Any] = reactive(None, always_update=True)
-    extrusion: reactive[Any] = reactive(None, always_update=True)
-    temps: reactive[Any] = reactive(None, always_update=True)
-    alive: reactive[dict] = reactive(dict, always_update=True)
-    degraded: reactive[dict] = reactive(dict, always_update=True)   # service -> reasons ([] = ok)
-    toolpath: reactive[Any] = reactive(None, always_update=True)
-    collision_hit: reactive[Any] = reactive(None, always_update=True)   # the loaded program's first hit
-    limits: reactive[Any] = reactive(None, always_update=True)
-    jobs: reactive[list] = reactive(list, always_update=True)
-    reply: reactive[Any] = reactive(None, always_update=True)
-    last_event: reactive[Any] = reactive(None, always_update=True)
-    log_entry: reactive[str] = reactive("", always_update=True)   # the newest line of the log
+    station_state: reactive[Any] = reactive(None, always_update=True, repaint=False)
+    pose: reactive[Any] = reactive(None, always_update=True, repaint=False)
+    extrusion: reactive[Any] = reactive(None, always_update=True, repaint=False)
+    temps: reactive[Any] = reactive(None, always_update=True, repaint=False)
+    alive: reactive[dict] = reactive(dict, always_update=True, repaint=False)
+    degraded: reactive[dict] = reactive(dict, always_update=True, repaint=False)   # service -> reasons ([] = ok)
+    toolpath: reactive[Any] = reactive(None, always_update=True, repaint=False)
+    collision_hit: reactive[Any] = reactive(None, always_update=True, repaint=False)   # the program's first hit
+    limits: reactive[Any] = reactive(None, always_update=True, repaint=False)
+    jobs: reactive[list] = reactive(list, always_update=True, repaint=False)
+    reply: reactive[Any] = reactive(None, always_update=True, repaint=False)
+    last_event: reactive[Any] = reactive(None, always_update=True, repaint=False)
+    log_entry: reactive[str] = reactive("", always_update=True, repaint=False)   # the newest line of the log
 
     def __init__(self, client: Client | None, cell_config: str | None = None, files_root: Path | None = None,
                  wall_clock: Callable[[], float] = time.time,

@@ -44,6 +44,8 @@ class CellScreen(Screen):
         yield Footer(compact=True)
 
     def on_mount(self) -> None:
+        self._pose_shown: tuple | None = None           # what the panels show of the last pose and extrusion
+        self._extrusion_shown: tuple | None = None
         for widget_id, title in (("temps", "temperatures"), ("toolpath", "layer"), ("joints", "robot"),
                                  ("extruder", "extruder")):
             self.query_one(f"#{widget_id}").border_title = title
@@ -74,12 +76,23 @@ class CellScreen(Screen):
             view.printing = st.state == "printing"       # a hit's layer is shown unless a print is followed
             view.layer_index = st.layer
 
+    # a sample that shows nothing new (a robot at rest, an extruder off) repaints nothing: the station
+    # samples at 50 Hz whatever moves, and each repaint of these panels costs the console a few ms
+
     def _on_pose(self, pose: Any) -> None:
+        shown = None if pose is None else (tuple(pose.q_deg), tuple(pose.xyz_mm))
+        if shown is not None and shown == self._pose_shown:
+            return
+        self._pose_shown = shown
         self.query_one(JointsPanel).pose = pose
         if pose is not None:
             self.query_one(ToolpathView).nozzle_xyz_mm = list(pose.xyz_mm)
 
     def _on_extrusion(self, e: Any) -> None:
+        shown = None if e is None else (e.on, e.flow_mm3_s, e.row)
+        if shown is not None and shown == self._extrusion_shown:
+            return
+        self._extrusion_shown = shown
         self.query_one(StateBanner).extrusion = e
         self.query_one(ExtruderPanel).extrusion = e
         if e is not None:
