@@ -1,12 +1,12 @@
 /* The TCP's position for a chain of revolute joints, and the linear moves whose joint interpolation sags.
  *
- * chain_point: the walk of fabric/robot/chain_point.py (ChainPoint.__call__), row by row and in the same order
- * of operations: from the TCP back to the base, the point is turned about each joint's axis (x, y or z of its
- * frame, either way: a plane rotation) and placed by the joint's fixed placement in its parent, the products by 0 and 1
- * skipped as there. numpy's sin and cos are the C library's on the platforms we build for, so the positions
- * are numpy's to the bit.
+ * chain_point: the walk of fabric/robot/chain_point.py (ChainPoint.__call__), row by row and in the same order of
+ * operations: from the TCP back to the base, the point is turned about each joint's axis (x, y or z of its frame,
+ * either way: a plane rotation) and placed by the joint's fixed placement in its parent, the products by 0 and 1
+ * skipped as there. numpy's sin and cos are the C library's on the platforms we build for, so the positions are
+ * numpy's to the bit.
  *
- * chain_straying: step 1 and 2 of fabric/planning/refine.py over every row of a program in one pass: the
+ * chain_straying: steps 1 and 2 of fabric/planning/refine.py over every row of a program in one pass: the
  * bound from the joint travel (sag_bound_mm), then, where it exceeds the threshold, the TCP half-way through
  * the joint interpolation against the middle of the straight line (_measured). numpy makes a pass over
  * memory for each operation and gathers the rows it measures; here a row is done in registers. The bound's
@@ -29,7 +29,6 @@ static void sin_cos(double x, double *s, double *c)
     *c = cos(x);
 #endif
 }
-
 
 /* One joint's placement R v + t as fabric/robot/chain_point.py's _placed computes it: per output coordinate
  * the terms of R's entries that are not 0, in order, each v[k] itself (1), -v[k] (-1) or r v[k]; the
@@ -133,12 +132,12 @@ int chain_point(long n, int nq, const int *axis, const double *R, const double *
     return 0;
 }
 
-/* refine._straying over every row (look is None) then refine._measured: writes the rows (ascending) whose
- * TCP half-way through the joint interpolation is more than `thresh_mm` from the middle of the straight line,
- * and by how much, and returns how many (-1: a chain longer than MAX_JOINTS). A row is looked at when it is a linear move (op == movel) solved
- * (status == ik_ok) after a solved row (row 0: after prev, given by prev_q / prev_xyz, prev_ok; prev_q NULL
- * where there is none) and the bound on its sag exceeds thresh_mm. xyz: the rows' TCP in the plate frame,
- * W: the plate frame in the base (4 x 4, row-major), reach: the bound's distances (nq). */
+/* refine._straying over every row (look is None) then refine._measured: writes the rows (ascending) whose TCP
+ * half-way through the joint interpolation is more than `thresh_mm` from the middle of the straight line, and by
+ * how much, and returns how many (-1: a chain longer than MAX_JOINTS). A row is looked at when it is a linear
+ * move (op == movel) solved (status == ik_ok) after a solved row (row 0: after prev, given by prev_q / prev_xyz,
+ * prev_ok; prev_q NULL where there is none) and the bound on its sag exceeds thresh_mm. xyz: the rows' TCP in the
+ * plate frame, W: the plate frame in the base (4 x 4, row-major), reach: the bound's distances (nq). */
 long chain_straying(long n, int nq, const int *axis, const double *R, const double *t, const double *tcp,
                     const double *q, const unsigned char *op, const unsigned char *status, const double *xyz,
                     const double *W, const double *reach, double thresh_mm, const double *prev_q,

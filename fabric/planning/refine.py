@@ -157,32 +157,11 @@ def _straying(prog: Program, status: np.ndarray, robot, tol_mm: float, prev: Pre
               reach_mm: np.ndarray, look: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """The linear-move rows (of ``look``, sorted; None: all) whose joint interpolation strays more than
     ``SPLIT_R * tol_mm`` half-way, and by how much."""
-    n = len(prog)
-    if n == 0:
+    if len(prog) == 0:
         return np.zeros(0, np.int64), np.zeros(0)
     if look is None:
-        walk = getattr(robot, "chain_point", None)
-        if walk is not None and walk.use_native:    # the same pass in C, a row at a time
-            got = chain_native.straying(walk, prog.q_rad, prog.op, status, prog.xyz_mm, prog.wobj, reach_mm,
-                                        SPLIT_R * tol_mm, None if prev is None else prev.q_rad,
-                                        None if prev is None else prev.xyz_mm,
-                                        prev is not None and prev.status == IK_OK, MOVEL, IK_OK)
-            if got is not None:
-                return got
+        return _straying_all(prog, status, robot, tol_mm, prev, reach_mm)
     ok = status == IK_OK
-    if look is None:                             # every row: slices, no gathering of a million rows
-        dq = np.empty_like(prog.q_rad)
-        np.subtract(prog.q_rad[1:], prog.q_rad[:-1], out=dq[1:])
-        dq[0] = prog.q_rad[0] - (prev.q_rad if prev is not None else prog.q_rad[0])
-        before_ok = np.empty(n, dtype=bool)
-        before_ok[1:] = ok[:-1]
-        before_ok[0] = prev is not None and prev.status == IK_OK
-        measure = (prog.op == MOVEL) & ok & before_ok
-        measure &= sag_bound_mm(dq, reach_mm) > SPLIT_R * tol_mm
-        cand = np.flatnonzero(measure)
-        q1 = prog.q_rad[cand]
-        q0 = q1 - dq[cand]
-        return _measured(prog, robot, cand, q0, q1, tol_mm, prev)
     rows = look
     before_ok = np.where(rows > 0, ok[np.maximum(rows - 1, 0)], prev is not None and prev.status == IK_OK)
     cand = rows[(prog.op[rows] == MOVEL) & ok[rows] & before_ok]
@@ -192,6 +171,32 @@ def _straying(prog: Program, status: np.ndarray, robot, tol_mm: float, prev: Pre
     q0 = _before(prog, cand, prev)[2]
     keep = sag_bound_mm(q1 - q0, reach_mm) > SPLIT_R * tol_mm
     return _measured(prog, robot, cand[keep], q0[keep], q1[keep], tol_mm, prev)
+
+
+def _straying_all(prog: Program, status: np.ndarray, robot, tol_mm: float, prev: PrevRow | None,
+                  reach_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_straying` of every row: in C where the arm has a chain walk and the helper is built (one pass,
+    a row at a time), else by slices of the whole program (no gathering of a million rows)."""
+    prev_ok = prev is not None and prev.status == IK_OK
+    walk = getattr(robot, "chain_point", None)
+    if walk is not None and walk.use_native:
+        got = chain_native.straying(walk, prog.q_rad, prog.op, status, prog.xyz_mm, prog.wobj, reach_mm,
+                                    SPLIT_R * tol_mm, None if prev is None else prev.q_rad,
+                                    None if prev is None else prev.xyz_mm, prev_ok, MOVEL, IK_OK)
+        if got is not None:
+            return got
+    ok = status == IK_OK
+    dq = np.empty_like(prog.q_rad)
+    np.subtract(prog.q_rad[1:], prog.q_rad[:-1], out=dq[1:])
+    dq[0] = prog.q_rad[0] - (prev.q_rad if prev is not None else prog.q_rad[0])
+    before_ok = np.empty(len(prog), dtype=bool)
+    before_ok[1:] = ok[:-1]
+    before_ok[0] = prev_ok
+    measure = (prog.op == MOVEL) & ok & before_ok
+    measure &= sag_bound_mm(dq, reach_mm) > SPLIT_R * tol_mm
+    cand = np.flatnonzero(measure)
+    q1 = prog.q_rad[cand]
+    return _measured(prog, robot, cand, q1 - dq[cand], q1, tol_mm, prev)
 
 
 def _measured(prog: Program, robot, cand: np.ndarray, q0: np.ndarray, q1: np.ndarray, tol_mm: float,
