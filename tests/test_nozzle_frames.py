@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from fabric.robot import frames
+from fabric.robot.frames import QUAT_SIGN_TOL
 from fabric.robot.nozzle_frames import NozzleFrames, unit_axes
 
 
@@ -30,11 +31,12 @@ def test_down_nozzle_quaternions_match_shepperd():
     ref = _shepperd(fr, theta)
     assert np.all(q[:, 0] >= 0.0)
     assert np.allclose(q, ref, atol=1e-12)
-    # the sign rule of a zero w: the largest of x, y positive (z is zero)
-    zero_w = q[:, 0] == 0.0
+    # the sign rule of a zero w (frames.quat_sign): the first of x, y, z that is not zero but for rounding is
+    # positive (z is zero), whatever sign the rounding gave w
+    zero_w = np.abs(q[:, 0]) <= QUAT_SIGN_TOL
     assert zero_w.all()
-    big = np.where(np.abs(q[:, 1]) >= np.abs(q[:, 2]), q[:, 1], q[:, 2])
-    assert np.all(big >= 0.0)
+    lead = np.where(np.abs(q[:, 1]) > QUAT_SIGN_TOL, q[:, 1], q[:, 2])
+    assert np.all(lead > 0.0)
 
 
 def test_tilted_nozzle_quaternions_match_shepperd():

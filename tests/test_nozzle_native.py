@@ -1,18 +1,29 @@
 """The nozzle frames, the IK's flange columns and the TCP quaternions in C (fabric/native/nozzle.c) against
-numpy's: the same bits, for one nozzle axis and an axis per row, a reference parallel to the axis (the
-fallbacks), one rotation and a rotation per row."""
+numpy's, for one nozzle axis and an axis per row, a reference parallel to the axis (the fallbacks), one rotation
+and a rotation per row.
+
+Within stated ULPs, not to the bit: numpy's AVX-512 kernels (X86_V4) round ``atan2``, sine and cosine otherwise
+than libm, and put unit quaternions 1-2 ULPs of 1 away from C's (seen on a Xeon with AVX-512 FP16); with older
+kernels they are the same bits. The joints and statuses a path solves to are the same either way.
+"""
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.numeric import assert_ulps
 
 from fabric import native
 from fabric.robot import nozzle_native
 from fabric.robot.cell import Cell
+from fabric.robot.frames import QUAT_SIGN_TOL
 from fabric.robot.nozzle_frames import NozzleFrames, unit_axes
 from fabric.robot.path_ik import solve_path
 
 pytestmark = pytest.mark.skipif(native.library("nozzle") is None, reason="no C compiler: numpy's path only")
+
+FRAME_ULPS = 2          # unit vectors: projections, norms and cross products, no transcendental call
+QUAT_ULPS = 8           # unit quaternions: atan2, cos and sin of numpy's kernels or libm's (seen: 2)
+JOINT_ULPS = 64         # joints (of pi) solved from frames that differ so (seen: 0)
 
 
 def _frames(z0: np.ndarray, xr: np.ndarray, use_native: bool) -> NozzleFrames:
@@ -32,8 +43,8 @@ def test_frames_and_quaternions_are_numpys(per_row: bool) -> None:
     xr[:, :50] = z0[:, :50] if per_row else z0                  # parallel to the axis: the fallbacks
     xr[:, 50:60] = 0.0
     a, b = _frames(z0, xr, True), _frames(z0, xr, False)
-    np.testing.assert_array_equal(a.x0, b.x0)
-    np.testing.assert_array_equal(a.y0, b.y0)
+    assert_ulps(a.x0, b.x0, FRAME_ULPS, scale=1.0, what="x0")
+    assert_ulps(a.y0, b.y0, FRAME_ULPS, scale=1.0, what="y0")
     if not per_row:                                              # the quaternions of one axis are in C
         for theta in (np.radians(30.0), rng.uniform(-np.pi, np.pi, n), np.array([np.pi, -np.pi] * (n // 2))):
             NozzleFrames.use_native = False
@@ -41,8 +52,9 @@ def test_frames_and_quaternions_are_numpys(per_row: bool) -> None:
                 want = b.quats(theta)
             finally:
                 NozzleFrames.use_native = True
-            np.testing.assert_array_equal(a.quats(theta), want)
-            assert np.all(want[:, 0] >= 0.0)
+            got = a.quats(theta)
+            assert_ulps(got, want, QUAT_ULPS, scale=1.0, what="quaternions")
+            assert np.all(want[:, 0] >= -QUAT_SIGN_TOL) and np.all(got[:, 0] >= -QUAT_SIGN_TOL)
 
 
 def test_the_flange_columns_check_their_rows() -> None:
@@ -72,6 +84,7 @@ def test_a_path_solved_with_the_c_frames_is_numpys(name: str) -> None:
             NozzleFrames.use_native = True
     a, b = out
     np.testing.assert_array_equal(a.status, b.status)
-    np.testing.assert_array_equal(a.q_rad, b.q_rad)
-    np.testing.assert_array_equal(a.quat_wxyz, b.quat_wxyz)
+    np.testing.assert_array_equal(a.rot_deg, b.rot_deg)
+    assert_ulps(a.q_rad, b.q_rad, JOINT_ULPS, scale=np.pi, what="joints")
+    assert_ulps(a.quat_wxyz, b.quat_wxyz, QUAT_ULPS, scale=1.0, what="quaternions")
     assert a.feasible_r > 0.9

@@ -17,7 +17,7 @@ from fabric.planning.post.numtext import ChoiceColumn, FixedColumn, format_rows,
 def path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
     """Every test on both paths: the C helper's, and numpy's (the helper switched off)."""
     if request.param == "numpy":
-        monkeypatch.setattr(numtext, "_lib", [None])
+        monkeypatch.setattr(numtext, "use_native", False)
     elif numtext._numtext() is None:
         pytest.fail("the C helper did not load" if shutil.which("cc") else "no C compiler here")
     return str(request.param)

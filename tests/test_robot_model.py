@@ -141,6 +141,13 @@ def test_frame_helpers_round_trip() -> None:
     np.testing.assert_allclose(frames.R_to_rpy(R), rpy, atol=1e-10)
     q = frames.quat_from_R(R)
     assert np.all(q[:, 0] >= 0) and np.allclose(np.linalg.norm(q, axis=1), 1.0)
+    # a half turn (w = 0 but for rounding, of either sign): the first of x, y, z that is not zero is positive,
+    # whatever sign rounding gave w (frames.quat_sign)
+    for w in (1e-17, -1e-17, 0.0, -0.0):
+        for xyz in ((0.6, -0.8, 0.0), (-0.6, 0.8, 0.0), (1e-12, -1.0, 0.0), (0.0, 0.0, -1.0)):
+            got = frames.quat_sign(np.array([w, *xyz]))
+            lead = next(v for v in got[1:] if abs(v) > frames.QUAT_SIGN_TOL)
+            assert lead > 0 and np.allclose(np.abs(got), np.abs([w, *xyz]))
     np.testing.assert_allclose(frames.R_from_quat(q), R, atol=1e-12)
     for Rs in (np.diag([1.0, -1.0, -1.0]), np.diag([-1.0, 1.0, -1.0]), np.diag([-1.0, -1.0, 1.0])):  # 180 deg turns
         np.testing.assert_allclose(frames.R_from_quat(frames.quat_from_R(Rs)), Rs, atol=1e-12)

@@ -14,21 +14,20 @@ import numpy as np
 
 from fabric import native
 
-__all__ = ["lex_arrays", "available"]
+__all__ = ["lex_arrays", "available", "SIGNATURES"]
 
-_lib: list[ctypes.CDLL | None] = []
+_U1, _I8, _F8 = (native.array(t, out=True) for t in (np.uint8, np.int64, np.float64))
+SIGNATURES: dict[str, native.Signature] = {
+    # the text, its length, then cls, line_start, code_end, word_line, word_letter, word_value, word_status,
+    # word_first, orphan, badsum, exponent (lines), counts
+    "gclex": (ctypes.c_long, [ctypes.c_char_p, ctypes.c_long, _U1, _I8, _I8, _I8, _U1, _F8, _U1, _U1, _I8, _I8, _I8,
+                              _I8]),
+    "gclex_bounds": (None, [ctypes.c_char_p, ctypes.c_long, _I8]),
+}
 
 
 def _gclex() -> ctypes.CDLL | None:
-    if not _lib:
-        lib = native.library("gclex")
-        if lib is not None:
-            lib.gclex.restype = ctypes.c_long
-            lib.gclex.argtypes = [ctypes.c_char_p, ctypes.c_long, *[ctypes.c_void_p] * 12]
-            lib.gclex_bounds.restype = None
-            lib.gclex_bounds.argtypes = [ctypes.c_char_p, ctypes.c_long, ctypes.c_void_p]
-        _lib.append(lib)
-    return _lib[0]
+    return native.bound("gclex", SIGNATURES)
 
 
 def available() -> bool:
@@ -46,7 +45,7 @@ def lex_arrays(block: bytes | memoryview) -> dict[str, Any] | None:
     data = bytes(block)
     n = len(data)
     bounds = np.zeros(2, np.int64)
-    lib.gclex_bounds(data, n, bounds.ctypes.data)
+    lib.gclex_bounds(data, n, bounds)
     lines_cap, words_cap = int(bounds[0]), int(bounds[1]) + 1
     cls = np.empty(n + 1, np.uint8)
     line_start, code_end = np.empty(lines_cap, np.int64), np.empty(lines_cap, np.int64)
@@ -54,8 +53,8 @@ def lex_arrays(block: bytes | memoryview) -> dict[str, Any] | None:
     word_letter, word_status, word_first = (np.empty(words_cap, np.uint8) for _ in range(3))
     orphan, badsum, exponent = (np.empty(lines_cap, np.int64) for _ in range(3))
     counts = np.zeros(5, np.int64)
-    lib.gclex(data, n, *(a.ctypes.data for a in (cls, line_start, code_end, word_line, word_letter, word_value,
-                                                  word_status, word_first, orphan, badsum, exponent, counts)))
+    lib.gclex(data, n, cls, line_start, code_end, word_line, word_letter, word_value, word_status, word_first,
+              orphan, badsum, exponent, counts)
     lines, words, n_orphan, n_bad, n_exp = (int(c) for c in counts)
     return {"n_lines": lines, "line_start": line_start[:lines], "code_end": code_end[:lines],
             "word_line": word_line[:words], "word_letter": word_letter[:words], "word_value": word_value[:words],

@@ -9,17 +9,19 @@ import numpy as np
 
 from fabric import native
 
-__all__ = ["caps", "available"]
+__all__ = ["caps", "available", "SIGNATURES"]
 
-_P = ctypes.c_void_p
 _L = ctypes.c_long
-_SIGNATURES: dict[str, native.Signature] = {
-    "lookahead_caps": (None, [_L, ctypes.c_int, _P, _P, _L, _P, _P, _P, _P, _P, _P, _P, _P]),
+_F8, _F8_OUT = native.array(np.float64), native.array(np.float64, out=True)
+SIGNATURES: dict[str, native.Signature] = {
+    "lookahead_caps": (None, [_L, ctypes.c_int, native.array(np.float64, ndim=2), _F8, _L, native.array(np.int64),
+                              _F8, _F8, _F8, _F8_OUT, native.array(np.bool_, out=True),
+                              native.array(np.int64, out=True), native.array(np.bool_, out=True)]),
 }
 
 
 def _lookahead() -> ctypes.CDLL | None:
-    return native.bound("lookahead", _SIGNATURES)
+    return native.bound("lookahead", SIGNATURES)
 
 
 def available() -> bool:
@@ -44,7 +46,7 @@ def caps(cap_prog: np.ndarray, q: np.ndarray, q0: np.ndarray, Ls: np.ndarray, se
         raise ValueError("caps: the segments' rows must be ascending rows of q")
     cap, worst = np.empty(m), np.empty(m, dtype=np.int64)
     slowed, reorient = np.empty(m, dtype=bool), np.empty(n, dtype=bool)
-    lib.lookahead_caps(n, nq, q.ctypes.data, q0.ctypes.data, m, seg.ctypes.data, Ls.ctypes.data, vlim.ctypes.data,
-                       cap_prog.ctypes.data, cap.ctypes.data, slowed.ctypes.data, worst.ctypes.data,
-                       reorient.ctypes.data)
+    if seg.shape != (m,):
+        raise ValueError("caps: the segments must be one row index each")
+    lib.lookahead_caps(n, nq, q, q0, m, seg, Ls, vlim, cap_prog, cap, slowed, worst, reorient)
     return cap, slowed, worst.astype(np.intp, copy=False), reorient

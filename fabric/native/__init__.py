@@ -12,6 +12,12 @@ answers None (the reason is logged once) and the caller takes that path.
 
 ``python -m fabric.native`` builds every helper ahead (``tools/setup-env``
 runs it), so the first plan does not wait for the compiler.
+
+Every function of a helper is called with its prototype declared (Klipper's
+``chelper`` declares each to cffi): :func:`bound` sets ``restype`` and
+``argtypes`` from a table, and an array argument is an :func:`array` type (its
+dtype, alignment, contiguity and, for an output, writability), so a wrong array
+is a ``ctypes.ArgumentError`` in Python, never a crash or silent garbage.
 """
 from __future__ import annotations
 
@@ -27,7 +33,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-__all__ = ["library", "bound", "build", "HELPERS", "cache_dir"]
+import numpy as np
+from numpy.typing import DTypeLike
+
+__all__ = ["library", "bound", "build", "array", "HELPERS", "cache_dir", "Signature"]
 
 log = logging.getLogger(__name__)
 
@@ -41,6 +50,24 @@ _loaded: dict[str, ctypes.CDLL | None] = {}
 _bound: dict[str, ctypes.CDLL | None] = {}
 
 Signature = tuple[Any, list[Any]]           # a function's restype and argtypes
+
+
+def array(dtype: DTypeLike, *, out: bool = False, ndim: int | None = None, strided: bool = False,
+          nullable: bool = False) -> type:
+    """The ctypes argument type of an array a C function reads (``out``: writes) as ``dtype`` elements.
+
+    A numpy ``ndpointer``: the call raises ``ctypes.ArgumentError`` for an array of another dtype or number
+    of dimensions, one not aligned, not C-contiguous (unless ``strided``: the function takes the strides in
+    other arguments) or, for an output, read-only. ``nullable``: None passes NULL."""
+    flags: Any = ",".join(["ALIGNED"] + ([] if strided else ["C_CONTIGUOUS"]) + (["WRITEABLE"] if out else []))
+    ptr = np.ctypeslib.ndpointer(dtype=np.dtype(dtype), ndim=ndim, flags=flags)
+    if not nullable:
+        return ptr
+
+    def from_param(cls: type, obj: Any) -> Any:
+        return None if obj is None else ptr.from_param(obj)
+
+    return type(f"{ptr.__name__}_or_NULL", (ptr,), {"from_param": classmethod(from_param)})
 
 
 def cache_dir() -> Path:

@@ -474,8 +474,8 @@ static void panda_all(const Arm *arm, const double *c, double c7, double s7, dou
     }
 }
 
-/* Single-turn joints into [lower, lower + 2 pi) (ClosedFormIK._canon_col); whether the branch is valid
- * (reachable and within the limits). */
+/* Single-turn joints into [lower, lower + 2 pi) (ClosedFormIK._canon_col: both ends take the limit tolerance);
+ * whether the branch is valid (reachable and within the limits). */
 static int limit(const Arm *arm, Branch *out)
 {
     const double *p = arm->p;
@@ -483,16 +483,16 @@ static int limit(const Arm *arm, Branch *out)
     for (int j = 0; j < arm->nq; j++) {
         if (p[P_MULTI + j] != 0.0)
             continue;
-        double lo = p[P_LOWER + j], v = out->q[j];
+        double lo = p[P_LOWER + j], tol = p[P_LIMIT], v = out->q[j];
         if (lo > -PI) {
-            if (v < lo)
+            if (v < lo - tol)
                 v += TWO_PI;
         } else if (lo + TWO_PI <= PI) {
-            if (v >= lo + TWO_PI)
+            if (v >= lo + TWO_PI - tol)
                 v -= TWO_PI;
         }
         out->q[j] = v;
-        inlim &= v <= p[P_UPPER + j] + p[P_LIMIT];
+        inlim &= v >= lo - tol && v <= p[P_UPPER + j] + tol;
     }
     return out->reach && inlim;
 }

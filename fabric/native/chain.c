@@ -19,6 +19,7 @@
 #define _GNU_SOURCE               /* sincos: glibc's, the same bits as its sin and cos */
 #include <math.h>
 #include <stddef.h>
+#include <stdint.h>
 
 static void sin_cos(double x, double *s, double *c)
 {
@@ -141,7 +142,7 @@ int chain_point(long n, int nq, const int *axis, const double *R, const double *
 long chain_straying(long n, int nq, const int *axis, const double *R, const double *t, const double *tcp,
                     const double *q, const unsigned char *op, const unsigned char *status, const double *xyz,
                     const double *W, const double *reach, double thresh_mm, const double *prev_q,
-                    const double *prev_xyz, int prev_ok, int movel, int ik_ok, long *rows_out, double *sag_out)
+                    const double *prev_xyz, int prev_ok, int movel, int ik_ok, int64_t *rows_out, double *sag_out)
 {
     Walk w;
     double dq[MAX_JOINTS], mid_q[MAX_JOINTS], p[3];

@@ -8,13 +8,14 @@
  * released during the call).
  */
 #include <math.h>
+#include <stdint.h>
 
 /* _caps: q (n x nq, row-major), q0 the joints before row 0; seg (m) the segments' rows (ascending), Ls their
  * lengths, cap_prog their programmed caps; vlim (nq) the joints' velocity limits. Writes each segment's cap,
  * whether a joint's limit lowered it (slowed) and which joint limits it most (worst: the first of equal
  * rates), and for every row whether any joint moves (reorient: more than 1e-12 rad). */
-void lookahead_caps(long n, int nq, const double *q, const double *q0, long m, const long *seg, const double *Ls,
-                    const double *vlim, const double *cap_prog, double *cap, unsigned char *slowed, long *worst,
+void lookahead_caps(long n, int nq, const double *q, const double *q0, long m, const int64_t *seg, const double *Ls,
+                    const double *vlim, const double *cap_prog, double *cap, unsigned char *slowed, int64_t *worst,
                     unsigned char *reorient)
 {
     long k = 0;

@@ -74,9 +74,9 @@ void nozzle_flange_cols(long n, const double *p, const double *x0, const double 
 
 /* NozzleFrames.quats with one nozzle axis: every frame is B Rz(alpha_i), so the quaternion (w, x, y, z; n rows
  * of 4) is q_B (cos h, 0, 0, sin h) with h = (alpha_i + theta_i) / 2, alpha_i = atan2(b_y . x0_i, b_x . x0_i);
- * w >= 0, and where w is 0 the largest of x, y, z is positive (as Shepperd's method). */
+ * signed as frames.quat_sign: the first of w, x, y, z larger than sign_tol in size is positive. */
 void nozzle_quats(long n, const double *x0, const double *bx, const double *by, const double *qb,
-                  const double *theta, int theta_per_row, double *out)
+                  const double *theta, int theta_per_row, double sign_tol, double *out)
 {
     double w1 = qb[0], x1 = qb[1], y1 = qb[2], z1 = qb[3];
     for (long i = 0; i < n; i++) {
@@ -86,12 +86,10 @@ void nozzle_quats(long n, const double *x0, const double *bx, const double *by, 
         double half = 0.5 * (atan2(dy, dx) + theta[theta_per_row ? i : 0]);
         double c = cos(half), s = sin(half);
         double q[4] = {w1 * c - z1 * s, x1 * c + y1 * s, y1 * c - x1 * s, z1 * c + w1 * s};
-        int flip = q[0] < 0.0;
-        if (q[0] == 0.0) {
-            double a0 = fabs(q[1]), a1 = fabs(q[2]), a2 = fabs(q[3]);
-            double largest = (a0 >= a1 && a0 >= a2) ? q[1] : (a1 >= a2 ? q[2] : q[3]);
-            flip = largest < 0.0;
-        }
+        int lead = 0;
+        while (lead < 3 && !(fabs(q[lead]) > sign_tol))
+            lead++;
+        int flip = q[lead] < 0.0;
         for (int k = 0; k < 4; k++)
             out[4 * i + k] = flip ? -q[k] : q[k];
     }

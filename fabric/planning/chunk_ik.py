@@ -16,7 +16,7 @@ import numpy as np
 
 from fabric.motion.program import MOVEL, Program
 from fabric.planning.options import PlanOptions
-from fabric.robot.frames import inv_T, quat_from_R
+from fabric.robot.frames import inv_T, quat_from_R, quat_sign
 from fabric.robot.kinematics import IK_JUMP, IK_OK
 
 __all__ = ["JUMP_DEG", "Seed", "solve_chunk", "putter", "quat_in_plate"]
@@ -121,7 +121,7 @@ def putter(idx: np.ndarray) -> Callable[[np.ndarray, np.ndarray], None]:
 
 
 def quat_in_plate(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
-    """``qa * qb`` (Hamilton product, (4,) by (N, 4)), sign fixed to w >= 0: base-frame TCP
+    """``qa * qb`` (Hamilton product, (4,) by (N, 4)), signed by ``frames.quat_sign``: base-frame TCP
     orientations expressed in the plate frame when ``qa`` is the inverse of the plate's."""
     w1, x1, y1, z1 = qa
     w2, x2, y2, z2 = qb[:, 0], qb[:, 1], qb[:, 2], qb[:, 3]
@@ -130,5 +130,4 @@ def quat_in_plate(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
     q[:, 1] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
     q[:, 2] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
     q[:, 3] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
-    q[q[:, 0] < 0] *= -1.0
-    return q
+    return quat_sign(q)

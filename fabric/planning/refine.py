@@ -48,7 +48,7 @@ import numpy as np
 from fabric.motion.program import COLUMNS, MOVEL, Program
 from fabric.robot import chain_native
 from fabric.robot.frames import R_from_quat, make_T, nlerp_quat
-from fabric.robot.kinematics import IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_SINGULAR, _wrap_diff, pose_cols
+from fabric.robot.kinematics import IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_SINGULAR, pose_cols, wrap_diff
 
 __all__ = ["Refined", "PrevRow", "refine_linear", "sag_bound_mm", "reach_bound_mm"]
 
@@ -276,7 +276,7 @@ def _solve_near(robot, xyz_plate: np.ndarray, quat_plate: np.ndarray, wobj: np.n
         free = None if cf.free_joint is None else q_lerp[:, cf.free_joint]
         qb, ok, reach, sing = cf.branches_cols(pose_cols(T, cf.tool_inv_T), None, free)
         d = qb - q_lerp[:, None, :]
-        d[..., cf.multi] = _wrap_diff(d[..., cf.multi])              # multi-turn joints: any turn
+        d[..., cf.multi] = wrap_diff(d[..., cf.multi])              # multi-turn joints: any turn
         dist = np.max(np.abs(d), axis=2)                             # (M, 8)
         allowed = np.where(ok.any(axis=1, keepdims=True), ok, reach)
         b = np.argmin(np.where(allowed, dist, np.inf), axis=1)

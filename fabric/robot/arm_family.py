@@ -106,6 +106,14 @@ class ClosedFormArm(Protocol):
         """Joints (nq, M) of wrist-degenerate rows with the free angle taken from ``held`` (nq, M), still exact."""
         ...
 
+    def model_cols(self, C: np.ndarray) -> np.ndarray:
+        """End-frame columns (9, N) in the family's own model base (its closed form's frame)."""
+        ...
+
+    def native_constants(self) -> list[float]:
+        """The family's constants in the order the C tracking reads them (``fabric/native/armik.c``)."""
+        ...
+
 
 def stack_branches(res: dict[int, tuple[np.ndarray, ...]], nq: int, n: int
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

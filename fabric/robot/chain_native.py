@@ -17,20 +17,25 @@ from fabric import native
 if TYPE_CHECKING:
     from fabric.robot.chain_point import ChainPoint
 
-__all__ = ["Packed", "points", "straying", "available"]
+__all__ = ["Packed", "points", "straying", "available", "SIGNATURES"]
 
 MAX_JOINTS = 16                 # chain.c's MAX_JOINTS
-_P = ctypes.c_void_p
-_L = ctypes.c_long
-_SIGNATURES: dict[str, native.Signature] = {
-    "chain_point": (ctypes.c_int, [_L, ctypes.c_int, _P, _P, _P, _P, _P, _L, _P]),
-    "chain_straying": (_L, [_L, ctypes.c_int, _P, _P, _P, _P, _P, _P, _P, _P, _P, _P, ctypes.c_double, _P, _P,
-                            ctypes.c_int, ctypes.c_int, ctypes.c_int, _P, _P]),
+_L, _I = ctypes.c_long, ctypes.c_int
+_F8 = native.array(np.float64)
+_U1 = native.array(np.uint8)
+_WALK = [native.array(np.int32, ndim=2), native.array(np.float64, ndim=2), native.array(np.float64, ndim=2),
+         native.array(np.float64, ndim=1)]             # Packed.args: axes and signs, rotations, translations, TCP
+SIGNATURES: dict[str, native.Signature] = {
+    "chain_point": (_I, [_L, _I, *_WALK, native.array(np.float64, ndim=2, strided=True), _L,
+                         native.array(np.float64, out=True)]),
+    "chain_straying": (_L, [_L, _I, *_WALK, _F8, _U1, _U1, _F8, _F8, _F8, ctypes.c_double,
+                            native.array(np.float64, nullable=True), _F8, _I, _I, _I,
+                            native.array(np.int64, out=True), native.array(np.float64, out=True)]),
 }
 
 
 def _chain() -> ctypes.CDLL | None:
-    return native.bound("chain", _SIGNATURES)
+    return native.bound("chain", SIGNATURES)
 
 
 def available() -> bool:
@@ -50,7 +55,7 @@ class Packed:
         self.tcp = np.ascontiguousarray(walk.tcp_mm, dtype=float)
 
     def args(self) -> tuple:
-        return self.nq, self.axis.ctypes.data, self.R.ctypes.data, self.t.ctypes.data, self.tcp.ctypes.data
+        return self.nq, self.axis, self.R, self.t, self.tcp
 
 
 def points(walk: ChainPoint, q_rad: np.ndarray) -> np.ndarray | None:
@@ -64,8 +69,9 @@ def points(walk: ChainPoint, q_rad: np.ndarray) -> np.ndarray | None:
     if q.strides[1] != q.itemsize:
         q = np.ascontiguousarray(q)
     out = np.empty((len(q), 3))
-    if lib.chain_point(len(q), *walk.packed().args(), q.ctypes.data, q.strides[0] // q.itemsize,
-                       out.ctypes.data) < 0:
+    if q.strides[0] % q.itemsize or q.strides[0] < 0:
+        q = np.ascontiguousarray(q)
+    if lib.chain_point(len(q), *walk.packed().args(), q, q.strides[0] // q.itemsize, out) < 0:
         raise ValueError(f"a chain of {len(walk.joints)} joints is more than the helper takes ({MAX_JOINTS})")
     return out
 
@@ -87,10 +93,12 @@ def straying(walk: ChainPoint, q_rad: np.ndarray, op: np.ndarray, status: np.nda
     pq = None if prev_q_rad is None else np.ascontiguousarray(prev_q_rad, dtype=float)
     px = np.ascontiguousarray(prev_xyz_mm if prev_xyz_mm is not None else np.zeros(3), dtype=float)
     rows, sag = np.empty(n, dtype=np.int64), np.empty(n)
-    found = lib.chain_straying(n, *walk.packed().args(), q.ctypes.data, op.ctypes.data, status.ctypes.data,
-                               xyz.ctypes.data, W.ctypes.data, reach.ctypes.data, float(thresh_mm),
-                               None if pq is None else pq.ctypes.data, px.ctypes.data, int(prev_ok), int(movel),
-                               int(ik_ok), rows.ctypes.data, sag.ctypes.data)
+    nq = len(walk.joints)
+    if q.shape != (n, nq) or op.shape != (n,) or status.shape != (n,) or xyz.shape != (n, 3) \
+            or W.shape != (4, 4) or reach.shape != (nq,) or px.shape != (3,) or (pq is not None and pq.shape != (nq,)):
+        raise ValueError("straying: the program's columns, the work object or the row before do not match")
+    found = lib.chain_straying(n, *walk.packed().args(), q, op, status, xyz, W, reach, float(thresh_mm), pq, px,
+                               int(prev_ok), int(movel), int(ik_ok), rows, sag)
     if found < 0:
         raise ValueError(f"a chain of {len(walk.joints)} joints is more than the helper takes ({MAX_JOINTS})")
     return rows[:found].copy(), sag[:found].copy()

@@ -23,17 +23,17 @@ import numpy as np
 
 from fabric.robot.arm_family import ClosedFormArm
 from fabric.robot.kinematics import (
-    _LIMIT_TOL_RAD,
-    _PI,
-    _TWO_PI,
     IK_JOINT_LIMIT,
     IK_OK,
     IK_OUT_OF_REACH,
     IK_SINGULAR,
-    _wrap,
-    _wrap_diff,
+    LIMIT_TOL_RAD,
+    PI,
+    TWO_PI,
     multi_turn_mask,
     pose_cols,
+    wrap,
+    wrap_diff,
 )
 from fabric.robot.native_track import NativeTrack
 
@@ -42,7 +42,7 @@ __all__ = ["ClosedFormIK", "select_branches"]
 
 def _sq_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Squared joint distance, every angle compared modulo 2*pi (last axis = joints)."""
-    d = _wrap(a - b)
+    d = wrap(a - b)
     return np.einsum("...j,...j->...", d, d)
 
 
@@ -105,7 +105,7 @@ class ClosedFormIK:
         self.free_rad = 0.0                # the redundancy joint's value when a call gives none
         if self.free_joint is not None:
             j = self.free_joint
-            mid = 0.5 * (max(self.lower_rad[j], -_PI) + min(self.upper_rad[j], _PI))
+            mid = 0.5 * (max(self.lower_rad[j], -PI) + min(self.upper_rad[j], PI))
             self.free_rad = float(mid if free_rad is None else free_rad)
 
     def _free(self, q_free: float | np.ndarray | None, n: int) -> float | np.ndarray | None:
@@ -147,13 +147,19 @@ class ClosedFormIK:
         return q, inlim
 
     def _canon_col(self, j: int, col: np.ndarray) -> np.ndarray:
-        """:meth:`canon` of joint ``j``'s angles ``col`` (in place); returns its in-limits mask."""
-        lo = self.lower_rad[j]
-        if lo > -_PI:                                   # (ufuncs with where=: no index arrays, views stay views)
-            np.add(col, _TWO_PI, out=col, where=col < lo)
-        elif lo + _TWO_PI <= _PI:
-            np.subtract(col, _TWO_PI, out=col, where=col >= lo + _TWO_PI)
-        return col <= self.upper_rad[j] + _LIMIT_TOL_RAD
+        """:meth:`canon` of joint ``j``'s angles ``col`` (in place); returns its in-limits mask.
+
+        Both ends take the limit tolerance: an angle a rounding error below the lower limit stays there (in
+        limits) instead of turning a full turn up past the upper one. Without it, a configuration at a limit
+        (a path clipped to it, the wrist flip of one at the opposite limit) was in or out by the last bit of
+        an ``atan2``, which differs between numpy's kernels on different CPUs.
+        """
+        lo, tol = self.lower_rad[j], LIMIT_TOL_RAD
+        if lo > -PI:                                   # (ufuncs with where=: no index arrays, views stay views)
+            np.add(col, TWO_PI, out=col, where=col < lo - tol)
+        elif lo + TWO_PI <= PI:
+            np.subtract(col, TWO_PI, out=col, where=col >= lo + TWO_PI - tol)
+        return (col >= lo - tol) & (col <= self.upper_rad[j] + tol)
 
     def branches(self, T_flange: np.ndarray, q1_hold: np.ndarray | None = None,
                  q_free: float | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -265,11 +271,11 @@ class ClosedFormIK:
             for jj in single:
                 fine &= self._canon_col(jj, qt[jj])
             d = np.diff(qt, axis=1, prepend=prev[:, None])
-            sep2 = np.minimum(gap, _PI) ** 2
+            sep2 = np.minimum(gap, PI) ** 2
             quiet = 4.0 * np.einsum("ji,ji->i", d, d) < sep2      # unwrapped steps: all < pi/2 if it passes
             loud = np.flatnonzero(~quiet)
             if len(loud):                                        # compare those modulo 2*pi
-                dw = _wrap(d[:, loud])
+                dw = wrap(d[:, loud])
                 quiet[loud] = 4.0 * np.einsum("ji,ji->i", dw, dw) < sep2[loud]
             fine &= quiet
             f = int(np.argmin(fine)) if not fine.all() else j - i
@@ -313,18 +319,18 @@ class ClosedFormIK:
             step_allowed = allowed[1:]
         max_step2 = np.max(np.where(step_allowed, step2, 0.0), axis=1)
         pair_allowed = allowed[1:, ::2] | allowed[1:, 1::2]
-        sep = np.full(n - 1, _PI)
+        sep = np.full(n - 1, PI)
         # the two elbows of a shoulder: one A3 gap for a spherical wrist; a UR arm's wrist choice moves its arm
         # plane, so each wrist has its own pair of elbows (their A3 far apart under one wrist, close under the
         # other near a stretched elbow)
         for s, w in ((0, 0), (0, 1), (1, 0), (1, 1)) if self.family == "ur" else ((0, 0), (1, 0)):
             a, c = 4 * s + w, 4 * s + 2 + w
-            gap = np.abs(_wrap_diff(qb[1:, a, 2] - qb[1:, c, 2]))
+            gap = np.abs(wrap_diff(qb[1:, a, 2] - qb[1:, c, 2]))
             both = (allowed[1:, a] & allowed[1:, c]) if self.family == "ur" else \
                 (pair_allowed[:, 2 * s] & pair_allowed[:, 2 * s + 1])
             sep = np.where(both, np.minimum(sep, gap), sep)
         if self.family != "abb-spherical-wrist":         # the reference model's shoulders are pi apart
-            gap = np.abs(_wrap_diff(qb[1:, 0, 0] - qb[1:, 4, 0]))
+            gap = np.abs(wrap_diff(qb[1:, 0, 0] - qb[1:, 4, 0]))
             both = (pair_allowed[:, 0] | pair_allowed[:, 1]) & (pair_allowed[:, 2] | pair_allowed[:, 3])
             sep = np.where(both, np.minimum(sep, gap), sep)
         quiet[1:] = same & (4.0 * max_step2 < sep * sep)
@@ -338,15 +344,15 @@ class ClosedFormIK:
         A5 and A6 depend on the elbow and the wrist, so the two wrists of one elbow are at least the larger of
         their A5 and A6 distances apart; the two shoulders of one elbow and wrist are pi apart in A1.
         """
-        sep = np.full(len(qb), _PI)
+        sep = np.full(len(qb), PI)
         elbow = [allowed[:, [2 * e, 2 * e + 1, 2 * e + 4, 2 * e + 5]].any(axis=1) for e in range(2)]
-        gap = np.abs(_wrap_diff(qb[:, 0, 3] - qb[:, 2, 3]))
+        gap = np.abs(wrap_diff(qb[:, 0, 3] - qb[:, 2, 3]))
         sep = np.where(elbow[0] & elbow[1], np.minimum(sep, gap), sep)
         for e in range(2):
             w0 = allowed[:, 2 * e] | allowed[:, 2 * e + 4]
             w1 = allowed[:, 2 * e + 1] | allowed[:, 2 * e + 5]
-            gap = np.maximum(np.abs(_wrap_diff(qb[:, 2 * e, 4] - qb[:, 2 * e + 1, 4])),
-                             np.abs(_wrap_diff(qb[:, 2 * e, 5] - qb[:, 2 * e + 1, 5])))
+            gap = np.maximum(np.abs(wrap_diff(qb[:, 2 * e, 4] - qb[:, 2 * e + 1, 4])),
+                             np.abs(wrap_diff(qb[:, 2 * e, 5] - qb[:, 2 * e + 1, 5])))
             sep = np.where(w0 & w1, np.minimum(sep, gap), sep)
         return sep
 
@@ -365,22 +371,22 @@ class ClosedFormIK:
                 continue
             raw = q[j]
             d = np.diff(raw, prepend=seed[j])
-            wraps = np.flatnonzero(np.abs(d) > 0.999 * _PI)          # superset of rint(d / 2pi) != 0
+            wraps = np.flatnonzero(np.abs(d) > 0.999 * PI)          # superset of rint(d / 2pi) != 0
             lo, hi = self.lower_rad[j], self.upper_rad[j]
             if len(wraps):
                 step = np.zeros(len(raw))
-                step[wraps] = -np.rint(d[wraps] / _TWO_PI)
+                step[wraps] = -np.rint(d[wraps] / TWO_PI)
                 turns = np.cumsum(step)
-                col = raw + _TWO_PI * turns
+                col = raw + TWO_PI * turns
             else:
                 turns, col = None, raw
-            over, under = col > hi + _LIMIT_TOL_RAD, col < lo - _LIMIT_TOL_RAD
+            over, under = col > hi + LIMIT_TOL_RAD, col < lo - LIMIT_TOL_RAD
             if over.any() or under.any():
                 turns = np.zeros(len(raw)) if turns is None else turns
-                turns -= np.where(over, np.ceil((col - hi) / _TWO_PI), 0.0)
-                turns += np.where(under, np.ceil((lo - col) / _TWO_PI), 0.0)
+                turns -= np.where(over, np.ceil((col - hi) / TWO_PI), 0.0)
+                turns += np.where(under, np.ceil((lo - col) / TWO_PI), 0.0)
             if turns is not None:
-                q[j] = raw + _TWO_PI * turns
+                q[j] = raw + TWO_PI * turns
 
 
 def _rows(free: float | np.ndarray | None, i: int, j: int) -> float | np.ndarray | None:

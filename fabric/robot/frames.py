@@ -7,7 +7,9 @@ Conventions used everywhere in the fabric:
   about y, then yaw about z, i.e. ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``. RoboDK's
   ``(x, y, z, rx, ry, rz)`` in Table II is the same matrix for the zero and
   single-axis rotations used there;
-* quaternions are ``(w, x, y, z)`` with ``w >= 0`` (ABB RAPID order).
+* quaternions are ``(w, x, y, z)`` (ABB RAPID order) with the sign :func:`quat_sign` chooses: ``w > 0``, or
+  where ``w`` is zero but for rounding (a half turn: a nozzle pointing down), the first of ``x, y, z`` that is
+  not is positive. The sign is never chosen by a rounding error's, so every CPU writes the same quaternion.
 """
 from __future__ import annotations
 
@@ -16,8 +18,11 @@ from numpy.typing import ArrayLike
 
 __all__ = [
     "rot_x", "rot_y", "rot_z", "rpy_to_R", "R_to_rpy", "make_T", "xyzrpy_to_T", "T_to_xyzrpy",
-    "inv_T", "quat_from_R", "R_from_quat", "frame_from_z_axis", "rot_about_z", "nlerp_quat",
+    "inv_T", "quat_from_R", "R_from_quat", "frame_from_z_axis", "rot_about_z", "nlerp_quat", "quat_sign",
+    "QUAT_SIGN_TOL",
 ]
+
+QUAT_SIGN_TOL = 1e-9      # a quaternion's components this small are rounding noise: they never choose its sign
 
 
 def _rot(axis: int, angle_rad: np.ndarray | float) -> np.ndarray:
@@ -94,8 +99,18 @@ def inv_T(T: np.ndarray) -> np.ndarray:
     return make_T(Rt, -np.einsum("...ij,...j->...i", Rt, T[..., :3, 3]))
 
 
+def quat_sign(q_wxyz: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) with their sign chosen (``q`` and ``-q`` are one rotation): the first of ``w, x, y,
+    z`` larger than :data:`QUAT_SIGN_TOL` in size is positive (a unit quaternion always has one of at least
+    1/2). The same rule as ``w >= 0`` but where ``w`` is zero in exact arithmetic: there the sign of the
+    rounding error, which differs between CPUs' kernels, would choose."""
+    q = np.asarray(q_wxyz, dtype=float)
+    lead = np.argmax(np.abs(q) > QUAT_SIGN_TOL, axis=-1)
+    return np.where(np.take_along_axis(q, lead[..., None], axis=-1) < 0.0, -q, q)
+
+
 def quat_from_R(R: np.ndarray) -> np.ndarray:
-    """Unit quaternions (..., 4) as ``(w, x, y, z)`` with ``w >= 0`` from rotations (..., 3, 3).
+    """Unit quaternions (..., 4) as ``(w, x, y, z)`` (sign: :func:`quat_sign`) from rotations (..., 3, 3).
 
     Shepperd's method: per row, divide by the largest of ``w, x, y, z`` so the
     result stays accurate for every rotation (each case computed on its rows only).
@@ -129,8 +144,7 @@ def quat_from_R(R: np.ndarray) -> np.ndarray:
         for j, col in enumerate(cols):
             q[sel, j] = col
     q /= np.linalg.norm(q, axis=-1, keepdims=True)
-    q *= np.where(q[:, :1] < 0.0, -1.0, 1.0)
-    return q.reshape(shape + (4,))
+    return quat_sign(q).reshape(shape + (4,))
 
 
 def R_from_quat(q_wxyz: np.ndarray) -> np.ndarray:
@@ -196,8 +210,8 @@ def rot_about_z(R: np.ndarray, angle_rad: np.ndarray | float) -> np.ndarray:
 
 def nlerp_quat(qa: np.ndarray, qb: np.ndarray, f: np.ndarray) -> np.ndarray:
     """Normalised linear interpolation (N, 4) of quaternions ``(w, x, y, z)`` (N, 4) at fractions ``f`` (N,),
-    the shorter way round, ``w >= 0``: how the twin turns the tool between two rows."""
+    the shorter way round, signed by :func:`quat_sign`: how the twin turns the tool between two rows."""
     sgn = np.where(np.sum(qa * qb, axis=-1) < 0, -1.0, 1.0)
     q = (1.0 - f)[:, None] * qa + (f * sgn)[:, None] * qb
     q /= np.linalg.norm(q, axis=-1, keepdims=True)
-    return np.where(q[:, :1] < 0, -q, q)
+    return quat_sign(q)

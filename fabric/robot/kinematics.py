@@ -49,7 +49,7 @@ import numpy as np
 __all__ = [
     "IK_OK", "IK_OUT_OF_REACH", "IK_JOINT_LIMIT", "IK_SINGULAR", "IK_JUMP", "IK_REASONS", "ik_reason",
     "WRIST_SING_SIN", "ELBOW_SING_COS", "SHOULDER_SING_MM", "SphericalWristArm", "IRB140_ARM",
-    "multi_turn_mask", "wrist_q6", "pose_cols",
+    "multi_turn_mask", "wrist_q6", "pose_cols", "wrap", "wrap_diff", "flip", "LIMIT_TOL_RAD", "PI", "TWO_PI",
 ]
 
 IK_OK, IK_OUT_OF_REACH, IK_JOINT_LIMIT, IK_SINGULAR, IK_JUMP = 0, 1, 2, 3, 4
@@ -74,30 +74,30 @@ def ik_reason(status: int | np.integer) -> str:
 WRIST_SING_SIN = 0.01
 ELBOW_SING_COS = 0.01
 SHOULDER_SING_MM = 10.0
-_LIMIT_TOL_RAD = 1e-9
-_TWO_PI = 2.0 * np.pi
-_PI = np.pi
+LIMIT_TOL_RAD = 1e-9      # a joint this far past a limit is at it (rounding): in limits, on either side
+TWO_PI = 2.0 * np.pi
+PI = np.pi
 
 
-def _wrap(a: np.ndarray) -> np.ndarray:
+def wrap(a: np.ndarray) -> np.ndarray:
     """Angles wrapped to [-pi, pi]."""
-    return a - _TWO_PI * np.rint(a / _TWO_PI)
+    return a - TWO_PI * np.rint(a / TWO_PI)
 
 
-def _wrap_diff(d: np.ndarray) -> np.ndarray:
+def wrap_diff(d: np.ndarray) -> np.ndarray:
     """Differences of two angles in [-pi, pi] (so d in [-2*pi, 2*pi]) wrapped to [-pi, pi]."""
-    d = np.where(d > _PI, d - _TWO_PI, d)
-    return np.where(d < -_PI, d + _TWO_PI, d)
+    d = np.where(d > PI, d - TWO_PI, d)
+    return np.where(d < -PI, d + TWO_PI, d)
 
 
-def _flip(a: np.ndarray) -> np.ndarray:
+def flip(a: np.ndarray) -> np.ndarray:
     """``wrap(a + pi)`` for a in [-pi, pi], without a modulo."""
-    return np.where(a >= 0.0, a - _PI, a + _PI)
+    return np.where(a >= 0.0, a - PI, a + PI)
 
 
 def multi_turn_mask(lower_rad: np.ndarray, upper_rad: np.ndarray) -> np.ndarray:
     """Joints whose range spans a full turn: IK only defines their angle modulo 2*pi."""
-    return (np.asarray(upper_rad) - np.asarray(lower_rad)) >= _TWO_PI - 1e-9
+    return (np.asarray(upper_rad) - np.asarray(lower_rad)) >= TWO_PI - 1e-9
 
 
 @dataclass(frozen=True)
@@ -243,7 +243,7 @@ class SphericalWristArm:
         d6 = self.d6_mm
         wx, wy = px - d6 * zx, py - d6 * zy
         v = pz - d6 * zz - self.d1_mm
-        q1 = np.arctan2(wy, wx) if q1_hold is None else _wrap(np.asarray(q1_hold, dtype=float))
+        q1 = np.arctan2(wy, wx) if q1_hold is None else wrap(np.asarray(q1_hold, dtype=float))
         return (zx, zy, zz, yx, yy, yz, wx, wy, v, q1,
                 wx * wx + wy * wy < SHOULDER_SING_MM * SHOULDER_SING_MM)
 
@@ -254,7 +254,7 @@ class SphericalWristArm:
         L = float(np.hypot(self.d4_mm, self.a3_mm))
         phi = float(np.arctan2(self.a3_mm, self.d4_mm))
         if shoulder:
-            q1 = _flip(q1)
+            q1 = flip(q1)
         c1, s1 = np.cos(q1), np.sin(q1)
         # the flange z and y columns expressed in the arm plane: Rz(-q1) applied
         zx1, zy1 = c1 * zx + s1 * zy, c1 * zy - s1 * zx
@@ -269,7 +269,7 @@ class SphericalWristArm:
         q2 = np.arctan2(A * u - B * v, A * v + B * u)
         q3 = np.arctan2(kc, cpsi)
         if phi:
-            q3 = _wrap(q3 + phi)
+            q3 = wrap(q3 + phi)
         q23 = q2 + q3
         c23, s23 = np.cos(q23), np.sin(q23)
         # first two columns of R36 = Ry(q23)^T (Rz(q1)^T R06)
@@ -315,7 +315,7 @@ def _wrist_variant(cols: tuple[np.ndarray, ...], wrist: int) -> tuple[np.ndarray
     if not wrist:
         return cols
     q1, q2, q3, q4, q5, q6 = cols
-    return q1, q2, q3, _flip(q4), -q5, _flip(q6)
+    return q1, q2, q3, flip(q4), -q5, flip(q6)
 
 
 def wrist_q6(R01: np.ndarray, R11: np.ndarray, R21: np.ndarray, q4: np.ndarray, q5: np.ndarray) -> np.ndarray:

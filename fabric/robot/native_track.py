@@ -16,43 +16,36 @@ from typing import Any
 import numpy as np
 
 from fabric import native
-from fabric.robot.kinematics import _LIMIT_TOL_RAD, ELBOW_SING_COS, SHOULDER_SING_MM, WRIST_SING_SIN, _wrap
+from fabric.robot.kinematics import ELBOW_SING_COS, LIMIT_TOL_RAD, SHOULDER_SING_MM, WRIST_SING_SIN, wrap
 
-__all__ = ["NativeTrack", "available"]
+__all__ = ["NativeTrack", "available", "SIGNATURES"]
 
 FAMILIES = {"opw": 0, "ur": 1, "panda": 2}      # armik.c's FAMILY_*
 _NQ_MAX = 7                         # armik.c's NQ_MAX: par holds 7 values per joint block
 _HOLD = -1                          # armik.c's ARMIK_HOLD
 
-_P = ctypes.c_void_p
-_SIGNATURES: dict[str, native.Signature] = {
-    "armik_track": (ctypes.c_long, [ctypes.c_int, ctypes.c_int, _P, _P, ctypes.c_long, _P, _P, _P, _P, ctypes.c_int,
-                                    _P, ctypes.c_long, _P, _P, _P, _P]),
-    "armik_place_multi_turn": (None, [ctypes.c_long, _P, ctypes.c_double, ctypes.c_double, ctypes.c_double,
-                                      ctypes.c_double, _P]),
+_L, _I, _D = ctypes.c_long, ctypes.c_int, ctypes.c_double
+_F8 = native.array(np.float64, ndim=1)
+_F8_OUT = native.array(np.float64, out=True)
+_B1_OUT = native.array(np.bool_, ndim=1, out=True)
+SIGNATURES: dict[str, native.Signature] = {
+    # family, nq, constants, parameters, n, C (9, n), A7's cos, sin and value, per row, seed, max_rows; out: q,
+    # row_ok, reach_any, singular
+    "armik_track": (_L, [_I, _I, _F8, _F8, _L, native.array(np.float64, ndim=2), _F8, _F8, _F8, _I, _F8, _L,
+                         native.array(np.float64, ndim=2, out=True), _B1_OUT, _B1_OUT, _B1_OUT]),
+    "armik_place_multi_turn": (None, [_L, native.array(np.float64, ndim=1, out=True), _D, _D, _D, _D, _F8_OUT]),
     "armik_par_count": (ctypes.c_long, []),
     "armik_panda_count": (ctypes.c_long, []),
 }
 
 
 def _armik() -> ctypes.CDLL | None:
-    return native.bound("armik", _SIGNATURES)
+    return native.bound("armik", SIGNATURES)
 
 
 def available() -> bool:
     """Whether the C helper is built and loaded here (else numpy's path answers every family)."""
     return _armik() is not None
-
-
-def _constants(arm: Any) -> list[float]:
-    """The family's constants in armik.c's order (``opw_branch``, ``ur_branch``, the ``F_*`` of the Panda type)."""
-    if arm.family == "opw":
-        return [arm.a1, arm.a2, arm.b, arm.c1, arm.c2, arm.c3, arm.c4, arm.k, arm.phi]
-    if arm.family == "ur":
-        return [arm.d1, arm.a2, arm.a3, arm.d4, arm.d5, arm.d6]
-    turned = [float(v) for X in (arm._u, arm._gv, arm._hv) for part in X for v in part]
-    return [*np.asarray(arm._K, dtype=float).ravel().tolist(), *np.asarray(arm._kW, dtype=float).tolist(), *turned,
-            arm._D, arm._inv2R4, arm._g4, arm.beta]
 
 
 class NativeTrack:
@@ -64,7 +57,7 @@ class NativeTrack:
         self._arm = arm
         self._family = FAMILIES[arm.family]
         self._nq = nq = int(arm.nq)
-        self._fam = np.asarray(_constants(arm), dtype=float)
+        self._fam = np.asarray(arm.native_constants(), dtype=float)
         if arm.family == "panda" and len(self._fam) != int(lib.armik_panda_count()):
             raise ValueError(f"{len(self._fam)} Panda constants, armik.c reads {int(lib.armik_panda_count())}")
         par = np.zeros(int(lib.armik_par_count()))
@@ -72,7 +65,7 @@ class NativeTrack:
         sign = getattr(arm, "sign", np.ones(nq))
         for k, block in enumerate((off, sign, lower_rad, upper_rad, np.asarray(multi, dtype=float))):
             par[k * _NQ_MAX:k * _NQ_MAX + nq] = block
-        par[5 * _NQ_MAX:5 * _NQ_MAX + 4] = (WRIST_SING_SIN, ELBOW_SING_COS, SHOULDER_SING_MM, _LIMIT_TOL_RAD)
+        par[5 * _NQ_MAX:5 * _NQ_MAX + 4] = (WRIST_SING_SIN, ELBOW_SING_COS, SHOULDER_SING_MM, LIMIT_TOL_RAD)
         self._par = par
 
     @classmethod
@@ -89,11 +82,13 @@ class NativeTrack:
         three (N,) bool arrays, with a Panda-type arm's A7 ``free`` ((N,) or one value); False (nothing
         written) where a row's A1 is undefined: numpy's path holds it."""
         n = C.shape[1]
-        Cm = np.ascontiguousarray(self._arm._model_cols(C), dtype=float)
+        Cm = np.ascontiguousarray(self._arm.model_cols(C), dtype=float)
         seed = np.ascontiguousarray(seed, dtype=float)
-        for a in (q, row_ok, reach_any, sing):
-            assert a.flags.c_contiguous and a.shape[-1] == n and a.itemsize == (8 if a is q else 1)
-        assert q.shape[0] == self._nq and seed.shape == (self._nq,)
+        if Cm.shape != (9, n) or q.shape != (self._nq, n) or seed.shape != (self._nq,) \
+                or any(a.shape != (n,) for a in (row_ok, reach_any, sing)):
+            flags = [a.shape for a in (row_ok, reach_any, sing)]
+            raise ValueError(f"track: columns {Cm.shape}, joints {q.shape}, seed {seed.shape} and flags {flags} do "
+                             f"not match {self._nq} joints of {n} rows")
         # A7 as PandaArm._link6 and _branches take it: numpy's cos and sin of the value given, and it wrapped
         given = np.asarray(0.0 if free is None else free, dtype=float)
         per_row = given.ndim == 1
@@ -102,11 +97,9 @@ class NativeTrack:
             raise ValueError(f"A7 needs one value per row ({n}), got {q7.shape[0]}")
         c7, s7 = (np.ascontiguousarray(np.cos(q7)), np.ascontiguousarray(np.sin(q7))) if per_row else \
             (np.array([np.cos(q7[0])]), np.array([np.sin(q7[0])]))
-        w7 = np.ascontiguousarray(_wrap(q7))
-        got = self._lib.armik_track(self._family, self._nq, self._fam.ctypes.data, self._par.ctypes.data, n,
-                                    Cm.ctypes.data, c7.ctypes.data, s7.ctypes.data, w7.ctypes.data, int(per_row),
-                                    seed.ctypes.data, int(max_rows), q.ctypes.data, row_ok.ctypes.data,
-                                    reach_any.ctypes.data, sing.ctypes.data)
+        w7 = np.ascontiguousarray(wrap(q7))
+        got = self._lib.armik_track(self._family, self._nq, self._fam, self._par, n, Cm, c7, s7, w7, int(per_row),
+                                    seed, int(max_rows), q, row_ok, reach_any, sing)
         if got == _HOLD:
             return False
         if got != n:
@@ -115,7 +108,5 @@ class NativeTrack:
 
     def place_multi_turn(self, col: np.ndarray, seed_rad: float, lower_rad: float, upper_rad: float) -> None:
         """``ClosedFormIK._place_multi_turn`` of one multi-turn joint's angles ``col`` (N,), in place."""
-        assert col.dtype == np.float64 and col.flags.c_contiguous and col.flags.writeable
         turns = np.empty(len(col))
-        self._lib.armik_place_multi_turn(len(col), col.ctypes.data, seed_rad, lower_rad, upper_rad, _LIMIT_TOL_RAD,
-                                         turns.ctypes.data)
+        self._lib.armik_place_multi_turn(len(col), col, seed_rad, lower_rad, upper_rad, LIMIT_TOL_RAD, turns)

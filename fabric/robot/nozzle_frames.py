@@ -80,7 +80,7 @@ class NozzleFrames:
         return FrameCols(self.x0[:, rows], self.y0[:, rows], z0)
 
     def quats(self, theta_rad: np.ndarray) -> np.ndarray:
-        """(N, 4) quaternions ``(w, x, y, z)``, w >= 0, of ``R0_i @ Rz(theta_i)``.
+        """(N, 4) quaternions ``(w, x, y, z)`` (sign: ``frames.quat_sign``) of ``R0_i @ Rz(theta_i)``.
 
         With one nozzle axis every frame is ``B @ Rz(alpha_i)`` for a fixed ``B``
         (z column the axis), so the quaternion is ``q_B * (cos h, 0, 0, sin h)``
@@ -104,13 +104,4 @@ class NozzleFrames:
             w1, x1, y1, z1 = qa.T
         c, s = np.cos(half), np.sin(half)
         cols = (w1 * c - z1 * s, x1 * c + y1 * s, y1 * c - x1 * s, z1 * c + w1 * s)
-        flip = cols[0] < 0.0
-        zero = np.flatnonzero(cols[0] == 0.0)              # w = 0: largest component positive, as Shepperd's
-        if len(zero):
-            sub = [col if len(zero) == len(c) else col[zero] for col in cols[1:]]
-            a = [np.abs(col) for col in sub]
-            largest = np.where((a[0] >= a[1]) & (a[0] >= a[2]), sub[0],
-                               np.where(a[1] >= a[2], sub[1], sub[2]))
-            flip[zero] = largest < 0.0
-        q = np.stack(cols, axis=1)
-        return np.negative(q, out=q, where=flip[:, None])
+        return frames.quat_sign(np.stack(cols, axis=1))

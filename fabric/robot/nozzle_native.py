@@ -13,19 +13,22 @@ import ctypes
 import numpy as np
 
 from fabric import native
+from fabric.robot.frames import QUAT_SIGN_TOL
 
-__all__ = ["frames", "flange_cols", "quats", "available"]
+__all__ = ["frames", "flange_cols", "quats", "available", "SIGNATURES"]
 
-_P = ctypes.c_void_p
-_SIGNATURES: dict[str, native.Signature] = {
-    "nozzle_frames": (None, [ctypes.c_long, _P, ctypes.c_int, _P, _P, _P]),
-    "nozzle_flange_cols": (None, [ctypes.c_long, _P, _P, _P, _P, ctypes.c_int, _P, _P, ctypes.c_int, _P, _P]),
-    "nozzle_quats": (None, [ctypes.c_long, _P, _P, _P, _P, _P, ctypes.c_int, _P]),
+_V, _M = native.array(np.float64, ndim=1), native.array(np.float64, ndim=2)      # vectors, columns (3, N)
+_M_OUT = native.array(np.float64, ndim=2, out=True)
+_L, _I = ctypes.c_long, ctypes.c_int
+SIGNATURES: dict[str, native.Signature] = {
+    "nozzle_frames": (None, [_L, _M, _I, _M, _M_OUT, _M_OUT]),
+    "nozzle_flange_cols": (None, [_L, _M, _M, _M, _M, _I, _V, _V, _I, _M, _M_OUT]),
+    "nozzle_quats": (None, [_L, _M, _V, _V, _V, _V, _I, ctypes.c_double, _M_OUT]),
 }
 
 
 def _nozzle() -> ctypes.CDLL | None:
-    return native.bound("nozzle", _SIGNATURES)
+    return native.bound("nozzle", SIGNATURES)
 
 
 def available() -> bool:
@@ -42,6 +45,12 @@ def _check(rows: int, n: int, what: str) -> None:
         raise ValueError(f"{what} has {rows} rows for {n}")
 
 
+def _rows3(a: np.ndarray, what: str) -> None:
+    """Columns of 3-vectors: (3, N)."""
+    if a.ndim != 2 or a.shape[0] != 3:
+        raise ValueError(f"{what} must be (3, N), not {a.shape}")
+
+
 def frames(z0: np.ndarray, xr: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """``x0, y0`` (3, N) of ``NozzleFrames`` for unit nozzle axes ``z0`` ((3, 1) or (3, N)) and references
     ``xr`` (3, N); None without the helper."""
@@ -50,9 +59,11 @@ def frames(z0: np.ndarray, xr: np.ndarray) -> tuple[np.ndarray, np.ndarray] | No
         return None
     n = xr.shape[1]
     _check(z0.shape[1], n, "z0")
+    _rows3(z0, "z0")
+    _rows3(xr, "xr")
     z0, xr = _f8(z0), _f8(xr)
     x0, y0 = np.empty((3, n)), np.empty((3, n))
-    lib.nozzle_frames(n, z0.ctypes.data, int(z0.shape[1] != 1), xr.ctypes.data, x0.ctypes.data, y0.ctypes.data)
+    lib.nozzle_frames(n, z0, int(z0.shape[1] != 1), xr, x0, y0)
     return x0, y0
 
 
@@ -64,14 +75,19 @@ def flange_cols(p: np.ndarray, x0: np.ndarray, y0: np.ndarray, z0: np.ndarray, c
     if lib is None:
         return None
     n = p.shape[1]
+    for a, what in ((p, "p"), (x0, "x0"), (y0, "y0"), (z0, "z0")):
+        _rows3(a, what)
+    if x0.shape != p.shape or y0.shape != p.shape:
+        raise ValueError(f"the frames {x0.shape}, {y0.shape} do not match the positions {p.shape}")
     p, x0, y0, z0 = _f8(p), _f8(x0), _f8(y0), _f8(z0)
     c, s = np.atleast_1d(_f8(c)), np.atleast_1d(_f8(s))
     m = _f8(np.stack([tool_inv_T[:3, 3], tool_inv_T[:3, 2], tool_inv_T[:3, 1]]))
     out = np.empty((9, n))
     _check(z0.shape[1], n, "z0")
     _check(c.shape[0], n, "the rotation")
-    lib.nozzle_flange_cols(n, p.ctypes.data, x0.ctypes.data, y0.ctypes.data, z0.ctypes.data, int(z0.shape[1] != 1),
-                           c.ctypes.data, s.ctypes.data, int(c.shape[0] != 1), m.ctypes.data, out.ctypes.data)
+    if s.shape != c.shape:
+        raise ValueError(f"the rotation's cosines {c.shape} and sines {s.shape} differ")
+    lib.nozzle_flange_cols(n, p, x0, y0, z0, int(z0.shape[1] != 1), c, s, int(c.shape[0] != 1), m, out)
     return out
 
 
@@ -81,12 +97,14 @@ def quats(x0: np.ndarray, B: np.ndarray, qb: np.ndarray, theta_rad: np.ndarray |
     lib = _nozzle()
     if lib is None:
         return None
+    _rows3(x0, "x0")
     n = x0.shape[1]
     x0 = _f8(x0)
     theta = np.atleast_1d(_f8(theta_rad))
     bx, by, qb = _f8(B[:, 0]), _f8(B[:, 1]), _f8(qb)
+    if B.shape != (3, 3) or qb.shape != (4,):
+        raise ValueError(f"B must be (3, 3) and qb (4,), not {B.shape} and {qb.shape}")
     out = np.empty((n, 4))
     _check(theta.shape[0], n, "the rotation")
-    lib.nozzle_quats(n, x0.ctypes.data, bx.ctypes.data, by.ctypes.data, qb.ctypes.data, theta.ctypes.data,
-                     int(theta.shape[0] != 1), out.ctypes.data)
+    lib.nozzle_quats(n, x0, bx, by, qb, theta, int(theta.shape[0] != 1), QUAT_SIGN_TOL, out)
     return out

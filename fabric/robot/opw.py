@@ -39,8 +39,8 @@ from fabric.robot.kinematics import (
     ELBOW_SING_COS,
     SHOULDER_SING_MM,
     WRIST_SING_SIN,
-    _flip,
-    _wrap,
+    flip,
+    wrap,
 )
 from fabric.robot.opw_derive import OPWParams
 
@@ -88,7 +88,7 @@ class OPWArm:
     def _q(self, theta: np.ndarray, j: int) -> np.ndarray:
         s, o = self.sign[j], self.off[j]
         if o:
-            return _wrap(theta - o if s > 0 else o - theta)
+            return wrap(theta - o if s > 0 else o - theta)
         return theta if s > 0 else -theta
 
     # Forward kinematics ----------------------------------------------------
@@ -156,7 +156,11 @@ class OPWArm:
         return out
 
     # Inverse kinematics ----------------------------------------------------
-    def _model_cols(self, C: np.ndarray) -> np.ndarray:
+    def native_constants(self) -> list[float]:
+        """armik.c's ``opw_branch`` constants: a1, a2, b, c1, c2, c3, c4, k, phi."""
+        return [float(v) for v in (self.a1, self.a2, self.b, self.c1, self.c2, self.c3, self.c4, self.k, self.phi)]
+
+    def model_cols(self, C: np.ndarray) -> np.ndarray:
         """End-frame columns in the OPW base (the URDF base unless axis 1 is placed otherwise)."""
         return cols_in_frame(self._base, C)
 
@@ -165,7 +169,7 @@ class OPWArm:
 
     def q1_free(self, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """A1 of the front shoulder per row, and the rows where it is undefined (centre on axis 1, b = 0)."""
-        cx, cy, _ = self._centre(self._model_cols(C))
+        cx, cy, _ = self._centre(self.model_cols(C))
         rho2 = cx * cx + cy * cy
         t = np.sqrt(np.maximum(rho2 - self.b * self.b, 0.0))
         th1 = np.arctan2(cy * t - cx * self.b, cx * t + cy * self.b)
@@ -175,7 +179,7 @@ class OPWArm:
     def ik_branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None,
                          q_free: float | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """All 8 branches of end-frame columns ``C`` (9, N): ``q (N, 8, 6), reach (N, 8), singular (N, 8)``."""
-        F = self._terms(self._model_cols(C), q1_hold)
+        F = self._terms(self.model_cols(C), q1_hold)
         n = C.shape[1]
         qt = np.empty((8, 6, n))
         reach = np.empty((n, 8), dtype=bool)
@@ -193,7 +197,7 @@ class OPWArm:
                        q_free: float | np.ndarray | None = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """One branch for every row: ``q (6, N), reach, singular, gap_rad`` (see ``arm_family``)."""
-        th, ok, sg, gap = self._solve(self._terms(self._model_cols(C), q1_hold), branch // 4, (branch // 2) % 2)
+        th, ok, sg, gap = self._solve(self._terms(self.model_cols(C), q1_hold), branch // 4, (branch // 2) % 2)
         q = np.empty((6, C.shape[1]))
         for j, col in enumerate(_wrist_variant(th, branch % 2)):
             q[j] = self._q(col, j)
@@ -205,7 +209,7 @@ class OPWArm:
         rho2 = cx * cx + cy * cy
         t = np.sqrt(np.maximum(rho2 - self.b * self.b, 0.0))
         ok = rho2 >= self.b * self.b
-        th1 = None if q1_hold is None else _wrap(self._theta(np.asarray(q1_hold, dtype=float), 0))
+        th1 = None if q1_hold is None else wrap(self._theta(np.asarray(q1_hold, dtype=float), 0))
         return _Terms(cx, cy, cz, rho2, t, ok, th1, C)
 
     def _solve(self, F: _Terms, shoulder: int, elbow: int
@@ -222,7 +226,7 @@ class OPWArm:
             th1 = np.arctan2(s1, c1)
             u = (-t if shoulder else t) - self.a1
         else:
-            th1 = _flip(th1h) if shoulder else th1h
+            th1 = flip(th1h) if shoulder else th1h
             c1, s1 = np.cos(th1), np.sin(th1)
             u = c1 * cx + s1 * cy - self.a1
         v = cz - self.c1
@@ -236,7 +240,7 @@ class OPWArm:
         th2 = np.arctan2(u * A - v * Bk, v * A + u * Bk)
         th3 = np.arctan2(spsi, Dc)
         if self.phi:
-            th3 = _wrap(th3 - self.phi)
+            th3 = wrap(th3 - self.phi)
         th23 = th2 + th3
         c23, s23 = np.cos(th23), np.sin(th23)
         # z and y columns of Rc = Ry(t23)^T Rz(t1)^T R
@@ -268,7 +272,7 @@ class OPWArm:
 
     def resolve_wrist(self, C: np.ndarray, q: np.ndarray, held: np.ndarray) -> np.ndarray:
         """Hold A4 at ``held[3]`` and solve A6 exactly on wrist-degenerate rows (6, M)."""
-        Cm = self._model_cols(C)
+        Cm = self.model_cols(C)
         th = [self._theta(q[j], j) for j in range(6)]
         th4 = self._theta(held[3], 3)
         c1, s1 = np.cos(th[0]), np.sin(th[0])
@@ -287,7 +291,7 @@ def _wrist_variant(th: tuple[np.ndarray, ...], wrist: int) -> tuple[np.ndarray, 
     if not wrist:
         return th
     t1, t2, t3, t4, t5, t6 = th
-    return t1, t2, t3, _flip(t4), -t5, _flip(t6)
+    return t1, t2, t3, flip(t4), -t5, flip(t6)
 
 
 def _zyz_theta6(R01: np.ndarray, R11: np.ndarray, R21: np.ndarray, th4: np.ndarray, th5: np.ndarray) -> np.ndarray:

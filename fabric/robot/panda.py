@@ -84,7 +84,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fabric.robot.arm_family import cols_in_frame, stack_branches
-from fabric.robot.kinematics import ELBOW_SING_COS, WRIST_SING_SIN, _flip, _wrap
+from fabric.robot.kinematics import ELBOW_SING_COS, WRIST_SING_SIN, flip, wrap
 from fabric.robot.panda_derive import PandaParams
 
 __all__ = ["PandaArm"]
@@ -214,7 +214,14 @@ class PandaArm:
         return out[0] if single else out
 
     # Inverse kinematics ----------------------------------------------------
-    def _model_cols(self, C: np.ndarray) -> np.ndarray:
+    def native_constants(self) -> list[float]:
+        """armik.c's ``F_*`` constants of the Panda type: K (row by row), kW, the turned vectors u, g, h (each
+        part), D, 1 / (2 R4), g4 and beta."""
+        turned = [float(v) for X in (self._u, self._gv, self._hv) for part in X for v in part]
+        return [*np.asarray(self._K, dtype=float).ravel().tolist(), *np.asarray(self._kW, dtype=float).tolist(),
+                *turned, float(self._D), float(self._inv2R4), float(self._g4), float(self.beta)]
+
+    def model_cols(self, C: np.ndarray) -> np.ndarray:
         """End-frame columns in the model base (origin at the shoulder)."""
         return cols_in_frame(self._base, C)
 
@@ -242,7 +249,7 @@ class PandaArm:
         k = np.clip(k, -1.0, 1.0)
         sphi = np.sqrt(1.0 - k * k)
         esp = -sphi if elbow else sphi
-        q4 = _wrap(self._g4 + np.arctan2(esp, k))
+        q4 = wrap(self._g4 + np.arctan2(esp, k))
 
         def at(X: tuple[np.ndarray, ...]) -> _Vec:
             X0, Xk, Xs = X[0], X[3], X[4]
@@ -286,7 +293,7 @@ class PandaArm:
         cx = c1 * dx + s1 * dy                                   # sin(q2 + beta) (= sign * h)
         q2 = np.arctan2(cx, dz)
         if self.beta:
-            q2 = _wrap(q2 - self.beta)
+            q2 = wrap(q2 - self.beta)
         mx, my, mz = m
         mx1, my1 = c1 * mx + s1 * my, c1 * my - s1 * mx          # RotZ(-q1) m
         q3 = np.arctan2(cx * mz - dz * mx1, my1)                 # RotY(-q2 - beta) of that is (-s3, c3, 0)
@@ -324,7 +331,7 @@ class PandaArm:
         """
         n = C.shape[1]
         l6 = self._link6(C, q7)
-        q7_row = np.full(n, _wrap(np.asarray(q7, dtype=float))) if np.ndim(q7) == 0 else _wrap(np.asarray(q7))
+        q7_row = np.full(n, wrap(np.asarray(q7, dtype=float))) if np.ndim(q7) == 0 else wrap(np.asarray(q7))
         norm_w = np.sqrt(l6.WW)
         out: dict[int, tuple[np.ndarray, ...]] = {}
         for e in elbows:
@@ -340,9 +347,9 @@ class PandaArm:
                 first: tuple[np.ndarray, ...] | None = None
                 for s in shoulders:
                     if first is not None and q1_hold is None:         # over the top of the first shoulder
-                        q1, q2, q3, h = _flip(first[0]), _wrap(-first[1] - 2.0 * self.beta), _flip(first[2]), first[3]
+                        q1, q2, q3, h = flip(first[0]), wrap(-first[1] - 2.0 * self.beta), flip(first[2]), first[3]
                     else:
-                        hold = None if q1_hold is None else (_flip(_wrap(q1_hold)) if s else q1_hold)
+                        hold = None if q1_hold is None else (flip(wrap(q1_hold)) if s else q1_hold)
                         q1, q2, q3, h = self._shoulder(d, m, -1.0 if s else 1.0, hold)
                         first = (q1, q2, q3, h)
                     q = np.stack([q1, q2, q3, el.q4, q5, q6, q7_row])
@@ -362,13 +369,13 @@ class PandaArm:
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """All 8 branches of end-frame columns ``C`` (9, N) for A7 = ``q_free`` ((N,) or a number; default 0):
         ``q (N, 8, 7), reach (N, 8), singular (N, 8)``."""
-        res = self._branches(self._model_cols(C), (0, 1), (0, 1), (0, 1), q1_hold, 0.0 if q_free is None else q_free)
+        res = self._branches(self.model_cols(C), (0, 1), (0, 1), (0, 1), q1_hold, 0.0 if q_free is None else q_free)
         return stack_branches(res, 7, C.shape[1])
 
     def ik_branch_cols(self, C: np.ndarray, branch: int, q1_hold: np.ndarray | None = None,
                        q_free: _Num | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """One branch for every row: ``q (7, N), reach, singular, gap_rad`` (see ``arm_family``)."""
-        res = self._branches(self._model_cols(C), (branch // 4,), (branch % 2,), ((branch // 2) % 2,), q1_hold,
+        res = self._branches(self.model_cols(C), (branch // 4,), (branch % 2,), ((branch // 2) % 2,), q1_hold,
                              0.0 if q_free is None else q_free)
         q, ok, sing, gap = res[branch]
         return q, ok, sing, gap
@@ -403,7 +410,7 @@ class PandaArm:
 
         The elbow (A4), A7 and the side of the shoulder (the sign of ``sin(q2 + beta)``) are kept from ``q``.
         """
-        l6 = self._link6(self._model_cols(C), q[6])
+        l6 = self._link6(self.model_cols(C), q[6])
         (ua, ub, uc), g_vec, h_vec = (self._at_q4(X, q[3]) for X in (self._u, self._gv, self._hv))
         va, vb, vc = l6.v
         tiny = FREE_SIN * np.sqrt(l6.WW)

@@ -37,7 +37,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fabric.robot.arm_family import cols_in_frame, stack_branches
-from fabric.robot.kinematics import ELBOW_SING_COS, SHOULDER_SING_MM, WRIST_SING_SIN, _flip, _wrap
+from fabric.robot.kinematics import ELBOW_SING_COS, SHOULDER_SING_MM, WRIST_SING_SIN, flip, wrap
 from fabric.robot.ur_derive import URParams, ur_dh_frames
 
 __all__ = ["URArm"]
@@ -89,7 +89,7 @@ class URArm:
     def _q(self, theta: np.ndarray, j: int) -> np.ndarray:
         s, o = self.sign[j], self.off[j]
         if o:
-            return _wrap(theta - o if s > 0 else o - theta)
+            return wrap(theta - o if s > 0 else o - theta)
         return theta if s > 0 else -theta
 
     # Forward kinematics ----------------------------------------------------
@@ -109,7 +109,11 @@ class URArm:
         return T[0] if single else T
 
     # Inverse kinematics ----------------------------------------------------
-    def _model_cols(self, C: np.ndarray) -> np.ndarray:
+    def native_constants(self) -> list[float]:
+        """armik.c's ``ur_branch`` constants: d1, a2, a3, d4, d5, d6."""
+        return [float(v) for v in (self.d1, self.a2, self.a3, self.d4, self.d5, self.d6)]
+
+    def model_cols(self, C: np.ndarray) -> np.ndarray:
         """DH frame-6 columns in the DH base (the URDF base unless axis 1 is placed otherwise)."""
         return cols_in_frame(self._base, C)
 
@@ -120,8 +124,8 @@ class URArm:
         t = np.sqrt(np.maximum(r2 - self.d4 * self.d4, 0.0))
         ok = r2 >= self.d4 * self.d4
         if q1_hold is not None:
-            th1 = _wrap(self._theta(np.asarray(q1_hold, dtype=float), 0))
-            th1 = _flip(th1) if shoulder else th1
+            th1 = wrap(self._theta(np.asarray(q1_hold, dtype=float), 0))
+            th1 = flip(th1) if shoulder else th1
             return _Shoulder(th1, np.cos(th1), np.sin(th1), ok, t)
         ts = -t if shoulder else t
         inv = 1.0 / np.where(r2 > 0.0, r2, 1.0)
@@ -131,7 +135,7 @@ class URArm:
 
     def q1_free(self, C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """A1 of the first shoulder; undefined only with the axis-5 point on axis 1 (d4 = 0)."""
-        Cm = self._model_cols(C)
+        Cm = self.model_cols(C)
         sh = self._shoulder(Cm, 0, None)
         p5x, p5y = Cm[0] - self.d6 * Cm[3], Cm[1] - self.d6 * Cm[4]
         return self._q(sh.th1, 0), p5x * p5x + p5y * p5y < 1e-12
@@ -183,7 +187,7 @@ class URArm:
         A, Bk = self.a2 + self.a3 * pl.c3, self.a3 * s3
         th2 = np.arctan2(pl.Y * A - pl.X * Bk, pl.X * A + pl.Y * Bk)
         th3 = np.arctan2(s3, pl.c3)
-        return th2, th3, _wrap(pl.th234 - th2 - th3)
+        return th2, th3, wrap(pl.th234 - th2 - th3)
 
     def _branches(self, C: np.ndarray, shoulders: tuple[int, ...], wrists: tuple[int, ...],
                   elbows: tuple[int, ...], q1_hold: np.ndarray | None) -> dict[int, tuple[np.ndarray, ...]]:
@@ -210,14 +214,14 @@ class URArm:
     def ik_branches_cols(self, C: np.ndarray, q1_hold: np.ndarray | None = None,
                          q_free: float | np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """All 8 branches of DH frame-6 columns ``C`` (9, N): ``q (N, 8, 6), reach (N, 8), singular (N, 8)``."""
-        res = self._branches(self._model_cols(C), (0, 1), (0, 1), (0, 1), q1_hold)
+        res = self._branches(self.model_cols(C), (0, 1), (0, 1), (0, 1), q1_hold)
         return stack_branches(res, 6, C.shape[1])
 
     def ik_branch_cols(self, C: np.ndarray, branch: int, q1_hold: np.ndarray | None = None,
                        q_free: float | np.ndarray | None = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """One branch for every row: ``q (6, N), reach, singular, gap_rad`` (see ``arm_family``)."""
-        res = self._branches(self._model_cols(C), (branch // 4,), (branch % 2,), ((branch // 2) % 2,), q1_hold)
+        res = self._branches(self.model_cols(C), (branch // 4,), (branch % 2,), ((branch // 2) % 2,), q1_hold)
         q, ok, sing, gap = res[branch]
         return q, ok, sing, gap
 
@@ -232,7 +236,7 @@ class URArm:
 
     def resolve_wrist(self, C: np.ndarray, q: np.ndarray, held: np.ndarray) -> np.ndarray:
         """Hold A6 at ``held[5]`` and re-solve A2..A4 (same elbow) exactly on wrist-degenerate rows (6, M)."""
-        Cm = self._model_cols(C)
+        Cm = self.model_cols(C)
         th1, th3, th5 = self._theta(q[0], 0), self._theta(q[2], 2), self._theta(q[4], 4)
         th6 = self._theta(held[5], 5)
         r2 = (Cm[0] - self.d6 * Cm[3]) ** 2 + (Cm[1] - self.d6 * Cm[4]) ** 2

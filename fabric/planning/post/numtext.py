@@ -35,7 +35,7 @@ import numpy as np
 
 from fabric import native
 
-__all__ = ["format_rows", "FixedColumn", "ChoiceColumn", "Column", "trimmed_text", "native_rows"]
+__all__ = ["format_rows", "FixedColumn", "ChoiceColumn", "Column", "trimmed_text", "native_rows", "SIGNATURES"]
 
 _ZERO, _DOT, _MINUS = ord("0"), ord("."), ord("-")
 _MAX_SCALED = 1e15          # beyond this the int64 digits path is not trusted: Python formats the value
@@ -229,6 +229,7 @@ def _native_rows(columns: Sequence[Column], sep: bytes, n: int) -> bytes | None:
         if ints and (col.decimals or (dt.itemsize == 8 and dt.kind == "u")):
             return None                         # integers read as fixed-point, or past int64: numpy's path
         values = _readable(col.values, np.dtype(np.int64 if ints else np.float64))
+        assert values.dtype == (np.int64 if ints else np.float64) and values.ndim == 1   # what kinds[j] says
         keep.append(values)
         kinds[j], decimals[j] = (_KIND_INT, 0) if ints else (_KIND_FLOAT, col.decimals)
         data[j], stride[j] = values.ctypes.data, values.strides[0] // values.itemsize
@@ -236,7 +237,7 @@ def _native_rows(columns: Sequence[Column], sep: bytes, n: int) -> bytes | None:
     cap = max(cap * n + 128, 128)
     out = np.empty(cap, dtype=np.uint8)     # not zeroed: only the bytes written are read
     written = lib.numtext_rows(n, k, kinds, data, stride, decimals, texts, text_len, sep[:1] or b"\0",
-                               out.ctypes.data, cap, _MAX_SCALED, _TIE_TOL_R)
+                               out, cap, _MAX_SCALED, _TIE_TOL_R)
     if written < 0:                         # not finite or too long, or (never expected) no room: numpy writes it
         return None
     return out[:written].tobytes()
@@ -251,7 +252,15 @@ def _readable(values: np.ndarray, dtype: np.dtype) -> np.ndarray:
     return np.ascontiguousarray(v, dtype=dtype)
 
 
-_lib: list[ctypes.CDLL | None] = []
+# The columns' data pointers are an array of void pointers, each set from an array _readable made of the
+# column's kind (float64 or int64, native order): the kinds array says which the helper reads at each.
+SIGNATURES: dict[str, native.Signature] = {
+    "numtext_rows": (ctypes.c_long, [
+        ctypes.c_long, ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_void_p),
+        ctypes.POINTER(ctypes.c_long), ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_char_p),
+        ctypes.POINTER(ctypes.c_long), ctypes.c_char, native.array(np.uint8, out=True), ctypes.c_long,
+        ctypes.c_double, ctypes.c_double]),
+}
 
 
 def native_rows() -> bool:
@@ -259,18 +268,11 @@ def native_rows() -> bool:
     return _numtext() is not None
 
 
+use_native = True           # False: numpy writes every row even where the C helper could (tests compare the two)
+
+
 def _numtext() -> ctypes.CDLL | None:
-    if not _lib:
-        lib = native.library("numtext")
-        if lib is not None:
-            f = lib.numtext_rows
-            f.restype = ctypes.c_long
-            f.argtypes = [ctypes.c_long, ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_void_p),
-                          ctypes.POINTER(ctypes.c_long), ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_char_p),
-                          ctypes.POINTER(ctypes.c_long), ctypes.c_char, ctypes.c_void_p, ctypes.c_long,
-                          ctypes.c_double, ctypes.c_double]
-        _lib.append(lib)
-    return _lib[0]
+    return native.bound("numtext", SIGNATURES) if use_native else None
 
 
 def _constant(text: bytes, n: int) -> np.ndarray:
