@@ -15,10 +15,7 @@ from fabric.schemas.common import (
 from fabric.schemas.export import ExportChunk, ExportChunkRequest
 from fabric.schemas.library import MAX_FILES_PAGE, FileAdd, FileList, FileQuery, FilesQuery, LibraryFile
 from fabric.schemas.pipeline import (
-                                   FINAL_JOB_STATES,
                                    MAX_JOBS_PAGE,
-                                   ON_STATION_JOB_STATES,
-                                   PRINT_JOB_STATES,
                                    Backends,
                                    Beads,
                                    BeadsQuery,
@@ -43,6 +40,15 @@ from fabric.schemas.pipeline import (
                                    SliceResult,
                                    SlowedMove,
                                    UnreachableTarget,
+)
+from fabric.schemas.states import (
+                                   FINAL_JOB_STATES,
+                                   HEALTH_STATES,
+                                   JOB_STATES,
+                                   ON_STATION_JOB_STATES,
+                                   PRINT_JOB_STATES,
+                                   STATION_STATES,
+                                   WAITING_JOB_STATES,
 )
 from fabric.schemas.station import (
                                    CalibrationReport,
@@ -70,7 +76,8 @@ __all__ = [
     "REGISTRY", "f", "schema", "to_plain", "validate_into",
     "Ack", "Artifact", "ArtifactQuery", "Empty", "ErrorReply", "Health", "JobAccepted", "JobQuery", "JobStatus",
     "PinRequest",
-    "FINAL_JOB_STATES", "MAX_JOBS_PAGE", "ON_STATION_JOB_STATES", "PRINT_JOB_STATES",
+    "STATION_STATES", "WAITING_JOB_STATES", "JOB_STATES", "HEALTH_STATES", "FINAL_JOB_STATES", "MAX_JOBS_PAGE",
+    "ON_STATION_JOB_STATES", "PRINT_JOB_STATES",
     "Backends", "Beads", "BeadsQuery", "ColdExtrusion", "CollisionHit", "CollisionReport", "CollisionRequest",
     "ExportRequest",
     "FabricStatus", "JobList",

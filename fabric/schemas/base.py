@@ -18,6 +18,7 @@ import math
 import types
 import typing
 from collections.abc import Callable
+from enum import Enum
 from typing import TYPE_CHECKING, Any, TypeVar, Union
 
 import numpy as np
@@ -204,6 +205,8 @@ def to_plain(msg: Any) -> Any:
     tp = type(msg)
     if tp in _SCALARS:
         return msg
+    if isinstance(msg, Enum):          # a state (fabric.schemas.states): its string
+        return msg.value
     names = _field_names(tp) if dataclasses.is_dataclass(tp) else None
     if names is not None:
         return {name: to_plain(getattr(msg, name)) for name in names}

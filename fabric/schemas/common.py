@@ -4,8 +4,7 @@ from __future__ import annotations
 from typing import Any
 
 from fabric.schemas.base import f, schema
-
-JOB_STATES = ("queued", "running", "done", "failed")
+from fabric.schemas.states import HEALTH_STATES, JOB_STATES
 
 
 @schema("common.Empty")
@@ -96,7 +95,6 @@ class Artifact:
     data: bytes                     # the content
 
 
-HEALTH_STATES = ("ok", "degraded")
 
 
 @schema("common.Health")

@@ -7,6 +7,7 @@ import numpy as np
 
 from fabric.schemas.base import f, schema
 from fabric.schemas.common import ErrorReply
+from fabric.schemas.states import PRINT_JOB_STATES
 from fabric.schemas.station import CellInfo
 from fabric.wire.errors import COLD_EXTRUSION_REASONS, UNREACHABLE_REASONS, ValidationError
 
@@ -16,10 +17,6 @@ EXPORT_FORMATS = ("rapid", "krl", "urscript", "csv")
 JOB_SOURCES = ("model", "gcode")
 GCODE_SUFFIXES = (".gcode", ".gco", ".g", ".nc")   # a file named so is G-code (JobSubmit source "" infers it)
 MODEL_SUFFIXES = (".stl", ".obj", ".3mf")          # a file named so is a model to slice
-PRINT_JOB_STATES = ("queued", "slicing", "planning", "checking", "loaded", "printing", "paused",
-                    "finished", "stopped", "failed", "interrupted")
-FINAL_JOB_STATES = ("finished", "stopped", "failed")
-ON_STATION_JOB_STATES = ("loaded", "printing", "paused", "interrupted")
 WAITING_FOR = ("", "plate", "station", "queue")    # the operator's `job next`, a busy station, jobs ahead
 MATERIAL_SOURCES = ("option", "gcode", "assumed")  # where a plan's filament diameter came from
 

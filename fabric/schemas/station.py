@@ -8,9 +8,10 @@ from __future__ import annotations
 from typing import Any
 
 from fabric.schemas.base import f, schema
+from fabric.schemas.states import STATION_STATES
 
 MESH_FORMATS = ("stl", "glb", "csv")
-STATES = ("idle", "ready", "printing", "paused", "stopped", "fault", "moving", "interrupted")
+STATES = STATION_STATES
 
 
 @schema("station.Pose")
