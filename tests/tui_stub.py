@@ -8,6 +8,7 @@ from types import SimpleNamespace
 from typing import Any
 
 from fabric import schemas as s
+from fabric.schemas import states
 from fabric.wire.errors import NotFound, StateError
 from fabric.wire.keys import SERVICES
 
@@ -100,7 +101,7 @@ class StubClient:
     # --- station -----------------------------------------------------------------------
     def home(self) -> s.Ack:
         self._called("home")
-        if self.station.state in ("printing", "paused"):
+        if states.Station(self.station.state).in_print:
             raise StateError(f"cannot go home while {self.station.state}; stop first", state=self.station.state)
         return s.Ack(ok=True, message="moving home", state="idle")
 

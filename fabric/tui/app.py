@@ -9,7 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
 
-from textual import work
+from textual import on, work
 from textual.app import App
 from textual.binding import Binding
 from textual.notifications import SeverityLevel
@@ -18,24 +18,29 @@ from textual.reactive import reactive
 from fabric import schemas as s
 from fabric.client import Client
 from fabric.extras import missing_extra
+from fabric.schemas import states
 from fabric.tui.commands import COMMANDS, PRESETS, Preset, describe, refusal, refused_hit
+from fabric.tui.format import event_data_text
 from fabric.tui.joblist import console_jobs
 from fabric.tui.link import CellLink
 from fabric.tui.messages import (
+    CallRequested,
     CellsListed,
     CollisionChecked,
     HealthReport,
+    JobRemoved,
     JobsListed,
     LimitsReady,
     Liveliness,
     ProgramReady,
     Reply,
+    ReprintRequested,
     Telemetry,
 )
 from fabric.tui.screens.cell import CellScreen
 from fabric.tui.screens.cells import CellsDialog
 from fabric.tui.screens.confirm import ConfirmDialog
-from fabric.tui.screens.events import EventsScreen, event_data_text
+from fabric.tui.screens.events import EventsScreen
 from fabric.tui.screens.files import FilesScreen
 from fabric.tui.screens.help import HelpDialog
 from fabric.tui.screens.jobs import JobsScreen
@@ -64,13 +69,13 @@ def default_state_path() -> Path:
 
 class FabricConsole(App):
     """``fabric-tui``. The console's state lives in the reactive attributes below; the screens watch them
-    and hand them down to their widgets. ``client`` None: no link (the tests set the attributes).
+    and hand them down to their widgets, and post messages for what the operator asks (handled here with
+    ``@on``: no screen knows this class). ``client`` None: no link (the tests set the attributes).
     ``state_path``: a small JSON file of what the console remembers between runs (None: nothing)."""
 
     CSS_PATH = "console.tcss"
     ENABLE_COMMAND_PALETTE = False
     TITLE = "am-fabric"
-    MODES = {"cell": CellScreen, "jobs": JobsScreen, "events": EventsScreen, "log": LogScreen, "files": FilesScreen}
     BINDINGS = [
         Binding("ctrl+c", "quit", "quit", show=False, priority=True),
         Binding("1", "switch_mode('cell')", "cell"), Binding("2", "switch_mode('jobs')", "jobs"),
@@ -97,6 +102,7 @@ class FabricConsole(App):
     # the app's data: the screens watch it and set their widgets' own reactives, which repaint those widgets.
     # None of it repaints the app (a repaint of the app is one of the whole screen: with telemetry at 10 Hz a
     # topic, an idle console took 60 % of a core re-rendering every widget)
+    client: reactive[Client | None] = reactive(None, repaint=False)    # of the cell followed (None: no link)
     cell: reactive[str] = reactive("")
     station_state: reactive[Any] = reactive(None, always_update=True, repaint=False)
     pose: reactive[Any] = reactive(None, always_update=True, repaint=False)
@@ -126,6 +132,16 @@ class FabricConsole(App):
         self._toolpath_id = ""          # the program the toolpath is of
         self._hit_program_id = ""       # the program the collision hit is of
         self._limits_source = ""        # who told the joints' limits shown: "station", "model" or "" (none yet)
+        self._add_screens()
+
+    def _add_screens(self) -> None:
+        """The screens, one mode each. A screen watches the console's reactives; what else it reads (the
+        clocks, the log so far) it is handed when it is made."""
+        self.add_mode("cell", lambda: CellScreen(self.wall_clock, self.monotonic_clock))
+        self.add_mode("jobs", JobsScreen)
+        self.add_mode("events", EventsScreen)
+        self.add_mode("log", lambda: LogScreen(self.log_lines))
+        self.add_mode("files", FilesScreen)
 
     # --- life ---------------------------------------------------------------------------
 
@@ -213,9 +229,10 @@ class FabricConsole(App):
         except OSError as err:               # not worth more than a line in the log
             self.add_log(f"could not remember the folder ({err})")
 
-    # --- messages up ----------------------------------------------------------------------
+    # --- messages up from the cell link ----------------------------------------------------
 
-    def on_telemetry(self, msg: Telemetry) -> None:
+    @on(Telemetry)
+    def _take_telemetry(self, msg: Telemetry) -> None:
         if msg.cell != self.cell:
             return          # from a link closed since
         p = msg.payload
@@ -243,7 +260,8 @@ class FabricConsole(App):
         jobs = list(self.jobs)
         for i, old in enumerate(jobs):
             if old.job_id == rec.job_id:
-                if rec.state == "failed" and old.state != "failed":
+                now, before = states.PrintJob(rec.state), states.PrintJob(old.state)
+                if now is states.PrintJob.FAILED and before is not states.PrintJob.FAILED:
                     self.notify(f"{rec.filename}: {rec.reason or rec.stage}", title=f"job {rec.job_id} failed",
                                 severity="error", timeout=10)
                     self.add_log(f"job {rec.job_id} failed: {rec.reason or rec.stage}")
@@ -253,28 +271,33 @@ class FabricConsole(App):
         self.jobs = jobs + [rec]
         self.refresh_jobs()        # a new job: the supervisor knows its place in the queue
 
-    def on_liveliness(self, msg: Liveliness) -> None:
+    @on(Liveliness)
+    def _take_liveliness(self, msg: Liveliness) -> None:
         if msg.cell == self.cell:
             came = msg.alive.get("station") and not self.alive.get("station")
             self.alive = {**self.alive, **msg.alive}
             if came and self._limits_source != "station":     # a station (again): it tells its cell's arm
                 self.load_limits()
 
-    def on_health_report(self, msg: HealthReport) -> None:
+    @on(HealthReport)
+    def _take_health(self, msg: HealthReport) -> None:
         if msg.cell == self.cell:
             self.degraded = dict(msg.degraded)
 
-    def on_jobs_listed(self, msg: JobsListed) -> None:
+    @on(JobsListed)
+    def _take_jobs(self, msg: JobsListed) -> None:
         if msg.cell == self.cell:
             self.jobs = list(msg.jobs)
 
-    def on_program_ready(self, msg: ProgramReady) -> None:
+    @on(ProgramReady)
+    def _take_program(self, msg: ProgramReady) -> None:
         if msg.cell == self.cell:
             self.toolpath, self._toolpath_id = msg.toolpath, msg.program_id
             if self.collision_hit is not None and msg.program_id != self._hit_program_id:
                 self.collision_hit = None          # a hit of the program loaded before
 
-    def on_collision_checked(self, msg: CollisionChecked) -> None:
+    @on(CollisionChecked)
+    def _take_collision_report(self, msg: CollisionChecked) -> None:
         """A collision report: its first hit is marked on the layer view, a collision-free one clears the mark.
         A report on a program other than the one shown (it changed meanwhile) marks nothing."""
         if msg.cell != self.cell:
@@ -285,17 +308,20 @@ class FabricConsole(App):
         self._hit_program_id = msg.program_id or self._toolpath_id
         self.collision_hit = hit
 
-    def on_limits_ready(self, msg: LimitsReady) -> None:
+    @on(LimitsReady)
+    def _take_limits(self, msg: LimitsReady) -> None:
         if msg.cell == self.cell:
             self.limits = (msg.lower_deg, msg.upper_deg)
             self._limits_source = msg.source
 
-    def on_reply(self, msg: Reply) -> None:
+    @on(Reply)
+    def _take_reply(self, msg: Reply) -> None:
         self.show_reply(msg.command, msg.ok, msg.text, msg.severity)
         if msg.report:
             self.push_screen(ReportDialog(msg.command, msg.report))
 
-    def on_cells_listed(self, msg: CellsListed) -> None:
+    @on(CellsListed)
+    def _offer_cells(self, msg: CellsListed) -> None:
         def chosen(name: str | None) -> None:
             if name:
                 self.switch_cell(name)
@@ -313,12 +339,27 @@ class FabricConsole(App):
         self.log_lines.append(stamped)
         self.log_entry = stamped
 
+    # --- messages up from the screens --------------------------------------------------------
+
+    @on(CallRequested)
+    def _run_requested_call(self, msg: CallRequested) -> None:
+        self.run_call(msg.label, msg.call, msg.refresh_jobs)
+
+    @on(JobRemoved)
+    def _forget_job(self, msg: JobRemoved) -> None:
+        """A job removed: off the screens at once (the list read next confirms it)."""
+        self.jobs = [r for r in self.jobs if r.job_id != msg.job_id]
+
+    @on(ReprintRequested)
+    def _reprint_requested(self, msg: ReprintRequested) -> None:
+        self.reprint(msg.record)
+
     # --- commands ---------------------------------------------------------------------------
 
     def action_command(self, name: str) -> None:
         cmd = COMMANDS[name]
         st = self.station_state
-        why = refusal(cmd, st.state if st is not None else None)
+        why = refusal(cmd, states.Station(st.state) if st is not None else None)
         if why:                                  # not asked first only to be refused after
             self.show_reply(name, False, why)
             return
@@ -402,10 +443,6 @@ class FabricConsole(App):
         elif refresh_jobs:
             self._list_jobs()
 
-    def forget_job(self, job_id: str) -> None:
-        """A job removed: off the screens at once (the list read next confirms it)."""
-        self.jobs = [r for r in self.jobs if r.job_id != job_id]
-
     @work(thread=True, group="jobs")
     def refresh_jobs(self) -> None:
         self._list_jobs()
@@ -488,6 +525,3 @@ class FabricConsole(App):
 
     def action_help(self) -> None:
         self.push_screen(HelpDialog())
-
-    def time_text(self, t_s: float) -> str:
-        return time.strftime("%H:%M:%S", time.localtime(t_s)) if t_s else "-"

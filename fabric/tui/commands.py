@@ -8,6 +8,7 @@ from typing import Any
 
 from fabric import schemas as s
 from fabric.client import Client
+from fabric.schemas import states
 from fabric.wire.errors import FabricError
 
 __all__ = ["Command", "COMMANDS", "Bound", "OVERRIDE_BOUNDS", "RTF_BOUND", "LAYER_BOUND", "JOG_BOUNDS",
@@ -32,7 +33,8 @@ OVERRIDE_BOUNDS = (Bound("speed_r", "speed", 0.05, 4.0, "x"), Bound("flow_r", "f
                    Bound("nozzle_c", "nozzle", 0.0, 500.0, "C"), Bound("bed_c", "bed", 0.0, 200.0, "C"))
 RTF_BOUND = Bound("rtf", "sim speed", 0.0, 1e6, "x real time, 0 = max")
 LAYER_BOUND = Bound("layer", "from layer", 1, 1_000_000, "1 = first", integer=True)
-STILL = ("idle", "ready", "stopped", "fault")           # station states in which the robot may be moved
+STILL = tuple(st for st in states.Station if st.free)          # station states in which the robot may be moved
+IN_PRINT = tuple(st for st in states.Station if st.in_print)    # a print is under way: it can be stopped
 # Jog and manual extrude (fabric.schemas.station: JogRequest, ExtrudeRequest); empty = 0 / the default
 JOG_BOUNDS = (Bound("dx_mm", "x", -200.0, 200.0, "mm"), Bound("dy_mm", "y", -200.0, 200.0, "mm"),
               Bound("dz_mm", "z", -200.0, 200.0, "mm"), Bound("speed_mm_s", "speed", 0.1, 200.0, "mm/s, 20"))
@@ -44,7 +46,7 @@ EXTRUDE_BOUNDS = (Bound("length_mm", "filament", -100.0, 500.0, "mm, < 0 pulls",
 class Command:
     """``call(client, values)`` runs it; ``confirm`` (a question) guards destructive ones; ``asks``
     are the values a dialog collects first; ``report``: the answer is shown whole in a dialog.
-    ``states``: the station states it makes sense in; in another one the console says so at once,
+    ``allowed_in``: the station states it makes sense in; in another one the console says so at once,
     rather than asking first and being refused after (the station still decides)."""
 
     name: str
@@ -53,7 +55,7 @@ class Command:
     confirm: str = ""
     asks: tuple[Bound, ...] = field(default=())
     report: bool = False
-    states: tuple[str, ...] = ()
+    allowed_in: tuple[states.Station, ...] = ()
 
 
 def _layer(values: dict[str, Any]) -> int:
@@ -72,20 +74,20 @@ COMMANDS: dict[str, Command] = {c.name: c for c in (
     Command("resume", "resume", lambda c, v: c.resume(rtf=v.get("rtf")), asks=(RTF_BOUND,)),
     Command("recover", "recover", lambda c, v: c.recover(rtf=v.get("rtf"), from_layer=_layer(v)),
             asks=(LAYER_BOUND, RTF_BOUND)),
-    Command("stop", "stop", lambda c, v: c.stop(), states=("printing", "paused"),
+    Command("stop", "stop", lambda c, v: c.stop(), allowed_in=IN_PRINT,
             confirm="Stop the print? The extruder and the heaters go off and the robot moves clear; the part stays "
                     "on the plate. A stopped print is not resumed, but it can be restarted at a layer "
                     "(s, then the layer)."),
-    Command("home", "home", lambda c, v: c.home(), states=STILL,
+    Command("home", "home", lambda c, v: c.home(), allowed_in=STILL,
             confirm="Move the robot home (a collision-checked joint move)?"),
-    Command("calibrate", "calibrate", lambda c, v: c.calibrate(), states=STILL,
+    Command("calibrate", "calibrate", lambda c, v: c.calibrate(), allowed_in=STILL,
             confirm="Probe the plate and replace the work object? A loaded program is unloaded (plan it again).",
             report=True),
     Command("jog", "jog", lambda c, v: c.jog(v.get("dx_mm") or 0.0, v.get("dy_mm") or 0.0, v.get("dz_mm") or 0.0,
                                               speed_mm_s=v.get("speed_mm_s") or 20.0),
-            asks=JOG_BOUNDS, states=STILL),
+            asks=JOG_BOUNDS, allowed_in=STILL),
     Command("extrude", "extrude", lambda c, v: c.extrude(v["length_mm"], speed_mm_s=v.get("speed_mm_s") or 2.0),
-            asks=EXTRUDE_BOUNDS, states=STILL),
+            asks=EXTRUDE_BOUNDS, allowed_in=STILL),
     Command("overrides", "overrides", lambda c, v: c.overrides(**v), asks=OVERRIDE_BOUNDS),
     Command("rtf", "sim speed", lambda c, v: c.set_rtf(v["rtf"]),
             asks=(Bound("rtf", RTF_BOUND.label, RTF_BOUND.lo, RTF_BOUND.hi, "x", optional=False),)),
@@ -105,14 +107,14 @@ PRESETS = (Preset("PLA", 215.0, 60.0), Preset("PETG", 240.0, 80.0), Preset("ABS"
            Preset("TPU", 225.0, 50.0), Preset("cool down", 0.0, 0.0))
 
 
-def refusal(cmd: Command, state: str | None) -> str:
+def refusal(cmd: Command, state: states.Station | None) -> str:
     """Why ``cmd`` is not asked for in station state ``state`` ("" when it is, or the state is not known)."""
-    if not cmd.states or state is None or state in cmd.states:
+    if not cmd.allowed_in or state is None or state in cmd.allowed_in:
         return ""
     if cmd.name == "stop":
         return f"nothing to stop: the station is {state}"
-    why = "stop the print first (x)" if state in ("printing", "paused") else (
-        "recover it first (v)" if state == "interrupted" else "wait until it has stopped moving")
+    why = "stop the print first (x)" if state.in_print else (
+        "recover it first (v)" if state is states.Station.INTERRUPTED else "wait until it has stopped moving")
     return f"cannot {cmd.label} while {state}: {why}"
 
 

@@ -1,4 +1,5 @@
-"""Text the console shows: durations, the ETA, job rows and records (pure functions, tested alone)."""
+"""Text the console shows: durations, the ETA, times of day, events, job rows and records (pure functions,
+tested alone)."""
 from __future__ import annotations
 
 import time
@@ -12,12 +13,15 @@ from fabric.printjobs.history import (
     segment_lines,
     state_text,
 )
+from fabric.schemas import states
 
-__all__ = ["duration_text", "eta_text", "layer_text", "job_outcome", "job_report", "STATE_STYLE"]
+__all__ = ["duration_text", "eta_text", "layer_text", "clock_text", "event_data_text", "job_outcome", "job_report",
+           "STATE_STYLE"]
 
-STATE_STYLE = {"idle": "white on grey23", "ready": "black on green", "printing": "black on green",
-               "moving": "black on dark_cyan", "paused": "black on yellow", "stopped": "white on dark_orange3",
-               "fault": "bold white on red", "interrupted": "bold white on red"}
+STATE_STYLE = {states.Station.IDLE: "white on grey23", states.Station.READY: "black on green",
+               states.Station.PRINTING: "black on green", states.Station.MOVING: "black on dark_cyan",
+               states.Station.PAUSED: "black on yellow", states.Station.STOPPED: "white on dark_orange3",
+               states.Station.FAULT: "bold white on red", states.Station.INTERRUPTED: "bold white on red"}
 
 
 def layer_text(st: s.StationState) -> str:
@@ -29,14 +33,25 @@ def eta_text(st: s.StationState, now_s: float) -> str:
     """When the print ends, always on the wall clock (``now_s``) at the current real-time factor: the time of day
     while printing, how long it will take once resumed while paused; at max speed there is no wall-clock time to
     say (the simulation runs as fast as the host can)."""
-    if st.state not in ("printing", "paused", "moving") or st.total_s <= 0:
+    state = states.Station(st.state)
+    if not (state.in_print or state is states.Station.MOVING) or st.total_s <= 0:
         return ""
     if st.rtf == 0:
         return "at max speed"
     wall_s = st.remaining_s / st.rtf
-    if st.state == "paused":
+    if state is states.Station.PAUSED:
         return f"paused: {duration_text(wall_s)} to go once resumed"
     return f"ETA {time.strftime('%H:%M:%S', time.localtime(now_s + wall_s))} (in {duration_text(wall_s)})"
+
+
+def clock_text(t_s: float) -> str:
+    """The time of day of ``t_s`` (wall clock, local time), or "-" when there is none (0)."""
+    return time.strftime("%H:%M:%S", time.localtime(t_s)) if t_s else "-"
+
+
+def event_data_text(data: dict) -> str:
+    """An event's data as ``key=value`` pairs (floats to 6 significant digits)."""
+    return "  ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in data.items())
 
 
 def job_outcome(rec: s.JobRecord) -> str:

@@ -5,11 +5,12 @@ from __future__ import annotations
 from typing import Any
 
 from fabric import schemas as s
+from fabric.schemas import states
 
 __all__ = ["HISTORY_SHOWN", "console_jobs"]
 
 HISTORY_SHOWN = 200          # the most ended jobs the Jobs screen lists (the newest)
-ACTIVE_STATES = tuple(st for st in s.PRINT_JOB_STATES if st not in s.FINAL_JOB_STATES)
+ACTIVE_STATES = tuple(st.value for st in states.PrintJob if not st.ended)
 
 
 def console_jobs(client: Any) -> list[s.JobRecord]:

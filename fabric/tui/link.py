@@ -10,6 +10,7 @@ from collections.abc import Callable
 from textual.message import Message
 
 from fabric.client import AliveSubscription, Client, Subscription
+from fabric.schemas import states
 from fabric.tui.messages import HealthReport, JobsListed, Liveliness, ProgramReady, Telemetry
 from fabric.wire.errors import FabricError
 
@@ -97,8 +98,9 @@ class CellLink:
             except FabricError as err:
                 log.info("no health answers: %s", err)
             else:
-                self.post(HealthReport(self.cell, {n: h.reasons if h.state == "degraded" else []
-                                                   for n, h in healths.items()}))
+                degraded = {n: h.reasons if states.Health(h.state) is states.Health.DEGRADED else []
+                            for n, h in healths.items()}
+                self.post(HealthReport(self.cell, degraded))
             self._stop.wait(HEALTH_PERIOD_S)
 
     def _snapshot(self) -> None:

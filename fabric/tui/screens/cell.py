@@ -1,7 +1,9 @@
 """The Cell screen: state banner, progress and ETA, temperatures, robot, extruder and the live layer view."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+import time
+from collections.abc import Callable
+from typing import Any
 
 from textual.app import ComposeResult
 from textual.containers import Container
@@ -9,6 +11,7 @@ from textual.events import Resize
 from textual.screen import Screen
 from textual.widgets import Footer, Header
 
+from fabric.schemas import states
 from fabric.tui.widgets.banner import StateBanner
 from fabric.tui.widgets.extruder_panel import ExtruderPanel
 from fabric.tui.widgets.job_progress import JobProgress
@@ -17,26 +20,24 @@ from fabric.tui.widgets.reply_line import ReplyLine
 from fabric.tui.widgets.temps_panel import TempsPanel
 from fabric.tui.widgets.toolpath_view import ToolpathView
 
-if TYPE_CHECKING:
-    from textual import getters
-
-    from fabric.tui.app import FabricConsole
-
 WIDE_COLS, WIDE_ROWS = 120, 36     # from this size on, the layer view takes a column of its own
 
 
 class CellScreen(Screen):
-    """Reads the console's state (app attributes) and hands it down to its widgets."""
+    """Watches the console's state (app attributes) and hands it down to its widgets. ``wall_clock`` gives
+    the time the ETA is counted from, ``monotonic_clock`` the one the temperature graph is drawn against."""
 
-    if TYPE_CHECKING:
-        app = getters.app(FabricConsole)      # self.app is the console (for the type checker)
+    def __init__(self, wall_clock: Callable[[], float] = time.time,
+                 monotonic_clock: Callable[[], float] = time.monotonic) -> None:
+        super().__init__()
+        self.wall_clock, self.monotonic_clock = wall_clock, monotonic_clock
 
     def compose(self) -> ComposeResult:
         yield Header()
         yield StateBanner(id="banner")
-        yield JobProgress(clock=self.app.wall_clock, id="progress")
+        yield JobProgress(clock=self.wall_clock, id="progress")
         with Container(id="cell-grid"):
-            yield TempsPanel(clock=self.app.monotonic_clock, id="temps")
+            yield TempsPanel(clock=self.monotonic_clock, id="temps")
             yield ToolpathView(id="toolpath")
             yield JointsPanel(id="joints")
             yield ExtruderPanel(id="extruder")
@@ -73,7 +74,7 @@ class CellScreen(Screen):
         self.query_one(ExtruderPanel).state = st
         if st is not None:
             view = self.query_one(ToolpathView)
-            view.printing = st.state == "printing"       # a hit's layer is shown unless a print is followed
+            view.printing = states.Station(st.state).printing    # a hit's layer is shown unless a print is followed
             view.layer_index = st.layer
 
     # a sample that shows nothing new (a robot at rest, an extruder off) repaints nothing: the station

@@ -12,32 +12,28 @@ from textual.widgets import DataTable, Footer, Header, Input, Label, Select
 
 from fabric import schemas as s
 from fabric.sim.types import EVENT_KINDS
+from fabric.tui.format import event_data_text
+from fabric.tui.messages import Reply
 from fabric.tui.widgets.reply_line import ReplyLine
 from fabric.wire.errors import FabricError
 
 if TYPE_CHECKING:
-    from textual import getters
-
-    from fabric.tui.app import FabricConsole
+    from fabric.client import Client
 
 HISTORY_EVENTS = 5000      # the newest this many events are fetched
 
 
-def event_data_text(data: dict) -> str:
-    return "  ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in data.items())
-
-
 class EventsScreen(Screen):
+    """Watches the console's client (the cell followed: its history is read again) and its last event."""
+
     BINDINGS = [Binding("slash", "search", "search", show=False),
                 Binding("escape", "clear", "clear filter", show=False)]
-
-    if TYPE_CHECKING:
-        app = getters.app(FabricConsole)      # self.app is the console (for the type checker)
 
     def __init__(self) -> None:
         super().__init__()
         self.rows: list[s.Event] = []
         self.kind: str | None = None
+        self.client: Client | None = None
 
     def compose(self) -> ComposeResult:
         yield Header()
@@ -52,11 +48,12 @@ class EventsScreen(Screen):
     def on_mount(self) -> None:
         self.query_one(DataTable).add_columns("seq", "t_sim s", "kind", "layer", "line", "data")
         self.watch(self.app, "last_event", self._on_event, init=False)
-        self.watch(self.app, "cell", self._on_cell)
+        self.watch(self.app, "client", self._on_client)
         self.watch(self.app, "reply", self.query_one(ReplyLine).show)
 
-    def _on_cell(self, _cell: str) -> None:
-        self.load(self.kind)            # the console switched cells: that cell's history
+    def _on_client(self, client: Client | None) -> None:
+        self.client = client
+        self.load(self.kind)            # the cell followed (first, or the one the console switched to): its history
 
     def _on_event(self, e: Any) -> None:
         if (e is not None and (self.kind is None or e.kind == self.kind)
@@ -70,7 +67,7 @@ class EventsScreen(Screen):
 
     @work(thread=True, exclusive=True, group="events-history")
     def load(self, kind: str | None) -> None:
-        client = self.app.client
+        client = self.client
         if client is None:
             return
         try:
@@ -78,7 +75,7 @@ class EventsScreen(Screen):
             evs = client.events(max(0, last - HISTORY_EVENTS), limit=HISTORY_EVENTS + 100,
                                 kinds=[kind] if kind else None).events
         except FabricError as err:
-            self.app.call_from_thread(self.app.show_reply, "events", False, err.message)
+            self.post_message(Reply("events", False, err.message))
             return
         self.app.call_from_thread(self.show_events, kind, evs)
 

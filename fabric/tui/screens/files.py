@@ -13,16 +13,14 @@ from textual.widgets import DataTable, Footer, Header, Label
 
 from fabric import schemas as s
 from fabric.printjobs.library_text import date_text, plan_text, size_text
-from fabric.tui.messages import Reply
+from fabric.tui.messages import CallRequested, Reply
 from fabric.tui.screens.confirm import ConfirmDialog
 from fabric.tui.screens.report import ReportDialog
 from fabric.tui.widgets.reply_line import ReplyLine
 from fabric.wire.errors import FabricError
 
 if TYPE_CHECKING:
-    from textual import getters
-
-    from fabric.tui.app import FabricConsole
+    from fabric.client import Client
 
 PAGE = 200          # the most files listed (most recently used first)
 
@@ -44,16 +42,17 @@ def entry_report(e: s.LibraryFile) -> str:
 
 
 class FilesScreen(Screen):
+    """Watches the console's client (the cell followed: its library is read again) and its jobs (a job's state
+    shows here); asks the console to print a file again or forget it."""
+
     BINDINGS = [Binding("R", "print_again", "print again", show=False),
                 Binding("delete,backspace", "remove", "remove", show=False),
                 Binding("u", "refresh", "refresh", show=False)]
 
-    if TYPE_CHECKING:
-        app = getters.app(FabricConsole)      # self.app is the console (for the type checker)
-
     def __init__(self) -> None:
         super().__init__()
         self.files: list[s.LibraryFile] = []
+        self.client: Client | None = None
 
     def compose(self) -> ComposeResult:
         yield Header()
@@ -67,6 +66,10 @@ class FilesScreen(Screen):
         self.query_one(DataTable).add_columns("file", "name", "kind", "size", "jobs", "last job", "plan")
         self.watch(self.app, "reply", self.query_one(ReplyLine).show)
         self.watch(self.app, "jobs", self._on_jobs, init=False)      # a job's state shows here
+        self.watch(self.app, "client", self._on_client)
+
+    def _on_client(self, client: Client | None) -> None:
+        self.client = client
         self.action_refresh()
 
     def _on_jobs(self, _: list) -> None:
@@ -77,13 +80,13 @@ class FilesScreen(Screen):
 
     @work(thread=True, exclusive=True, group="files")
     def action_refresh(self) -> None:
-        client = self.app.client
+        client = self.client
         if client is None:
             return
         try:
             page = client.files(0, PAGE)
         except FabricError as err:
-            self.app.post_message(Reply("files", False, f"[{err.code}] {err.message}"))
+            self.post_message(Reply("files", False, f"[{err.code}] {err.message}"))
             return
         self.app.call_from_thread(self.show_files, page)
 
@@ -113,16 +116,16 @@ class FilesScreen(Screen):
     def action_print_again(self) -> None:
         e = self._entry()
         if e is None:
-            self.app.show_reply("print again", False, "the library is empty: submit a file first (a)")
+            self.post_message(Reply("print again", False, "the library is empty: submit a file first (a)"))
             return
 
         def confirmed(yes: bool | None) -> None:
             if yes:
-                self.app.run_call("print again", lambda c: self._print(c, e), refresh_jobs=True)
+                self.post_message(CallRequested("print again", lambda c: self._print(c, e), refresh_jobs=True))
         self.app.push_screen(ConfirmDialog("Print again", f"Queue {e.name} again ({e.profile}, rtf {e.rtf:g}), "
                                                           f"started once loaded and the plate is clear?"), confirmed)
 
-    def _print(self, client, e: s.LibraryFile) -> s.Ack:
+    def _print(self, client: Client, e: s.LibraryFile) -> s.Ack:
         """(A worker thread) A new job from the library file, with its last job's settings."""
         acc = client.submit(s.JobSubmit(model=b"", filename="", file_id=e.file_id, profile=e.profile,
                                         backend=e.backend, overrides=dict(e.overrides) if e.source == "model" else {},
@@ -137,11 +140,11 @@ class FilesScreen(Screen):
 
         def confirmed(yes: bool | None) -> None:
             if yes:
-                self.app.run_call("file remove", lambda c: self._remove(c, e))
+                self.post_message(CallRequested("file remove", lambda c: self._remove(c, e)))
         self.app.push_screen(ConfirmDialog("Forget file", f"Remove {e.name} ({e.file_id}) from the library? Its "
                                                           f"jobs' records stay."), confirmed)
 
-    def _remove(self, client, e: s.LibraryFile) -> s.Ack:
+    def _remove(self, client: Client, e: s.LibraryFile) -> s.Ack:
         """(A worker thread) Forget the file; the list is read again after."""
         ack = client.file_remove(e.file_id)
         self.app.call_from_thread(self.action_refresh)

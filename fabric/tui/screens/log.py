@@ -1,7 +1,7 @@
 """The Log screen: every reply and every station event of this session, newest last (a scrollback)."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Iterable
 
 from textual.app import ComposeResult
 from textual.screen import Screen
@@ -9,17 +9,14 @@ from textual.widgets import Footer, Header, Label, RichLog
 
 from fabric.tui.widgets.reply_line import ReplyLine
 
-if TYPE_CHECKING:
-    from textual import getters
-
-    from fabric.tui.app import FabricConsole
-
 
 class LogScreen(Screen):
-    """Reads the console's log (``log_lines``, then each ``log_entry`` as it comes)."""
+    """The console's log: the lines it held when the screen was first shown (``log_lines``), then each
+    ``log_entry`` of the console as it comes."""
 
-    if TYPE_CHECKING:
-        app = getters.app(FabricConsole)      # self.app is the console (for the type checker)
+    def __init__(self, log_lines: Iterable[str] = ()) -> None:
+        super().__init__()
+        self.log_lines = log_lines
 
     def compose(self) -> ComposeResult:
         yield Header()
@@ -30,7 +27,7 @@ class LogScreen(Screen):
 
     def on_mount(self) -> None:
         log = self.query_one(RichLog)
-        for line in self.app.log_lines:
+        for line in self.log_lines:
             log.write(line)
         self.watch(self.app, "log_entry", self._on_entry, init=False)
         self.watch(self.app, "reply", self.query_one(ReplyLine).show)

@@ -7,6 +7,7 @@ from rich.text import Text
 from textual.reactive import reactive
 from textual.widgets import Static
 
+from fabric.schemas import states
 from fabric.tui.format import STATE_STYLE
 
 HEAT_MARGIN_C = 3.0     # below its set point by more than this, a heater counts as still heating
@@ -36,14 +37,15 @@ class StateBanner(Static):
         if st is None:
             word, style, why = "NO STATION", "bold white on red", "no state from the station yet"
         else:
-            word, style, why = st.state.upper(), STATE_STYLE.get(st.state, "white"), st.reason
+            state = states.Station(st.state)
+            word, style, why = state.upper(), STATE_STYLE.get(state, "white"), st.reason
             heating = heating_text(self.temps)
             extruding = self.extrusion is not None and self.extrusion.on
-            if st.state == "printing" and heating and not extruding:
+            if state.printing and heating and not extruding:
                 word, style, why = "HEATING", "black on yellow", f"waiting for {heating} before printing"
-            elif st.state == "paused" and ("interlock" in why.lower() or "prevented" in why.lower()):
+            elif state is states.Station.PAUSED and ("interlock" in why.lower() or "prevented" in why.lower()):
                 word, style = "INTERLOCK", "bold white on dark_orange3"
-            elif st.state == "idle" and not st.program_id:       # the first thing a new operator reads
+            elif state is states.Station.IDLE and not st.program_id:       # the first thing a new operator reads
                 why = (why + ": " if why else "") + "no program; a submits a file (the samples are listed there)"
                 if not st.plate_clear:
                     why += f"; the plate holds a part ({st.plate_mm3:.0f} mm3)"

@@ -9,7 +9,12 @@ from rich.text import Text
 from textual.reactive import reactive
 from textual.widgets import Static
 
+from fabric.schemas import states
 from fabric.tui.format import eta_text, layer_text
+
+# the bar's colour in these station states (green in the others)
+PROGRESS_COLOUR = {states.Station.PAUSED: "yellow", states.Station.STOPPED: "dark_orange3",
+                   states.Station.FAULT: "red", states.Station.INTERRUPTED: "red"}
 
 
 class JobProgress(Static):
@@ -28,8 +33,7 @@ class JobProgress(Static):
         tail = f" {layer_text(st)}  {100 * st.progress_r:5.1f} %  {eta_text(st, self.clock())}".rstrip()
         bar_w = max(10, self.size.width - len(tail) - 1)
         done = int(round(bar_w * st.progress_r))
-        colour = {"paused": "yellow", "stopped": "dark_orange3", "fault": "red", "interrupted": "red"}.get(
-            st.state, "green")
+        colour = PROGRESS_COLOUR.get(states.Station(st.state), "green")
         text = Text("█" * done, style=colour)
         text.append("░" * (bar_w - done), style="grey42")
         text.append(tail)
