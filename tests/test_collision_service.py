@@ -118,10 +118,10 @@ def test_a_restart_whose_descent_goes_through_the_part_is_refused_and_changes_no
     client, station, _, pid, _ = fabric
     client.load(pid)
     print_tower(client)
-    path = station._step(lambda: station._restart_path(9, "start"))
+    path, vel_r = station.commands.read(lambda: (station.twin.moves.restart_path(
+        station.twin.moves.layer_start_row(9)), station.twin.config.home_vel_r))
     joint_only = client.check(s.CollisionRequest(q_from_deg=deg(path.q_from_rad), q_to_deg=deg(path.q_above_rad),
-                                                 beads="station", tip_layer=-2, kind="restart",
-                                                 vel_r=station.twin.config.home_vel_r))
+                                                 beads="station", tip_layer=-2, kind="restart", vel_r=vel_r))
     assert joint_only.collision_free                  # the move the station checked before: free
     before, last_seq, where = client.state(), client.events(0).last_seq, client.position().q_deg
     with pytest.raises(CollisionError) as err:
@@ -153,11 +153,7 @@ def test_a_recovery_at_a_layer_under_the_part_is_refused_by_its_descent(fabric):
     try:
         client.start(rtf=0.5, from_layer=11)                 # the top layer again, slowly
         assert wait_event(events, ("at_layer", "fault")).kind == "at_layer"
-
-        def crash() -> None:                                 # the controller dies where it is
-            station.twin.interrupt("killed by the test")
-            station._changed()
-        station._step(crash)
+        station.commands.change(lambda: station.twin.interrupt("killed by the test"))   # it dies where it is
         assert client.state().state == "interrupted"
         with pytest.raises(CollisionError) as err:
             client.recover(rtf=0, from_layer=9)

@@ -18,7 +18,7 @@ import pytest
 from fabric import schemas as s
 from fabric.cli.doctor import check_cell
 from fabric.client import Client
-from fabric.server.service import _lock_dir
+from fabric.server.service import lock_dir
 from fabric.services.host import EXIT_NO_RESTART, EXIT_NOTE_ENV
 from fabric.store.jobs import JobStore
 from fabric.wire.config import SessionSettings
@@ -196,7 +196,7 @@ def test_doctor_on_garbage_starts_empty_and_leaves_a_running_services_files_alon
     path.parent.mkdir(parents=True)
     path.write_bytes(GARBAGE)
     Path(f"{path}-wal").write_bytes(b"junk wal")
-    holder = _lock_dir(path.parent, "supervisor", "c1")        # as a running supervisor holds it
+    holder = lock_dir(path.parent, "supervisor", "c1")        # as a running supervisor holds it
     try:
         (rep,) = check_cell(tmp_path, "c1")
         assert rep["status"] == "damaged" and "in_use" in rep and path.read_bytes() == GARBAGE

@@ -37,3 +37,12 @@ def test_mypy_is_clean():
     res = _run("mypy", timeout_s=COLD_MYPY_S)     # files and settings: [tool.mypy] in pyproject.toml
     if res.returncode != 0:
         pytest.fail(f"mypy:\n{res.stdout}{res.stderr}", pytrace=False)
+
+
+def test_no_private_name_crosses_a_module():
+    """A module's ``_names`` are its own: another module that needs one asks for a public name (the seams of
+    ``tools/check_seams.py``, on fabric/ and tools/)."""
+    res = subprocess.run([sys.executable, str(ROOT / "tools" / "check_seams.py")], cwd=ROOT, capture_output=True,
+                         text=True, timeout=60)
+    if res.returncode != 0:
+        pytest.fail(f"private names crossing modules:\n{res.stdout}{res.stderr}", pytrace=False)

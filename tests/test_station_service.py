@@ -196,18 +196,19 @@ def test_real_time_then_max_speed_gives_the_same_print_as_max_speed(fabric):
 def test_a_simulation_failure_faults_the_job_and_the_station_keeps_serving(fabric, monkeypatch):
     client, station, pid, _ = fabric
     client.load(pid)
-    real_advance = station.twin.advance
+    twin = station.commands.read(lambda: station.twin)       # the clock's own: used by the clock below
+    real_advance = twin.advance
     calls = {"n": 0}
 
     def broken(dt_s):                          # the clock ticks in every state: fail once, mid-print
-        if station.twin.state == "printing" and calls["n"] == 0:
+        if twin.state == "printing" and calls["n"] == 0:
             calls["n"] += 1
             raise RuntimeError("planted")
         return real_advance(dt_s)
 
     events = client.subscribe("station", "events")
     try:
-        monkeypatch.setattr(station.twin, "advance", broken)
+        monkeypatch.setattr(twin, "advance", broken)
         client.start(rtf=0)
         ev = wait_event(events, ("fault", "finished"))
     finally:
@@ -254,16 +255,12 @@ def test_going_on_above_the_part_and_the_next_layer_is_refused(fabric):
                                                                                   seq)
         with pytest.raises(ValidationError, match="no layer 7"):            # a layer the program has not
             client.start(from_layer=6)
-        assert station.plate.top_layer() == 0
+        assert station.commands.read(station.plate.top_layer) == 0
         assert "from layer 2" in client.start(rtf=0.5, from_layer=1).message
         wait_event(events, ("at_layer", "fault"))
-
-        def crash() -> None:                                 # the controller dies where it is, in layer 2
-            station.twin.interrupt("killed by the test")
-            station._changed()
-        station._step(crash)
+        station.commands.change(lambda: station.twin.interrupt("killed by the test"))   # it dies in layer 2
         assert client.state().state == "interrupted"
-        assert station.plate.top_layer() == 0                # arrived at layer 2, no bead of it yet
+        assert station.commands.read(station.plate.top_layer) == 0      # arrived at layer 2, no bead of it yet
         with pytest.raises(StateError, match=r"cannot recover at layer 3: .* in the air"):
             client.recover(rtf=0, from_layer=2)
         assert client.state().state == "interrupted"

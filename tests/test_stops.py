@@ -19,7 +19,7 @@ import pytest
 
 from fabric.cli import up as launcher
 from fabric.client import Client
-from fabric.server.service import _lock_dir
+from fabric.server.service import lock_dir
 from fabric.signals import on_signals
 from fabric.wire.config import SessionSettings
 from fabric.wire.errors import StateError
@@ -194,7 +194,7 @@ def test_no_service_outlives_up_however_it_ends_and_their_locks_are_free(tmp_pat
         wait_until(lambda: not any(_running(p) for p in pids.values()), 6.0,
                     f"every service ending after {how} of up ({ {n: _running(p) for n, p in pids.items()} })")
         for name in SERVICES:                         # and nothing holds their locks: the next up can start them
-            _lock_dir(data / cell / name, name, cell).close()
+            lock_dir(data / cell / name, name, cell).close()
     finally:
         _reap(proc)
 
@@ -202,18 +202,18 @@ def test_no_service_outlives_up_however_it_ends_and_their_locks_are_free(tmp_pat
 def test_a_lock_whose_holder_died_never_blocks_and_a_live_one_is_named(tmp_path):
     folder = tmp_path / "c1" / "planner"
     holder = subprocess.Popen([sys.executable, "-c", (
-        "import sys, time; from pathlib import Path; from fabric.server.service import _lock_dir\n"
-        f"fh = _lock_dir(Path({str(folder)!r}), 'planner', 'c1'); print('locked', flush=True); time.sleep(600)")],
+        "import sys, time; from pathlib import Path; from fabric.server.service import lock_dir\n"
+        f"fh = lock_dir(Path({str(folder)!r}), 'planner', 'c1'); print('locked', flush=True); time.sleep(600)")],
         stdout=subprocess.PIPE, text=True)
     try:
         assert holder.stdout.readline().strip() == "locked"
         with pytest.raises(StateError) as err:
-            _lock_dir(folder, "planner", "c1")
+            lock_dir(folder, "planner", "c1")
         assert f"pid {holder.pid}" in err.value.message and "already running on this host" in err.value.message
         assert (folder / "lock").read_text().startswith(f"{holder.pid} ")     # the refusal did not erase it
         holder.kill()
         holder.wait()
-        _lock_dir(folder, "planner", "c1").close()   # at once: the kernel released it with its holder
+        lock_dir(folder, "planner", "c1").close()   # at once: the kernel released it with its holder
     finally:
         _reap(holder)
 

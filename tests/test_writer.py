@@ -70,13 +70,13 @@ def test_home_refuses_when_the_station_changed_while_its_move_was_checked(sessio
     try:
         with Client.connect(settings) as client:
             client.wait_alive(("station", "collision"), deadline_s=20)
-            real_check = station._check_move
+            real_certify = station.certify
 
-            def check_while_calibrated(q_from, q_to, what):   # another operator calibrates meanwhile
-                real_check(q_from, q_to, what)
+            def certify_while_calibrated(move):               # another operator calibrates meanwhile
+                real_certify(move)
                 client.calibrate()
 
-            monkeypatch.setattr(station, "_check_move", check_while_calibrated)
+            monkeypatch.setattr(station, "certify", certify_while_calibrated)
             q_before = client.position().q_deg
             with pytest.raises(StateError, match="changed while the move home was being checked"):
                 client.home()

@@ -83,7 +83,7 @@ def _store_files(service: str) -> list[StoreFile]:
     files.append(StoreFile(service, "records.sqlite", through(RecordStore), through(RecordStore), (RECORDS_TABLE,)))
     # the artifact index: made with its schema; opened in place by the store, which also re-indexes the files
     files.append(StoreFile(service, "artifacts/index.sqlite",
-                           lambda path: open_db(path, artifacts._SCHEMA, synchronous="FULL").close(),
+                           lambda path: open_db(path, artifacts.INDEX_SCHEMA, synchronous="FULL").close(),
                            lambda path: artifacts.ArtifactStore(path.parent).close()))
     return files
 
@@ -411,7 +411,7 @@ def _check_in_place(sf: StoreFile, path: Path) -> tuple[str, str]:
 
 def check_cell(data_root: Path, cell: str, repair: bool = True) -> list[dict[str, Any]]:
     """Check (and with ``repair``, repair) every store of ``cell`` under ``data_root``: one report per file."""
-    from fabric.server.service import _lock_dir
+    from fabric.server.service import lock_dir
     from fabric.wire.errors import StateError
     from fabric.wire.keys import SERVICES
     reports = []
@@ -422,7 +422,7 @@ def check_cell(data_root: Path, cell: str, repair: bool = True) -> list[dict[str
             continue
         lock, in_use = None, ""
         try:
-            lock = _lock_dir(folder, service, cell)
+            lock = lock_dir(folder, service, cell)
         except StateError as err:
             in_use = err.message
         try:

@@ -40,7 +40,7 @@ from fabric.wire.errors import FabricError, InternalError, NotFound, StateError,
 from fabric.wire.keys import ENDPOINTS, SERVICES, TOPICS, Endpoint, Keys, endpoints_of
 from fabric.wire.qos import reply_qos
 
-__all__ = ["Service", "Publisher", "reply_error"]
+__all__ = ["Service", "Publisher", "reply_error", "lock_dir"]
 
 log = logging.getLogger("fabric.server.service")
 LINK_WINDOW_S = 3.0     # how long start() waits for a first link before asking who else serves the cell
@@ -103,7 +103,7 @@ class Service:
         self._served: frozenset[str] = frozenset()      # the commands served, once started (see _answer_unknown)
         self._tmp = tempfile.TemporaryDirectory(prefix=f"am-fabric-{self.name}-") if data_dir is None else None
         self.data_dir = Path(self._tmp.name) if self._tmp is not None else Path(str(data_dir))
-        self._dir_lock = _lock_dir(self.data_dir, self.name, cell_id)
+        self._dir_lock = lock_dir(self.data_dir, self.name, cell_id)
         self.artifacts = ArtifactStore(self.data_dir / "artifacts")
         self.records = RecordStore(self.data_dir / "records.sqlite")
         self.closed = threading.Event()
@@ -221,6 +221,8 @@ class Service:
             reply = fn(req)
             query.reply(query.key_expr, codec.encode(reply), **reply_qos(ep))
         except FabricError as err:
+            if isinstance(err, ValidationError):       # a handler's check of the request: that message's field
+                err.details.setdefault("schema", ep.request.TYPE)
             self.log.info("%s/%s: %s: %s", self.name, ep.command, err.code, err.message)
             reply_error(query, err)
         except Exception as exc:  # noqa: BLE001 - a full disk, or a bug: answer, log, mark degraded, keep serving
@@ -292,7 +294,7 @@ class Service:
             self._tmp.cleanup()
 
 
-def _lock_dir(path: Path, name: str, cell: str) -> IO[bytes]:
+def lock_dir(path: Path, name: str, cell: str) -> IO[bytes]:
     """Hold an exclusive lock on ``path`` for this process's life: two services of one role and cell on
     one host would write the same durable state (the liveliness check covers other hosts).
 

@@ -14,6 +14,13 @@ The thread that runs the steps belongs to the service: a plain service calls
 :meth:`Writer.run` in a thread of its own; the station runs them between the
 ticks of its simulation clock with :meth:`Writer.run_pending`, so the clock is
 the same writer and the twin is touched by exactly one thread.
+
+Which fields are the writer's is said in the code, not in comments: a service
+declares them :class:`Owned` (a descriptor), and reading or changing one from
+any other thread while the writer runs raises :class:`OwnershipError`. Before
+the writer's thread first runs (the service being built) and once it is closed
+(the service shutting down, its thread ended) the constructing or closing
+thread may touch them.
 """
 from __future__ import annotations
 
@@ -22,13 +29,18 @@ import threading
 from collections.abc import Callable
 from concurrent.futures import Future
 from concurrent.futures import TimeoutError as FutureTimeout
-from typing import Any, TypeVar
+from typing import Any, Generic, TypeVar, overload
 
 from fabric.wire.errors import ServiceUnavailable, StateError
 
-__all__ = ["Writer", "Stale"]
+__all__ = ["Writer", "Stale", "Owned", "OwnershipError"]
 
 T = TypeVar("T")
+V = TypeVar("V")
+
+
+class OwnershipError(RuntimeError):
+    """A field only the writer may touch was touched by another thread (a bug: the change must be a step)."""
 
 
 class Stale(StateError):
@@ -73,6 +85,15 @@ class Writer:
     def on_writer(self) -> bool:
         """Whether the calling thread is the writer's."""
         return self._thread_id == threading.get_ident()
+
+    def require(self, what: str) -> None:
+        """Raise :class:`OwnershipError` unless the calling thread may touch the writer's state (``what`` names
+        it): the writer's own thread, or any thread before the writer first ran or after it closed."""
+        owner = self._thread_id
+        if owner is None or owner == threading.get_ident() or self._closed.is_set():
+            return
+        raise OwnershipError(f"{what} belongs to {self.name}'s writer, but thread "
+                             f"{threading.current_thread().name!r} touched it outside a step")
 
     # Running the steps -------------------------------------------------------------------------
 
@@ -124,3 +145,32 @@ class Writer:
         except BaseException as exc:  # noqa: BLE001 - handed to the caller, who answers or logs it
             fut.set_exception(exc)
         return True
+
+
+class Owned(Generic[V]):
+    """A field of a service that only its :class:`Writer` may read or change (the service's ``writer``
+    attribute): declared on the class (``twin: Owned[Twin] = Owned()``), set and read as a plain attribute,
+    checked on every access (:meth:`Writer.require`)."""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+        self.slot = f"_owned_{name}"
+
+    @overload
+    def __get__(self, obj: None, objtype: type | None = None) -> Owned[V]: ...
+
+    @overload
+    def __get__(self, obj: object, objtype: type | None = None) -> V: ...
+
+    def __get__(self, obj: object | None, objtype: type | None = None) -> V | Owned[V]:
+        if obj is None:
+            return self
+        obj.writer.require(f"{type(obj).__name__}.{self.name}")      # type: ignore[attr-defined]
+        try:
+            return obj.__dict__[self.slot]
+        except KeyError:
+            raise AttributeError(f"{type(obj).__name__}.{self.name} is not set yet") from None
+
+    def __set__(self, obj: object, value: V) -> None:
+        obj.writer.require(f"{type(obj).__name__}.{self.name}")      # type: ignore[attr-defined]
+        obj.__dict__[self.slot] = value

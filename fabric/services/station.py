@@ -13,10 +13,15 @@ lower rate (:mod:`fabric.services.telemetry_gate`); state on every change.
 
 Every change of the twin happens on one thread, the clock's: a command is a
 step of the station's writer (:mod:`fabric.server.writer`), run between two
-ticks; a command that needs a collision check first reads the move in one step,
-checks it in its own thread, and acts in a second step only if the twin has not
-changed meanwhile. Reads (``state``, ``time``, ``ready``) are steps too, so
-they see one consistent twin; ``position`` is a snapshot the clock keeps.
+ticks, through one mechanism (:class:`~fabric.services.station_commands.CommandRunner`):
+a change, or a checked change whose moves are certified against the part on the
+plate between its plan and its act, and which acts only if the twin has not
+changed meanwhile; the mechanism takes the checkpoint. The twin and the
+station's record of it are :class:`~fabric.server.writer.Owned` by the writer:
+another thread that touches them raises. Reads (``state``, ``time``, ``ready``)
+are steps too, so they see one consistent twin; ``position`` is a snapshot the
+clock keeps. Commands of other modules (``jog``, ``extrude``) register
+themselves through :meth:`StationService.register_command`.
 
 The station is durable (:mod:`fabric.store.journal`): each tick's events and
 the simulated time reached are written before they are published, and the
@@ -50,9 +55,10 @@ from fabric.robot.frames import T_to_xyzrpy
 from fabric.server.disk import require_room
 from fabric.server.health import Backoff
 from fabric.server.service import Service
-from fabric.server.writer import Stale, Writer
-from fabric.services import station_manual as manual_commands
+from fabric.server.writer import Owned, Writer
 from fabric.services.readiness import ReadyFacts, print_temp_c, ready_report
+from fabric.services.station_commands import CommandRunner, Move, Planned
+from fabric.services.station_manual import ManualCommands
 from fabric.services.station_messages import StationMessages
 from fabric.services.station_plate import PlateGuard
 from fabric.sim.deposition import Deposition
@@ -72,12 +78,16 @@ STATE_PERIOD_S = 0.5          # state also re-published at this period (progress
 GIL_SWITCH_S = 0.0005         # a command's thread waits at most this long for the clock thread's interpreter lock
 STALL_S = 0.5                 # a tick this late: the process was frozen or starved (time is held, noted)
 STALL_INTERRUPT_S = 2.0       # this late, the fabric has reported the station gone: a print is interrupted
-STEP_TIMEOUT_S = 4.0          # a command's step not begun by then is dropped (under the 5 s a caller waits)
 CLOCK_HEALTHY_S = 30.0        # a clock that failed and has run this long since is healthy again
+SNAPSHOTS = ("position", "cell", "health")      # served from a kept reply, not by a handler
 
 
 class StationService(Service):
     name = "station"
+    # the writer's (the clock thread's): read or changed in its steps only
+    twin: Owned[Twin] = Owned()
+    meta: Owned[StationMeta] = Owned()
+    collision_report: Owned[s.CollisionReport | None] = Owned()
 
     def __init__(self, session: zenoh.Session, cell_id: str, cell: Cell, pose_hz: float = 50.0,
                  data_dir: Path | None = None, checkpoint_s: float = DEFAULT_CHECKPOINT_PERIOD_S) -> None:
@@ -93,7 +103,8 @@ class StationService(Service):
         self.clock_stop = threading.Event()         # set first on close: the clock thread ends
         self.msgs = StationMessages(self.twin, self.meta)
         self.plate = PlateGuard(self.twin, self.meta)          # the part on the plate, and its rules
-        self._generation = 0                        # counts the commands that changed the twin (compare-and-set)
+        self.commands = CommandRunner(self.writer, self._stamp, self._checkpoint, lambda move: self.certify(move),
+                                      lambda: self.twin.state)
         self._last_state: tuple = ()
         self._last_state_s = 0.0
         self.pub_pose = self.publisher("pose")
@@ -106,8 +117,10 @@ class StationService(Service):
         cell_info = codec.encode(cell_info_of(cell))              # constant for the process's life
         self.handle_snapshot("cell", lambda: cell_info)
         for ep in endpoints_of(self.name):
-            if ep.command not in ("position", "cell", "health"):
-                self.handle(ep.command, getattr(self, f"on_{ep.command}"))
+            handler = getattr(self, f"on_{ep.command}", None)
+            if ep.command not in SNAPSHOTS and handler is not None:
+                self.handle(ep.command, handler)
+        self.manual = ManualCommands(self)          # jog, extrude: they register themselves
 
     # The meta's fields, as the rest of this module reads them.
     program_id = property(lambda self: self.meta.program_id)
@@ -150,29 +163,50 @@ class StationService(Service):
         self.meta = restored.meta
         return restored.twin, restored.events
 
-    # --- the writer: every change of the twin is a step on the clock's thread ----------
+    # --- the public surface commands are built on (fabric.services.station_commands) ---------
 
-    def _step(self, fn: Callable[[], Any]) -> Any:
-        """Run ``fn`` as a step of the writer; a step that changes the twin calls :meth:`_changed`."""
-        return self.writer.call(fn, timeout_s=STEP_TIMEOUT_S)
+    def register_command(self, command: str, handler: Callable[[Any], Any]) -> None:
+        """Serve station endpoint ``command`` (declared in ``fabric.wire.keys``) with ``handler``: how a
+        command of another module joins the station. Its changes go through :attr:`commands`."""
+        self.handle(command, handler)
 
-    def _changed(self) -> None:
-        """After a command changed the twin (on the writer): checkpoint it, bring the ``position`` snapshot up
-        to date (so ``position`` after the reply sees e.g. a new work object) and count the change."""
-        self._generation += 1
-        self.journal.checkpoint(self.twin, self.meta, force=True)
-        self._position = codec.encode(self.msgs.pose())
+    def ack(self, message: str) -> s.Ack:
+        """A command's acknowledgement, with the state it left the station in (on the writer)."""
+        return s.Ack(ok=True, message=message, state=self.twin.state)
+
+    def certify(self, move: Move) -> None:
+        """A move the station is about to make, certified by the collision service against the beads the twin
+        has actually laid (it asks ``station/beads`` for them, and keeps them between checks: a million
+        beads cross once, not with every move). The nozzle tip may touch the last bead's layer and the one
+        under it (where an interrupted print left it); on a ``descent`` the layer it goes down onto and the
+        one under, as when printing it. Raises CollisionError on a hit. Runs outside the writer."""
+        q_down, down_layer = move.descent if move.descent is not None else (None, -1)
+        report = self.client.check(s.CollisionRequest(
+            q_from_deg=np.degrees(move.q_from_rad).tolist(), q_to_deg=np.degrees(move.q_to_rad).tolist(),
+            beads="station", tip_layer=-2, vel_r=float(move.vel_r), kind=move.kind,
+            q_down_deg=np.degrees(q_down).tolist() if q_down is not None else None, down_layer=down_layer))
+        hit = report.first_hit
+        if hit is not None:
+            raise CollisionError(f"{move.what} would collide: {hit.message or f'{hit.body_a} <-> {hit.body_b}'}",
+                                 **{k: v for k, v in s.to_plain(hit).items() if k != "message"})
+
+    def move(self, q_from_rad: np.ndarray, q_to_rad: np.ndarray, what: str, kind: str,
+             descent: tuple[np.ndarray, int] | None = None) -> Move:
+        """A joint move at the twin's home speed, for a checked command's plan (on the writer)."""
+        return Move(np.asarray(q_from_rad, dtype=float), np.asarray(q_to_rad, dtype=float), what, kind,
+                    float(self.twin.config.home_vel_r), descent)
 
     def _stamp(self) -> tuple:
-        """What a long command's second step compares with its first: no command in between, same state, the
-        robot where it was."""
-        return (self._generation, self.twin.state, np.round(self.twin.pose().q_rad, 6).tobytes())
+        """What a checked command's act compares with its plan's (besides the change counter): the same state,
+        the robot where it was."""
+        return (self.twin.state, np.round(self.twin.pose().q_rad, 6).tobytes())
 
-    def _still(self, stamp: tuple, what: str, command: str) -> None:
-        """Compare-and-set: refuse (changing nothing) when the twin moved on while ``what`` was checked."""
-        if self._stamp() != stamp:
-            raise Stale(f"the station changed while {what} was being checked (it is now {self.twin.state}); "
-                        f"nothing was done: ask again", state=self.twin.state, command=command)
+    def _checkpoint(self) -> None:
+        """After a command changed the twin (on the writer, by the command runner only): checkpoint it, and
+        bring the ``position`` snapshot up to date (so ``position`` after the reply sees e.g. a new work
+        object)."""
+        self.journal.checkpoint(self.twin, self.meta, force=True)
+        self._position = codec.encode(self.msgs.pose())
 
     # --- simulation clock ------------------------------------------------------
 
@@ -189,7 +223,7 @@ class StationService(Service):
                 self.health.degrade("clock", f"{why} (failed {backoff.failures}x; next try in {pause_s:.2f} s)")
                 self.log.error("simulation failed (%d in a row; next try in %.2f s):\n%s", backoff.failures,
                                pause_s, traceback.format_exc())
-                if self.twin.state in ("printing", "paused"):
+                if self.twin.state.in_print:
                     self.twin.trip(f"station error: {why}")
                 resume_at = time.monotonic() + pause_s
                 while not self.clock_stop.is_set() and time.monotonic() < resume_at:   # commands still run
@@ -208,11 +242,11 @@ class StationService(Service):
             if now - last > STALL_S:
                 self._stalled(now - last)
                 last = now
-            if self.rtf > 0 or self.twin.state != "printing":
+            if self.rtf > 0 or not self.twin.state.printing:
                 events = self.twin.advance((now - last) * (self.rtf if self.rtf > 0 else 1.0))
             else:  # as fast as possible: whole chunks until this tick's wall budget is spent
                 events, t0 = [], time.monotonic()
-                while self.twin.state == "printing" and time.monotonic() - t0 < TICK_S:
+                while self.twin.state.printing and time.monotonic() - t0 < TICK_S:
                     events += self.twin.advance(chunk_s)
                 spent = time.monotonic() - t0
                 chunk_s = float(np.clip(chunk_s * (TICK_S / max(spent, 1e-4)) ** 0.5, 0.05, 600.0))
@@ -229,7 +263,7 @@ class StationService(Service):
             position = self._position = codec.encode(self.msgs.pose(sample=pose_due))
             ext = self.msgs.extrusion_due(now, ext_now) if pose_due else None
             temps = self.msgs.temps_due(now) if pose_due else None
-            at_rest = self.twin.state != "printing" and not self.twin.moving
+            at_rest = not self.twin.state.printing and not self.twin.moving
             self.journal.record_tick(msgs, self.twin.t_sim_s, at_rest)      # written before it is published
             self.journal.checkpoint(self.twin, self.meta, force=key[:4] != self._last_state[:4])
             for m in msgs:
@@ -256,32 +290,25 @@ class StationService(Service):
         why = f"the station stalled for {gap_s:.1f} s (process frozen or starved)"
         self.log.warning("%s: simulated time held at %.3f s", why, self.twin.t_sim_s)
         self.twin.note("stall", {"stalled_s": round(gap_s, 3), "state": self.twin.state})
-        if gap_s >= STALL_INTERRUPT_S and self.twin.state in ("printing", "paused"):
+        if gap_s >= STALL_INTERRUPT_S and self.twin.state.in_print:
             self.twin.interrupt(why + ": recover to go on")
 
-    def _ack(self, message: str) -> s.Ack:
-        return s.Ack(ok=True, message=message, state=self.twin.state)
-
     # --- the paper's commands ----------------------------------------------------
-    # A command is one step of the writer; one that needs a collision check first is two: the first reads
-    # the move and a stamp, the check runs in the handler's thread, the second acts only if nothing changed.
+    # Each is a change or a checked change of self.commands (fabric.services.station_commands): the runner
+    # takes the checkpoint; a refusal raised in a plan or an act changes nothing.
 
     def on_home(self, _: s.Empty) -> s.Ack:
-        def plan() -> tuple[np.ndarray, tuple]:
-            if self.twin.state in ("printing", "paused"):
+        def plan() -> Planned[None]:
+            if self.twin.state.in_print:
                 raise StateError(f"cannot go home while {self.twin.state}; stop first",
                                  state=self.twin.state, command="home")
-            return self.twin.pose().q_rad, self._stamp()
+            return Planned([self.move(self.twin.pose().q_rad, self.cell.home_q_rad, "the move home", "home")],
+                           None, "the move home")
 
-        def act() -> s.Ack:
-            self._still(stamp, "the move home", "home")
+        def act(_: Planned[None]) -> s.Ack:
             self.twin.go_home()
-            self._changed()
-            return self._ack("moving home (collision-checked)")
-
-        q_now, stamp = self._step(plan)
-        self._check_move(q_now, self.cell.home_q_rad, "the move home")
-        return self._step(act)
+            return self.ack("moving home (collision-checked)")
+        return self.commands.checked("home", plan, act)
 
     def on_load(self, req: s.LoadRequest) -> s.TimeInfo:
         art = self.client.artifact("planner", req.program_id)       # fetched and decoded outside the writer
@@ -290,7 +317,7 @@ class StationService(Service):
         self.artifacts.put(art)        # on disk before the twin takes it: a full disk leaves the station as it was
 
         def act() -> s.TimeInfo:
-            if self.twin.state in ("printing", "paused"):
+            if self.twin.state.in_print:
                 raise StateError(f"cannot load while {self.twin.state}", state=self.twin.state, command="load")
             self.plate.refuse_load()
             self.twin.load(program)
@@ -299,34 +326,28 @@ class StationService(Service):
             self.meta.layers_total = int(program.layer.max() + 1) if len(program) else 0
             self.meta.planned_mm3 = program.deposited_volume_mm3()
             self.collision_report = None
-            self._changed()
             return self._time_msg()
-
-        return self._step(act)
+        return self.commands.change(act)
 
     def on_start(self, req: s.StartRequest) -> s.Ack:
         layer = req.from_layer if req.from_layer >= 0 else None
+        where = "" if layer is None else f" from layer {layer + 1} (heating, then the move above it)"
 
-        def act() -> s.Ack:
-            if stamp is not None:
-                self._still(stamp, f"the move to layer {(layer or 0) + 1}", "start")
+        def plan() -> Planned[None]:
+            self.plate.refuse_start("start", layer)
+            if layer is None:                          # from the beginning: the program was certified when planned
+                return Planned([], None)
+            path = self._restart_path(layer, "start")
+            what = f"the move to layer {layer + 1}"
+            return Planned([self.move(path.q_from_rad, path.q_above_rad, what, "restart",
+                                      descent=(path.q_down_rad, layer))], None, what)
+
+        def act(_: Planned[None]) -> s.Ack:
             self.plate.refuse_start("start", layer)
             self.twin.start(from_layer=layer)
             self._set_rtf(req.rtf)
-            self._changed()
-            where = "" if layer is None else f" from layer {layer + 1} (heating, then the move above it)"
-            return self._ack(f"printing{where} at {self._rtf_text()}")
-
-        def plan(layer: int) -> tuple[RestartPath, tuple]:
-            self.plate.refuse_start("start", layer)
-            return self._restart_path(layer, "start"), self._stamp()
-
-        stamp = None
-        if layer is not None:
-            path, stamp = self._step(lambda: plan(layer))
-            self._check_move(path.q_from_rad, path.q_above_rad, f"the move to layer {layer + 1}",
-                             descent=(path.q_down_rad, layer))
-        return self._step(act)
+            return self.ack(f"printing{where} at {self._rtf_text()}")
+        return self.commands.checked("start", plan, act)
 
     def _restart_path(self, layer: int, command: str) -> RestartPath:
         """The motion a restart at ``layer`` makes before it prints, as the twin will queue it: the joint move
@@ -345,114 +366,80 @@ class StationService(Service):
     def _rtf_text(self) -> str:
         return "max speed" if self.meta.rtf == 0 else f"{self.meta.rtf:g}x real time"
 
-    def _check_move(self, q_from: np.ndarray, q_to: np.ndarray, what: str,
-                    descent: tuple[np.ndarray, int] | None = None, kind: str = "") -> None:
-        """A joint move the station is about to make, certified by the collision service against the beads
-        the twin has actually laid (it asks ``station/beads`` for them, and keeps them between checks): a
-        million beads cross once, not with every move. The nozzle tip may touch the last bead's layer and
-        the one under it (where an interrupted print left it). ``descent`` (joints, layer): a restart's
-        straight way down after the move, onto the first point of that layer, certified with it; on the
-        way down the tip may touch that layer's beads and the layer under's, as when printing it. Raises
-        CollisionError on a hit."""
-        kind = kind or ("home" if "home" in what else "recover" if "back to" in what else "restart")
-        q_down, down_layer = descent if descent is not None else (None, -1)
-        report = self.client.check(s.CollisionRequest(
-            q_from_deg=np.degrees(q_from).tolist(), q_to_deg=np.degrees(q_to).tolist(), beads="station",
-            tip_layer=-2, vel_r=float(self.twin.config.home_vel_r), kind=kind,
-            q_down_deg=np.degrees(q_down).tolist() if q_down is not None else None, down_layer=down_layer))
-        hit = report.first_hit
-        if hit is not None:
-            raise CollisionError(f"{what} would collide: {hit.message or f'{hit.body_a} <-> {hit.body_b}'}",
-                                 **{k: v for k, v in s.to_plain(hit).items() if k != "message"})
-
-    def on_jog(self, req: s.JogRequest) -> s.Ack:
-        return manual_commands.jog(self, req)
-
-    def on_extrude(self, req: s.ExtrudeRequest) -> s.Ack:
-        return manual_commands.extrude(self, req)
-
     def on_pause(self, _: s.Empty) -> s.Ack:
         def act() -> s.Ack:
             self.twin.pause()
-            self._changed()
-            return self._ack("paused: extruder off, retracted, lifted clear")
-        return self._step(act)
+            return self.ack("paused: extruder off, retracted, lifted clear")
+        return self.commands.change(act)
 
     def on_resume(self, req: s.StartRequest) -> s.Ack:
         def act() -> s.Ack:
             self.twin.resume()
             self._set_rtf(req.rtf)
-            self._changed()
-            return self._ack(f"resuming at the paused spot at {self._rtf_text()}")
-        return self._step(act)
+            return self.ack(f"resuming at the paused spot at {self._rtf_text()}")
+        return self.commands.change(act)
 
     def on_recover(self, req: s.StartRequest) -> s.Ack:
         layer = req.from_layer if req.from_layer >= 0 else None
         where = "the interrupted spot" if layer is None else f"layer {layer + 1}"
+        what = f"the move back to {where}"
 
-        def plan() -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, int] | None, tuple]:
+        def plan() -> Planned[None]:
             move = self.twin.recovery_move(layer)
             if move is None:
                 raise StateError(f"nothing to recover while {self.twin.state}", state=self.twin.state,
                                  command="recover")
             if layer is None:                          # back to the interrupted spot: one move
-                return move, None, self._stamp()
+                return Planned([self.move(*move, what, "recover")], None, what)
             self.plate.refuse_in_the_air("recover", layer)
             path = self._restart_path(layer, "recover")    # from a layer: the move above it, then down
-            return (path.q_from_rad, path.q_above_rad), (path.q_down_rad, layer), self._stamp()
+            return Planned([self.move(path.q_from_rad, path.q_above_rad, what, "recover",
+                                      descent=(path.q_down_rad, layer))], None, what)
 
-        def act() -> s.Ack:
-            self._still(stamp, f"the move back to {where}", "recover")
+        def act(_: Planned[None]) -> s.Ack:
             self.twin.recover(from_layer=layer)
             self._set_rtf(req.rtf)
-            self._changed()
-            return self._ack(f"recovering: back to {where} (collision-checked), then going on at "
-                             f"{self._rtf_text()}")
-
-        (q_from, q_to), descent, stamp = self._step(plan)
-        self._check_move(q_from, q_to, f"the move back to {where}", descent)
-        return self._step(act)
+            return self.ack(f"recovering: back to {where} (collision-checked), then going on at {self._rtf_text()}")
+        return self.commands.checked("recover", plan, act)
 
     def on_stop(self, _: s.Empty) -> s.Ack:
         def act() -> s.Ack:
             self.twin.stop()
-            self._changed()
-            return self._ack("stopped: extruder off, moved clear; deposit kept on record")
-        return self._step(act)
+            return self.ack("stopped: extruder off, moved clear; deposit kept on record")
+        return self.commands.change(act)
 
     def on_clear_plate(self, _: s.Empty) -> s.Ack:
         def act() -> s.Ack:
             what = self.plate.clear()
-            self._changed()
             if not what:
-                return self._ack("the plate was clear already (noted: a job waiting for it goes on)")
-            return self._ack(f"plate clear: {what} taken off")
-        return self._step(act)
+                return self.ack("the plate was clear already (noted: a job waiting for it goes on)")
+            return self.ack(f"plate clear: {what} taken off")
+        return self.commands.change(act)
 
     def on_collisions(self, _: s.Empty) -> s.CollisionReport:
-        program_id = self._step(lambda: self.meta.program_id)
+        program_id, state = self.commands.read(lambda: (self.meta.program_id, self.twin.state))
         if not program_id:
-            raise StateError("no program loaded", state=self._step(lambda: self.twin.state), command="collisions")
+            raise StateError("no program loaded", state=state, command="collisions")
         report = self.client.check(s.CollisionRequest(program_id=program_id))
-        self._step(lambda: self._keep_report(program_id, report))
+        self.commands.read(lambda: self._keep_report(program_id, report))
         return report
 
     def _keep_report(self, program_id: str, report: s.CollisionReport) -> None:
-        """Keep a collision report for the ready checklist, if its program is still the loaded one."""
+        """Keep a collision report for the ready checklist, if its program is still the loaded one (on the
+        writer; a kept report is no change of the twin: no checkpoint)."""
         if self.meta.program_id == program_id:
             self.collision_report = report
 
     def on_calibrate(self, _: s.Empty) -> s.CalibrationReport:
         def act() -> tuple[Any, Any, Any]:
-            if self.twin.state in ("printing", "paused"):
+            if self.twin.state.in_print:
                 raise StateError("cannot calibrate during a print", state=self.twin.state, command="calibrate")
             r = self.twin.calibrate()
             self.twin.note("calibrated", {"residual_rms_mm": float(r.residual_rms_mm),
                                           "correction_xyz_mm": [float(v) for v in r.correction_xyz_mm]})
-            self._changed()
             return (r, *T_to_xyzrpy(self.twin.work_object_T))
 
-        r, wobj_xyz, wobj_rpy = self._step(act)
+        r, wobj_xyz, wobj_rpy = self.commands.change(act)
         return s.CalibrationReport(correction_xyz_mm=list(map(float, r.correction_xyz_mm)),
                                    correction_rpy_deg=list(map(float, r.correction_rpy_deg)),
                                    residual_rms_mm=float(r.residual_rms_mm), points=int(r.n_points),
@@ -466,12 +453,12 @@ class StationService(Service):
         """What the ready checklist judges: the fabric is asked first (in this thread), then the twin is read
         in one step of the writer."""
         alive = self.client.alive(timeout=2.0)
-        program_id, report = self._step(lambda: (self.meta.program_id, self.collision_report))
+        program_id, report = self.commands.read(lambda: (self.meta.program_id, self.collision_report))
         collision_error = ""
         if program_id and report is None:
             try:
                 report = self.client.check(s.CollisionRequest(program_id=program_id))
-                self._step(lambda: self._keep_report(program_id, report))
+                self.commands.read(lambda: self._keep_report(program_id, report))
             except FabricError as err:
                 collision_error = err.message
 
@@ -487,7 +474,7 @@ class StationService(Service):
                               print_temp_c=print_temp_c(program) if program is not None else None,
                               state=self.twin.state, reason=self.twin.reason,
                               plate=self.plate.text() if self.meta.plate_occupied else "")
-        return self._step(read)
+        return self.commands.read(read)
 
     def _time_msg(self) -> s.TimeInfo:
         ti = self.twin.time_info()
@@ -495,10 +482,10 @@ class StationService(Service):
                           estimate_s=float(ti.estimate_s), state=self.twin.state)
 
     def on_time(self, _: s.Empty) -> s.TimeInfo:
-        return self._step(self._time_msg)
+        return self.commands.read(self._time_msg)
 
     def on_state(self, _: s.Empty) -> s.StationState:
-        return self._step(self.msgs.state)
+        return self.commands.read(self.msgs.state)
 
     def on_events(self, req: s.EventsQuery) -> s.EventList:
         last = self.journal.last_seq()
@@ -515,21 +502,19 @@ class StationService(Service):
             given = {k: v for k, v in (("speed_r", req.speed_r), ("flow_r", req.flow_r), ("nozzle_c", req.nozzle_c),
                                        ("bed_c", req.bed_c)) if v is not None}
             self.twin.note("override", given)
-            self._changed()
             return self.msgs.state()
-        return self._step(act)
+        return self.commands.change(act)
 
     def on_rtf(self, req: s.StartRequest) -> s.StationState:
         """Change how fast simulated time runs; the simulation itself is unchanged (time is exact)."""
         def act() -> s.StationState:
             self._set_rtf(req.rtf)
-            self._changed()
             return self.msgs.state()
-        return self._step(act)
+        return self.commands.change(act)
 
     def on_mesh(self, req: s.MeshRequest) -> s.Artifact:
         # the beads are copied in one step; the mesh is built in this thread, while the clock goes on
-        program, arrays = self._step(lambda: (self.twin.program, self.twin.beads.to_arrays(0)))
+        program, arrays = self.commands.read(lambda: (self.twin.program, self.twin.beads.to_arrays(0)))
         beads = Deposition.from_arrays(program, arrays)
         if len(beads) == 0:
             raise NotFound("nothing has been deposited yet")
@@ -566,7 +551,7 @@ class StationService(Service):
                            layer=np.array(beads.layer[lo:hi], dtype="<i8"), row=rows.astype("<i8"),
                            gcode_line=lines.astype("<i8"), wobj=np.array(wobj, dtype="<f8"),
                            axis=np.array(beads.axis[lo:hi], dtype="<f8"))
-        return self._step(read)
+        return self.commands.read(read)
 
 
 def cell_info_of(cell: Cell) -> s.CellInfo:

@@ -19,7 +19,9 @@ were being prepared are prepared again.
 Job records have one writer (:mod:`fabric.server.writer`): every transition,
 from a command, the preparer, the load sequence or a station event, is a step
 that reads the record as it is now, changes it and saves it; calls to other
-services run between steps, never inside one.
+services run between steps, never inside one. The writer's fields are
+:class:`~fabric.server.writer.Owned` and the job store refuses a change from
+another thread: what a comment used to say, the code now checks.
 """
 from __future__ import annotations
 
@@ -43,7 +45,7 @@ from fabric.printjobs.prepare import PrepareCancelled, Preparer
 from fabric.printjobs.queue import PREPARER_FIELDS, STATION_FREE, WAITING_STATES, WAITING_TEXT, next_to_load
 from fabric.programs import content_id
 from fabric.server.service import Service
-from fabric.server.writer import Writer
+from fabric.server.writer import Owned, Writer
 from fabric.services.supervisor_files import LibraryCommands
 from fabric.store.jobs import JobStore
 from fabric.wire import codec
@@ -60,17 +62,24 @@ T = TypeVar("T")
 
 class SupervisorService(Service):
     name = "supervisor"
+    # the writer's: read or changed in its steps only
+    _loading: Owned[str] = Owned()                        # the job being loaded on the station
+    _plate_epoch: Owned[int] = Owned()                    # counts the operator's "plate clear"
+    _seen: Owned[int] = Owned()                           # the last station event applied
+    _seen_saved_s: Owned[float] = Owned()                 # when that number was last saved
 
     def __init__(self, session: zenoh.Session, cell_id: str, data_dir: Path | None = None) -> None:
         super().__init__(session, cell_id, data_dir)
         self.client = Client(session, cell_id)
-        self.store = JobStore(self.data_dir / "jobs.sqlite")
         self.writer = Writer(self.name)                   # the one writer of job records and the plate
+        self.store = JobStore(self.data_dir / "jobs.sqlite", self.writer)
         self.wake = threading.Event()                     # something to prepare or to load
         self.pub_jobs = self.publisher("jobs", lossless=True)
         self.preparer = Preparer(self.client, self.artifacts, self._save_prepared, self.closed)
-        self._loading = ""                                # the job being loaded on the station (writer's)
-        self._plate_epoch = 0                             # counts the operator's "plate clear" (writer's)
+        self._loading = ""
+        self._plate_epoch = 0
+        self._seen = self.store.last_event_seq()
+        self._seen_saved_s = time.monotonic()
         self._alive: dict[str, float] = {}                # service -> since (wall time)
         self._alive_lock = threading.Lock()
         self._live: queue.Queue[tuple[str, str]] = queue.Queue()
@@ -87,6 +96,7 @@ class SupervisorService(Service):
         self.handle("file", lambda q: self.library.library.get(q.file_id))
         self.handle("file_add", self.library.on_file_add)
         self.handle("file_remove", self.library.on_file_remove)
+        self.handle("upload", self.library.on_upload)       # a large file to submit, in pieces
         self._requeue_interrupted_preparations()
 
     def start(self) -> None:
@@ -429,9 +439,8 @@ class SupervisorService(Service):
     # --- following the station ------------------------------------------------------
 
     def _follow_events(self) -> None:
-        self._seen = self.store.last_event_seq()
-        self._seen_saved_s = time.monotonic()
-        EventFollower(self.client, self._events, lambda: self._seen, self._apply_batch, self.closed).run()
+        EventFollower(self.client, self._events, lambda: self._step(lambda: self._seen), self._apply_batch,
+                      self.closed).run()
 
     def _apply_batch(self, events: list[s.Event]) -> bool:
         """Apply events in order (one writer step); False when a gap shows the log must be read first."""

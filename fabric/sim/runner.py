@@ -207,11 +207,11 @@ class LegRunner:
         if kind == "finished":
             st.state, st.reason = "idle", "finished"
             st.t_ended_s = t
-            self.emit(events, t, kind, self._totals(t))
+            self.emit(events, t, kind, self.totals(t))
         elif kind == "stopped":
             self.record_partial()
             st.t_ended_s = t
-            self.emit(events, t, kind, self._totals(t))
+            self.emit(events, t, kind, self.totals(t))
         elif kind in ("resumed", "recovered", "at_layer"):
             job.resume_at = None
             if st.state == "printing" and kind != "at_layer":     # the move back is over: say so, not "-ing"
@@ -237,7 +237,7 @@ class LegRunner:
         else:
             self.emit(events, t, kind)
 
-    def _totals(self, t: float) -> dict[str, Any]:
+    def totals(self, t: float) -> dict[str, Any]:
         """What a finished or stopped job did: simulated duration, volume, filament, beads."""
         st = self.state
         job = st.job

@@ -29,6 +29,7 @@ from fabric.motion.thermal import Thermal
 from fabric.motion.validate import validate_program
 from fabric.robot.frames import make_T, rot_x
 from fabric.robot.kinematics import ik_reason
+from fabric.schemas import states
 from fabric.sim import manual
 from fabric.sim.builder import LegBuilder
 from fabric.sim.calibration import CalibrationResult, calibrate_plate
@@ -96,9 +97,9 @@ class Twin:
     # ------------------------------------------------------------------ queries
 
     @property
-    def state(self) -> str:
-        """Lifecycle state (one of :data:`STATES`)."""
-        return self.s.state
+    def state(self) -> states.Station:
+        """Lifecycle state (one of :data:`STATES`; its record ``s.state`` keeps the plain string)."""
+        return states.Station(self.s.state)
 
     @property
     def reason(self) -> str:
@@ -352,7 +353,7 @@ class Twin:
             # what the print deposited so far travels with the event (the job's record shows it)
             self.runner.emit(events, t, "interrupted", {"reason": reason, "resume_row": at.row,
                                                         "resume_s_mm": at.s_mm, "xyz_mm": at.pose.xyz_mm.tolist(),
-                                                        **self.runner._totals(t)})
+                                                        **self.runner.totals(t)})
         elif was == "stopped" and st.t_ended_s is None:
             self.runner.on_end("stopped", t, events)
 

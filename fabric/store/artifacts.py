@@ -30,12 +30,12 @@ from fabric.store.sqlite import open_db
 from fabric.wire import codec
 from fabric.wire.errors import DecodeError, NotFound, ValidationError
 
-__all__ = ["ArtifactStore", "DEFAULT_MAX_BYTES"]
+__all__ = ["ArtifactStore", "DEFAULT_MAX_BYTES", "INDEX_SCHEMA"]
 
 log = logging.getLogger("fabric.store.artifacts")
 DEFAULT_MAX_BYTES = 4 << 30
 
-_SCHEMA = """
+INDEX_SCHEMA = """
 CREATE TABLE IF NOT EXISTS artifacts (
     artifact_id TEXT PRIMARY KEY,
     size_bytes INTEGER NOT NULL,
@@ -64,7 +64,7 @@ class ArtifactStore:
         self.root.mkdir(parents=True, exist_ok=True)
         self.max_bytes = int(max_bytes)
         self._lock = threading.Lock()
-        self._db = open_db(self.root / "index.sqlite", _SCHEMA, synchronous="FULL")
+        self._db = open_db(self.root / "index.sqlite", INDEX_SCHEMA, synchronous="FULL")
         self._reconcile()
 
     # Reading and writing ------------------------------------------------------------------

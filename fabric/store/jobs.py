@@ -22,6 +22,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from fabric import schemas as s
+from fabric.server.writer import Writer
 from fabric.store.sqlite import Database, Table, run_script
 from fabric.wire import codec
 from fabric.wire.errors import NotFound, ValidationError
@@ -90,15 +91,24 @@ def _state_filter(states: Iterable[str]) -> tuple[str, tuple[str, ...]]:
 
 
 class JobStore:
-    """Job records in SQLite (see the module docstring). Thread-safe: every access holds the database's lock."""
+    """Job records in SQLite (see the module docstring). Thread-safe: every access holds the database's lock.
 
-    def __init__(self, path: str | Path) -> None:
+    ``writer``: the one writer of the records (the supervisor's); given, a change from any other thread while
+    it runs raises ``OwnershipError`` (reads are free: they answer from the database as it is)."""
+
+    def __init__(self, path: str | Path, writer: Writer | None = None) -> None:
         self.db = Database(path, (JOBS_TABLE, FOLLOW_TABLE, PLATE_TABLE), synchronous="FULL")
+        self.writer = writer
+
+    def _changing(self) -> None:
+        if self.writer is not None:
+            self.writer.require("a change of the job records")
 
     # Records --------------------------------------------------------------------------------
 
     def add(self, record: s.JobRecord) -> None:
         """A new job at the end of the queue."""
+        self._changing()
         with self.db.write() as conn:
             row = conn.execute("SELECT COALESCE(MAX(position), 0) FROM jobs").fetchone()
             conn.execute("INSERT INTO jobs VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
@@ -106,6 +116,7 @@ class JobStore:
 
     def save(self, *records: s.JobRecord, last_event_seq: int | None = None) -> None:
         """Write changed records (and, with them, how far the station's events were applied), all or none."""
+        self._changing()
         with self.db.write() as conn:
             for rec in records:
                 cur = conn.execute(f"UPDATE jobs SET {_COLUMNS} WHERE job_id = ?",
@@ -166,6 +177,7 @@ class JobStore:
 
     def remove(self, job_id: str) -> None:
         """Forget ``job_id``."""
+        self._changing()
         with self.db.write() as conn:
             if conn.execute("DELETE FROM jobs WHERE job_id = ?", (job_id,)).rowcount == 0:
                 raise NotFound(f"no job {job_id}", job_id=job_id)
@@ -178,6 +190,7 @@ class JobStore:
             raise ValidationError(f"position {index} outside the queue of {len(among)} jobs", field="position")
         order = [j for j in among if j != job_id]
         order.insert(index, job_id)
+        self._changing()
         with self.db.write() as conn:
             slots = sorted(float(r[0]) for r in conn.execute(
                 f"SELECT position FROM jobs WHERE job_id IN ({','.join('?' * len(among))})", among))
@@ -199,6 +212,7 @@ class JobStore:
         return True if row is None else bool(row[0])
 
     def set_plate_clear(self, clear: bool) -> None:
+        self._changing()
         with self.db.write() as conn:
             conn.execute("INSERT OR REPLACE INTO plate VALUES (1, ?)", (int(clear),))
 

@@ -1,0 +1,128 @@
+"""The one way a station command changes the twin: :class:`CommandRunner` (Klipper's reactor as the only way in).
+
+A command is a *change* or a *checked change*. A change is one step of the
+station's writer: the command's ``act`` runs there, and the runner then takes
+the checkpoint (the journal, the ``position`` snapshot, the change counter); a
+refused command raises before anything is changed, and nothing is written. A
+checked change is a motion the collision service certifies first, in four
+parts that no command can skip or reorder:
+
+1. **plan**, a step: read the twin, refuse what the state forbids, and say
+   which moves the command will make (:class:`Move`), with a stamp of the
+   twin as it is (the change counter, its state, the robot's joints);
+2. **certify**, in the handler's thread, outside the writer: every move
+   against the beads on the plate (``StationService.certify``);
+3. **act**, a step: only if the stamp is unchanged (compare-and-set; else
+   :class:`~fabric.server.writer.Stale`, nothing done), make the change;
+4. **checkpoint and acknowledge**: the runner's, after ``act`` returns.
+
+Commands outside the station module register themselves on the station
+through its public surface (``StationService.register_command``, Klipper's
+``register_command``) and use these same mechanisms.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Generic, TypeVar
+
+import numpy as np
+
+from fabric.server.writer import Owned, Stale, Writer
+
+__all__ = ["Move", "Planned", "CommandRunner", "STEP_TIMEOUT_S"]
+
+STEP_TIMEOUT_S = 4.0          # a command's step not begun by then is dropped (under the 5 s a caller waits)
+P = TypeVar("P")
+R = TypeVar("R")
+
+
+@dataclass(frozen=True)
+class Move:
+    """A joint move the station is about to make, to be certified before it is made.
+
+    ``descent`` (joints, layer): a straight way down after the move (a restart onto the first point of
+    a layer, or a jog's straight piece), certified with it; on the way down the nozzle tip may touch that
+    layer's beads and the layer under's (-1: none)."""
+
+    q_from_rad: np.ndarray
+    q_to_rad: np.ndarray
+    what: str                        # "the move home", for the refusal: "the move home would collide: ..."
+    kind: str                        # the collision service's kind: home, recover, restart, jog
+    vel_r: float                     # the move's share of the joints' top speeds
+    descent: tuple[np.ndarray, int] | None = None
+
+
+@dataclass
+class Planned(Generic[P]):
+    """What a checked command's plan found: the moves to certify, what ``act`` needs, and ``what`` to name
+    in a stale refusal ("the station changed while the move home was being checked")."""
+
+    moves: list[Move]
+    data: P
+    what: str = "the move"
+    stamp: tuple = field(default=(), repr=False)      # set by the runner
+
+
+class CommandRunner:
+    """Runs the station's commands as steps of its ``writer`` (see the module docstring).
+
+    ``stamp()`` (on the writer) is what a checked command's act compares with its plan's; ``checkpoint()``
+    (on the writer) saves the twin after a change; ``certify(move)`` (outside it) raises CollisionError on
+    a hit. ``state()`` (on the writer) names the station's state for a stale refusal."""
+
+    generation: Owned[int] = Owned()          # counts the changes (a checked command's stamp compares it)
+
+    def __init__(self, writer: Writer, stamp: Callable[[], tuple], checkpoint: Callable[[], None],
+                 certify: Callable[[Move], None], state: Callable[[], str]) -> None:
+        self.writer = writer
+        self._stamp_of, self._checkpoint, self._certify, self._state = stamp, checkpoint, certify, state
+        self.generation = 0
+
+    def read(self, fn: Callable[[], R]) -> R:
+        """``fn`` as a step that changes nothing (a consistent read of the twin); no checkpoint."""
+        return self.writer.call(fn, timeout_s=STEP_TIMEOUT_S)
+
+    def change(self, act: Callable[[], R]) -> R:
+        """``act`` as one step, then the checkpoint; an ``act`` that raises has changed nothing, and no
+        checkpoint is taken."""
+        def step() -> R:
+            reply = act()
+            self._committed()
+            return reply
+        return self.writer.call(step, timeout_s=STEP_TIMEOUT_S)
+
+    def checked(self, command: str, plan: Callable[[], Planned[P]], act: Callable[[Planned[P]], R]) -> R:
+        """A motion certified before it is made: plan (a step), certify every move (here, outside the
+        writer), act only if nothing changed meanwhile (a step), checkpoint. A plan with no moves acts in
+        its own step."""
+        def planning() -> tuple[Planned[P], R | None]:
+            planned = plan()
+            if not planned.moves:                    # nothing to certify: act at once, in this step
+                reply = act(planned)
+                self._committed()
+                return planned, reply
+            planned.stamp = self._stamp()
+            return planned, None
+        planned, done = self.writer.call(planning, timeout_s=STEP_TIMEOUT_S)
+        if not planned.moves:
+            return done                                   # type: ignore[return-value]
+        for move in planned.moves:
+            self._certify(move)
+
+        def acting() -> R:
+            if self._stamp() != planned.stamp:
+                state = self._state()
+                raise Stale(f"the station changed while {planned.what} was being checked (it is now {state}); "
+                            f"nothing was done: ask again", state=state, command=command)
+            reply = act(planned)
+            self._committed()
+            return reply
+        return self.writer.call(acting, timeout_s=STEP_TIMEOUT_S)
+
+    def _stamp(self) -> tuple:
+        return (self.generation, *self._stamp_of())
+
+    def _committed(self) -> None:
+        self.generation += 1
+        self._checkpoint()
