@@ -88,4 +88,4 @@ def test_the_check_finds_numpys_rows_and_sags(name: str) -> None:
 def test_a_chain_longer_than_the_helper_takes_is_refused() -> None:
     walk = ChainPoint([_Joint(2, 1, np.eye(3), np.array([0.0, 0.0, 100.0]))] * 17, np.zeros(3))
     with pytest.raises(ValueError, match="17 joints"):
-        chain_native.points(walk, np.zeros((3, 17)))
+        chain_native.points(walk.packed(), np.zeros((3, 17)))

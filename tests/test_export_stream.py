@@ -133,3 +133,24 @@ def test_atomic_files_all_or_nothing(tmp_path) -> None:
         files.open(b).write(b"new b")
     assert a.read_bytes() == b"new a" and b.read_bytes() == b"new b"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "b.mod"]
+
+
+def test_export_by_the_id_of_an_older_job_whose_program_was_let_go(session, settings, cell) -> None:
+    """Two plans later the first job's hand-off is released (the planner keeps the last plan's): an export by
+    its job id still gives its program, from the store (the job is ``done``: a plan job's states are
+    queued, running, done and failed, not a print job's)."""
+    planner = PlannerService(session, settings.cell, cell)
+    planner.start()
+    try:
+        with Client.connect(settings) as client:
+            client.wait_alive(("planner",), deadline_s=20)
+            first = client.plan(s.PlanRequest(gcode=_GCODE.encode(), filename="grid.gcode"))
+            done = client.wait_job("planner", first.job_id, timeout=60)
+            assert done.state == "done"
+            for k in range(2):
+                later = client.plan(s.PlanRequest(gcode=_GCODE.replace("E0.1", f"E0.{k + 2}").encode()))
+                client.wait_job("planner", later.job_id, timeout=60)
+            chunk = client.export_chunk("", "csv", 0, 1 << 20, 300, job_id=first.job_id)
+            assert chunk.done and chunk.data == client.export(done.result_id, "csv").data
+    finally:
+        planner.close()

@@ -180,7 +180,7 @@ def _straying_all(prog: Program, status: np.ndarray, robot, tol_mm: float, prev:
     prev_ok = prev is not None and prev.status == IK_OK
     walk = getattr(robot, "chain_point", None)
     if walk is not None and walk.use_native:
-        got = chain_native.straying(walk, prog.q_rad, prog.op, status, prog.xyz_mm, prog.wobj, reach_mm,
+        got = chain_native.straying(walk.packed(), prog.q_rad, prog.op, status, prog.xyz_mm, prog.wobj, reach_mm,
                                     SPLIT_R * tol_mm, None if prev is None else prev.q_rad,
                                     None if prev is None else prev.xyz_mm, prev_ok, MOVEL, IK_OK)
         if got is not None:

@@ -69,7 +69,7 @@ class ChainPoint:
     def packed(self) -> chain_native.Packed:
         """The joints as the C helper reads them (made once)."""
         if self._packed is None:
-            self._packed = chain_native.Packed(self)
+            self._packed = chain_native.Packed(self.joints, self.tcp_mm)
         return self._packed
 
     @classmethod
@@ -104,7 +104,7 @@ class ChainPoint:
     def __call__(self, q_rad: np.ndarray) -> np.ndarray:
         q = np.atleast_2d(np.asarray(q_rad, dtype=float))
         if self.use_native:
-            out = chain_native.points(self, q)
+            out = chain_native.points(self.packed(), q)
             if out is not None:
                 return out
         n = len(q)

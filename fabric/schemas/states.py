@@ -13,7 +13,8 @@ from __future__ import annotations
 
 from enum import Enum
 
-__all__ = ["Station", "PrintJob", "Job", "Health", "STATION_STATES", "PRINT_JOB_STATES",
+__all__ = ["Station", "PrintJob", "Job", "Health", "STATION_STATES", "IN_PRINT_STATES", "FREE_STATION_STATES",
+           "PRINT_JOB_STATES",
            "FINAL_JOB_STATES", "ON_STATION_JOB_STATES", "WAITING_JOB_STATES", "JOB_STATES", "HEALTH_STATES"]
 
 
@@ -60,20 +61,23 @@ class Station(_State):
 
 
 class PrintJob(_State):
-    """A print job's state (``supervisor.PrintJob``): queued -> slicing -> planning -> checking -> loaded ->
+    """A print job's state (``supervisor.JobRecord.state``): queued -> slicing -> planning -> checking -> loaded ->
     printing <-> paused -> finished | stopped | failed | interrupted."""
 
-    QUEUED = "queued"
-    SLICING = "slicing"
-    PLANNING = "planning"
-    CHECKING = "checking"
-    LOADED = "loaded"
-    PRINTING = "printing"
-    PAUSED = "paused"
-    FINISHED = "finished"
-    STOPPED = "stopped"
-    FAILED = "failed"
-    INTERRUPTED = "interrupted"
+    QUEUED = "queued"              # in the queue: waiting to be prepared, or prepared (``prepared`` true) and
+                                   # waiting to be loaded (``waiting_for`` says for what)
+    SLICING = "slicing"            # its model is being sliced (G-code skips this)
+    PLANNING = "planning"          # its G-code is being planned into a robot program
+    CHECKING = "checking"          # its program is being checked for collisions
+    LOADED = "loaded"              # its program is loaded on the station, not started (submitted without
+                                   # ``start``: the operator starts it)
+    PRINTING = "printing"          # the station prints it
+    PAUSED = "paused"              # its print is paused (``station/resume`` goes on)
+    FINISHED = "finished"          # its print ended as planned (final)
+    STOPPED = "stopped"            # the operator stopped its print (final; the deposit stays on the plate)
+    FAILED = "failed"              # it could not be prepared or loaded, or its print faulted (final; ``error``
+                                   # says why)
+    INTERRUPTED = "interrupted"    # the station restarted or stalled mid-print (``station/recover`` goes on)
 
     @property
     def ended(self) -> bool:
@@ -100,10 +104,10 @@ class PrintJob(_State):
 class Job(_State):
     """A long job's state (slicing, planning, a collision check): queued -> running -> done | failed."""
 
-    QUEUED = "queued"
-    RUNNING = "running"
-    DONE = "done"
-    FAILED = "failed"
+    QUEUED = "queued"              # accepted, waiting for the service's worker
+    RUNNING = "running"            # under way (``progress_r`` and ``stage`` say how far)
+    DONE = "done"                  # finished: ``result_id`` names the result (final)
+    FAILED = "failed"              # it could not be done: ``error`` says why (final)
 
     @property
     def ended(self) -> bool:
@@ -113,11 +117,13 @@ class Job(_State):
 class Health(_State):
     """A service's health: ``ok``, or ``degraded`` (it serves, but something failed; its report says what)."""
 
-    OK = "ok"
-    DEGRADED = "degraded"
+    OK = "ok"                      # serving, nothing failed
+    DEGRADED = "degraded"          # serving, but something failed: the reasons say what
 
 
 STATION_STATES = tuple(s.value for s in Station)
+IN_PRINT_STATES = tuple(s for s in Station if s.in_print)          # printing, paused
+FREE_STATION_STATES = tuple(s for s in Station if s.free)          # idle, ready, stopped, fault
 PRINT_JOB_STATES = tuple(s.value for s in PrintJob)
 FINAL_JOB_STATES = tuple(s.value for s in PrintJob if s.ended)
 ON_STATION_JOB_STATES = tuple(s.value for s in PrintJob if s.on_station)

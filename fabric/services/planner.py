@@ -45,6 +45,7 @@ from fabric.planning.report import Reachability, unreachable_detail
 from fabric.programs import content_id, program_artifact_pieces, program_from_artifact
 from fabric.robot.cell import Cell
 from fabric.robot.frames import xyzrpy_to_T
+from fabric.schemas import states
 from fabric.schemas.upload import MAX_GCODE_BYTES
 from fabric.server.disk import disk_full_of, require_room
 from fabric.server.jobs import Job, JobRunner
@@ -188,7 +189,7 @@ class PlannerService(Service):
         (fabric.planning.memory), so the idle planner does not keep the highest working set it ever had."""
         if self.exports:
             return
-        if any(st.state in ("queued", "running") and st.job_id != finishing for st in self.jobs.all()):
+        if any(not states.Job(st.state).ended and st.job_id != finishing for st in self.jobs.all()):
             return
         give_back_freed_memory()
 
@@ -311,16 +312,16 @@ class PlannerService(Service):
         with self._handoffs_lock:
             handoff = self.handoffs.get(job_id)
         if handoff is None or handoff.released:     # an older job: its program by id, or its error
-            if st.state == "finished":
+            if st.state == states.Job.DONE:
                 return self._exporter(st.result_id, fmt, module_targets)
-            if st.state == "failed" and st.error is not None:
+            if st.state == states.Job.FAILED and st.error is not None:
                 raise error_from_code(st.error.code, st.error.message, st.error.details)
             handoff = self._handoff(job_id)
 
         def job_failed() -> FabricError | None:
             # a job that ended without handing over what the export waits for (it always should)
             st = self.jobs.get(job_id)
-            if st.state not in s.FINAL_JOB_STATES:
+            if not states.Job(st.state).ended:
                 return None
             if st.error is not None:
                 return error_from_code(st.error.code, st.error.message, st.error.details)

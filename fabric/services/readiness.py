@@ -7,6 +7,7 @@ import numpy as np
 
 from fabric import schemas as s
 from fabric.motion.program import NOZZLE, SET_TEMP, Program
+from fabric.schemas.states import Station
 from fabric.wire.keys import SERVICES
 
 __all__ = ["ReadyFacts", "ready_report", "print_temp_c", "TEMP_TOLERANCE_C"]
@@ -26,7 +27,7 @@ class ReadyFacts:
     at_home: bool
     nozzle_c: float
     print_temp_c: float | None                 # nozzle temperature the program sets (None: no program / none set)
-    state: str                                 # the twin's state
+    state: Station                             # the twin's state
     reason: str = ""                           # why it is in that state (the fault's reason)
     plate: str = ""                            # what is on the plate ("" when it is clear)
 
@@ -73,7 +74,7 @@ def _collisions(facts: ReadyFacts) -> s.Check:
 
 def _pose(facts: ReadyFacts) -> s.Check:
     name = "robot at a known pose"
-    if facts.state == "interrupted":
+    if facts.state == Station.INTERRUPTED:
         return s.Check(name=name, ok=False, detail="interrupted: the robot stopped where the station lost it; "
                                                    "recover it (fabric-cli recover) before anything else moves")
     detail = "at home" if facts.at_home else ("within limits" if facts.pose_known else "outside its limits")
@@ -102,5 +103,5 @@ def _temperature(facts: ReadyFacts) -> s.Check:
 
 
 def _fault(facts: ReadyFacts) -> s.Check:
-    fault = facts.state == "fault"
+    fault = facts.state == Station.FAULT
     return s.Check(name="no fault", ok=not fault, detail=facts.reason if fault else "")

@@ -17,20 +17,22 @@ parts that no command can skip or reorder:
 4. **checkpoint and acknowledge**: the runner's, after ``act`` returns.
 
 Commands outside the station module register themselves on the station
-through its public surface (``StationService.register_command``, Klipper's
-``register_command``) and use these same mechanisms.
+through its public surface (:class:`StationSurface`: ``register_command``,
+Klipper's, and the runner) and use these same mechanisms.
 """
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Generic, TypeVar
+from typing import Any, Generic, Protocol, TypeVar
 
 import numpy as np
 
+from fabric import schemas as s
 from fabric.server.writer import Owned, Stale, Writer
+from fabric.sim.twin import Twin
 
-__all__ = ["Move", "Planned", "CommandRunner", "STEP_TIMEOUT_S"]
+__all__ = ["Move", "Planned", "CommandRunner", "StationSurface", "STEP_TIMEOUT_S"]
 
 STEP_TIMEOUT_S = 4.0          # a command's step not begun by then is dropped (under the 5 s a caller waits)
 P = TypeVar("P")
@@ -126,3 +128,28 @@ class CommandRunner:
     def _committed(self) -> None:
         self.generation += 1
         self._checkpoint()
+
+
+class StationSurface(Protocol):
+    """What a station command of another module may use of the station (``StationService`` is one): it never
+    reaches into the station's private names, and the station keeps no forwarding methods for it."""
+
+    commands: CommandRunner
+
+    @property
+    def twin(self) -> Twin:
+        """The twin, in a step of :attr:`commands` only (owned by the writer)."""
+        ...
+
+    def register_command(self, command: str, handler: Callable[[Any], Any]) -> None:
+        """Serve the station endpoint ``command`` with ``handler``."""
+        ...
+
+    def move(self, q_from_rad: np.ndarray, q_to_rad: np.ndarray, what: str, kind: str,
+             descent: tuple[np.ndarray, int] | None = None) -> Move:
+        """A joint move at the twin's home speed, for a checked command's plan (in a step)."""
+        ...
+
+    def ack(self, message: str) -> s.Ack:
+        """A command's acknowledgement with the station's state (in a step)."""
+        ...

@@ -8,15 +8,10 @@ outside the writer, made only if nothing changed meanwhile, checkpointed by the 
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from fabric import schemas as s
-from fabric.services.station_commands import Planned
-
-if TYPE_CHECKING:
-    from fabric.services.station import StationService
+from fabric.services.station_commands import Planned, StationSurface
 
 __all__ = ["ManualCommands"]
 
@@ -24,7 +19,7 @@ __all__ = ["ManualCommands"]
 class ManualCommands:
     """``jog`` and ``extrude`` of one station (registered on it when made)."""
 
-    def __init__(self, station: StationService) -> None:
+    def __init__(self, station: StationSurface) -> None:
         self.station = station
         station.register_command("jog", self.cmd_jog)
         station.register_command("extrude", self.cmd_extrude)

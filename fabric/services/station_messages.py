@@ -15,6 +15,7 @@ import numpy as np
 from fabric import schemas as s
 from fabric.motion.program import MOVEL
 from fabric.robot.frames import T_to_xyzrpy
+from fabric.schemas.states import Station
 from fabric.services.telemetry_gate import EXTRUSION_PERIOD_S, TEMPS_PERIOD_S, ChangeOrPeriod
 from fabric.sim.twin import Twin
 from fabric.sim.types import ExtrusionState
@@ -79,7 +80,7 @@ class StationMessages:
         """Where the print is in its program: the share of the planned volume in the rows before the one
         running (1 once the print has finished). Not the volume deposited, which a flow override above 1
         brings to the planned total layers before the end."""
-        if self.twin.state == "idle" and self.twin.reason == "finished":
+        if self.twin.state == Station.IDLE and self.twin.reason == "finished":
             return 1.0
         program = self.twin.program
         if program is None or len(program) == 0:

@@ -96,7 +96,7 @@ class PlateGuard:
     def clear(self) -> str:
         """The operator took the part off (refused while it is being printed); what was taken off, in words
         ("" when the plate was clear already)."""
-        if self.twin.state in ("printing", "paused", "interrupted"):
+        if self.twin.state.print_on:
             raise StateError(f"the part is still being printed ({self.twin.state}): stop first",
                              state=self.twin.state, command="clear_plate")
         m = self.meta

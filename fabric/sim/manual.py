@@ -22,6 +22,7 @@ from fabric.planning.chunk_ik import JUMP_DEG
 from fabric.planning.options import PlanOptions
 from fabric.planning.refine import PrevRow, refine_linear
 from fabric.robot.kinematics import IK_OK, ik_reason
+from fabric.schemas.states import FREE_STATION_STATES
 from fabric.sim.legs import Leg, PoseSpec
 from fabric.sim.moves import MotionPlanner
 from fabric.sim.types import IK_ACCEPT
@@ -30,7 +31,7 @@ from fabric.wire.errors import UnreachableError, ValidationError
 __all__ = ["MANUAL_STATES", "FIRMWARE_MIN_EXTRUDE_C", "MAX_JOG_MM", "JOG_LINE_TOL_MM", "Jog", "jog_plan", "jog_leg",
            "extrude_leg"]
 
-MANUAL_STATES = ("idle", "ready", "stopped", "fault")     # not while a print is on (printing, paused, interrupted)
+MANUAL_STATES = FREE_STATION_STATES     # not while a print is on (printing, paused, interrupted)
 FIRMWARE_MIN_EXTRUDE_C = DEFAULT_MIN_EXTRUDE_C   # with no program loaded: the rule printer firmware applies
 MAX_JOG_MM = 200.0                 # the longest jog one command makes
 

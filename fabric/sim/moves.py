@@ -22,6 +22,7 @@ from fabric.motion.program import BED, MOVEJ, MOVEL, NOZZLE, RETRACT, SET_TEMP, 
 from fabric.motion.timing import stop_timeline
 from fabric.robot.frames import R_from_quat, inv_T, make_T, quat_from_R
 from fabric.robot.kinematics import ik_reason
+from fabric.schemas.states import Station
 from fabric.sim.builder import LegBuilder
 from fabric.sim.config import TwinConfig
 from fabric.sim.legs import AuxLegSpec, Leg, PoseSpec, ProgramLegSpec, StopLegSpec
@@ -202,7 +203,7 @@ class MotionPlanner:
         pose = PoseSpec(np.asarray(smp.q_rad, float), np.asarray(smp.xyz_mm, float),
                         np.asarray(smp.quat_wxyz, float))
         st.job.resume_at = ResumePoint(tl.start_row + j, 0.0, pose)
-        st.state, st.reason = "paused", reason
+        st.state, st.reason = Station.PAUSED, reason
         st.legs = [head, self._lift_leg(pose, tl.program.wobj, "paused")]
         self.pause_preview_s = None
 

@@ -5,6 +5,7 @@ import numpy as np
 
 from fabric.motion.timeline import Sample
 from fabric.robot.frames import R_from_quat, inv_T, make_T, quat_from_R
+from fabric.schemas.states import Station
 from fabric.sim.config import TwinConfig
 from fabric.sim.legs import Leg
 from fabric.sim.moves import MotionPlanner
@@ -90,16 +91,17 @@ class Readout:
     def time_info(self) -> TimeInfo:
         """Elapsed, expected total and remaining simulated time of the job (paused: if resumed now)."""
         st = self.state
-        if st.state == "ready":
+        state = Station(st.state)
+        if state == Station.READY:
             return TimeInfo(0.0, st.estimate_s, st.estimate_s, st.estimate_s)
         if st.t_started_s is None:
             return TimeInfo(0.0, 0.0, 0.0, st.estimate_s)
         end = st.t_ended_s if st.t_ended_s is not None else st.t_sim_s
         elapsed = end - st.t_started_s
         remaining = 0.0
-        if st.state == "printing":
+        if state.printing:
             remaining = self.moves.remaining_s()
-        elif st.state in ("paused", "interrupted"):
+        elif state.print_on:                          # paused, interrupted
             remaining = self.moves.remaining_s() + self.moves.resume_preview_s()
         return TimeInfo(elapsed, elapsed + remaining, remaining, st.estimate_s)
 

@@ -22,6 +22,7 @@ from fabric.motion.cold import DEFAULT_MIN_EXTRUDE_C, min_extrude_c
 from fabric.motion.program import MOVEL, NOZZLE, RETRACT, SET_TEMP, WAIT_TEMP, Program
 from fabric.motion.thermal import HEATER_NAMES
 from fabric.robot.frames import R_from_quat, inv_T, make_T
+from fabric.schemas.states import Station
 from fabric.sim.builder import LegBuilder
 from fabric.sim.deposition import nozzle_axes
 from fabric.sim.legs import Leg
@@ -205,7 +206,7 @@ class LegRunner:
         st = self.state
         job = st.job
         if kind == "finished":
-            st.state, st.reason = "idle", "finished"
+            st.state, st.reason = Station.IDLE, "finished"
             st.t_ended_s = t
             self.emit(events, t, kind, self.totals(t))
         elif kind == "stopped":
@@ -214,11 +215,11 @@ class LegRunner:
             self.emit(events, t, kind, self.totals(t))
         elif kind in ("resumed", "recovered", "at_layer"):
             job.resume_at = None
-            if st.state == "printing" and kind != "at_layer":     # the move back is over: say so, not "-ing"
+            if Station(st.state).printing and kind != "at_layer":     # the move back is over: say so, not "-ing"
                 st.reason = kind
             self.emit(events, t, kind)
         elif kind == "home":
-            if st.state not in ("printing", "paused"):
+            if not Station(st.state).in_print:
                 st.reason = "at home"
             self.emit(events, t, kind)
         elif kind == "jogged":

@@ -111,7 +111,7 @@ class TwinState:
         keeps their count."""
         return {
             "version": SNAPSHOT_VERSION,
-            "state": self.state, "reason": self.reason, "t_sim_s": self.t_sim_s,
+            "state": str(self.state), "reason": self.reason, "t_sim_s": self.t_sim_s,
             "work_T": self.work_T.copy(), "rest_q_rad": self.rest_q_rad.copy(), "rest_T": self.rest_T.copy(),
             "rng": json.dumps(self.rng.bit_generator.state),   # 128-bit integers: as JSON text
             "thermal": thermal_to_dict(self.thermal), "speed_r": self.speed_r, "flow_r": self.flow_r,

@@ -29,7 +29,7 @@ from fabric.motion.thermal import Thermal
 from fabric.motion.validate import validate_program
 from fabric.robot.frames import make_T, rot_x
 from fabric.robot.kinematics import ik_reason
-from fabric.schemas import states
+from fabric.schemas.states import FREE_STATION_STATES, IN_PRINT_STATES, Station
 from fabric.sim import manual
 from fabric.sim.builder import LegBuilder
 from fabric.sim.calibration import CalibrationResult, calibrate_plate
@@ -97,9 +97,9 @@ class Twin:
     # ------------------------------------------------------------------ queries
 
     @property
-    def state(self) -> states.Station:
+    def state(self) -> Station:
         """Lifecycle state (one of :data:`STATES`; its record ``s.state`` keeps the plain string)."""
-        return states.Station(self.s.state)
+        return Station(self.s.state)
 
     @property
     def reason(self) -> str:
@@ -159,10 +159,10 @@ class Twin:
 
     # ------------------------------------------------------------------ commands
 
-    def _refuse(self, command: str, allowed: tuple[str, ...]) -> None:
-        if self.s.state not in allowed:
-            raise StateError(f"cannot {command} while {self.s.state}", state=self.s.state, command=command,
-                             allowed=list(allowed))
+    def _refuse(self, command: str, allowed: tuple[Station, ...]) -> None:
+        if self.state not in allowed:
+            raise StateError(f"cannot {command} while {self.state}", state=self.state, command=command,
+                             allowed=[a.value for a in allowed])
 
     def _busy(self, command: str) -> None:
         if self.s.legs:
@@ -188,7 +188,7 @@ class Twin:
     def load(self, program: Program) -> TimeInfo:
         """Validate ``program`` and make it the job (state ``ready``); returns the time estimate."""
         st = self.s
-        self._refuse("load", ("idle", "ready", "stopped", "fault"))
+        self._refuse("load", FREE_STATION_STATES)
         self._busy("load")                 # e.g. a stop's lift: its end event belongs to the job before
         validate_program(program, self.robot)
         dp = np.abs(program.wobj - st.work_T)
@@ -207,7 +207,7 @@ class Twin:
         self._new_job(program)
         st.speed_r = st.flow_r = 1.0       # speed and flow overrides belong to a job: the next one starts at 1
         st.t_started_s = st.t_ended_s = None
-        st.state, st.reason = "ready", f"loaded {len(program)} rows"
+        st.state, st.reason = Station.READY, f"loaded {len(program)} rows"
         return TimeInfo(0.0, estimate, estimate, estimate)
 
     def start(self, from_layer: int | None = None, collision_ok: bool = True) -> None:
@@ -217,7 +217,7 @@ class Twin:
         joint move above the layer's first point, down, go on. The deposit record is kept then.
         ``collision_ok``: the collision service's verdict on that joint move."""
         st = self.s
-        self._refuse("start", ("ready", "stopped", "idle", "fault"))
+        self._refuse("start", FREE_STATION_STATES)
         if st.program is None:
             raise StateError(f"cannot start while {st.state}: no program loaded", state=st.state, command="start")
         self._busy("start")
@@ -237,7 +237,7 @@ class Twin:
             st.estimate_s = self.moves.remaining_s()
             reason = f"restarted at layer {from_layer + 1}" if from_layer is not None else "restarted"
         st.t_started_s, st.t_ended_s = st.t_sim_s, None
-        st.state, st.reason = "printing", reason
+        st.state, st.reason = Station.PRINTING, reason
         data = {"rows": len(st.program), "estimate_s": st.estimate_s, "from_row": row,
                 "from_layer": from_layer if from_layer is not None else 0}
         self.runner.emit(st.pending, st.t_sim_s, "started", data)
@@ -251,27 +251,27 @@ class Twin:
 
     def pause(self) -> None:
         """Controlled stop, extruder off, retract, lift; ``paused`` event once the robot is clear."""
-        self._refuse("pause", ("printing",))
-        self.s.state, self.s.reason = "paused", "paused by operator"
+        self._refuse("pause", (Station.PRINTING,))
+        self.s.state, self.s.reason = Station.PAUSED, "paused by operator"
         self._command(lambda: self.moves.halt("paused"))
 
     def resume(self) -> None:
         """Back down to the stop point, unretract, continue the program from there (refused while the
         nozzle is below the material's minimum extrusion temperature)."""
-        self._refuse("resume", ("paused",))
+        self._refuse("resume", (Station.PAUSED,))
         self._check_hot("resume")
-        self.s.state, self.s.reason = "printing", "resuming"
+        self.s.state, self.s.reason = Station.PRINTING, "resuming"
         self._command(self.moves.resume)
 
     def stop(self) -> None:
         """Abort: controlled stop, retract, lift, heaters off; the beads printed stay on record."""
         st = self.s
-        self._refuse("stop", ("printing", "paused"))
+        self._refuse("stop", IN_PRINT_STATES)
         was = st.state
-        st.state, st.reason = "stopped", "stopped by operator"
+        st.state, st.reason = Station.STOPPED, "stopped by operator"
         for h in (0, 1):
             st.thermal.set_target(h, 0.0, st.t_sim_s)
-        if was == "printing":
+        if was == Station.PRINTING:
             self._command(lambda: self.moves.halt("stopped"))
         elif st.legs:
             st.legs[-1].end_kinds = ["stopped" if k == "paused" else k for k in st.legs[-1].end_kinds]
@@ -280,13 +280,13 @@ class Twin:
 
     def clear_plate(self) -> None:
         """The part was taken off the plate: its beads are forgotten (the job's totals stay on record)."""
-        self._refuse("clear_plate", ("idle", "ready", "stopped", "fault"))
+        self._refuse("clear_plate", FREE_STATION_STATES)
         self._busy("clear_plate")
         self.s.beads = Deposition(self.s.program)
 
     def go_home(self, collision_ok: bool = True) -> None:
         """Joint move to the cell's home joints (``collision_ok``: the collision service's verdict)."""
-        self._refuse("go_home", ("idle", "ready", "stopped", "fault"))
+        self._refuse("go_home", FREE_STATION_STATES)
         if not collision_ok:
             raise CollisionError("the home move was refused by the collision check", command="go_home")
         self.runner.enqueue(self.moves.home_leg())
@@ -296,7 +296,7 @@ class Twin:
     def jog_move(self, dxyz_mm: list[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(joints now, joints of each point of the jog (M, nq), the last its end) of a jog by ``dxyz_mm``
         (plate frame), for the collision check before it is made; refused as :meth:`jog` would be."""
-        self._refuse("jog", manual.MANUAL_STATES)
+        self._refuse("jog", FREE_STATION_STATES)
         self._busy("jog")
         plan = manual.jog_plan(self.moves, dxyz_mm)
         return np.asarray(plan.start.q_rad, dtype=float), plan.q_rad
@@ -304,7 +304,7 @@ class Twin:
     def jog(self, dxyz_mm: list[float] | np.ndarray, speed_mm_s: float) -> None:
         """A straight move by ``dxyz_mm`` in the plate frame at ``speed_mm_s``, the nozzle's orientation kept
         (while not printing; the station has certified it against the part first)."""
-        self._refuse("jog", manual.MANUAL_STATES)
+        self._refuse("jog", FREE_STATION_STATES)
         self._busy("jog")
         self.runner.enqueue(manual.jog_leg(self.moves, manual.jog_plan(self.moves, dxyz_mm), speed_mm_s))
         self.readout.forget()
@@ -315,7 +315,7 @@ class Twin:
         with the nozzle below the minimum extrusion temperature (the loaded material's, else firmware's)."""
         if not math.isfinite(length_mm) or length_mm == 0.0:
             raise ValidationError("give a non-zero filament length", field="length_mm", value=length_mm)
-        self._refuse("extrude", manual.MANUAL_STATES)
+        self._refuse("extrude", FREE_STATION_STATES)
         self._busy("extrude")
         min_c = self.runner.min_extrude_c() if self.s.program is not None else manual.FIRMWARE_MIN_EXTRUDE_C
         nozzle_c = self.s.thermal.temp_at(0, self.s.t_sim_s)
@@ -345,16 +345,16 @@ class Twin:
         if point is not None:
             st.job.resume_at = point
         st.job.extruder_on = False
-        if was in ("printing", "paused") and st.job.resume_at is not None:
+        if Station(was).in_print and st.job.resume_at is not None:
             if not st.job.retracted:
                 st.job.pause_retract_mm = 0.0        # the pause's retraction had not happened yet
             at = st.job.resume_at
-            st.state, st.reason = "interrupted", reason
+            st.state, st.reason = Station.INTERRUPTED, reason
             # what the print deposited so far travels with the event (the job's record shows it)
             self.runner.emit(events, t, "interrupted", {"reason": reason, "resume_row": at.row,
                                                         "resume_s_mm": at.s_mm, "xyz_mm": at.pose.xyz_mm.tolist(),
                                                         **self.runner.totals(t)})
-        elif was == "stopped" and st.t_ended_s is None:
+        elif was == Station.STOPPED and st.t_ended_s is None:
             self.runner.on_end("stopped", t, events)
 
     def recover(self, collision_ok: bool = True, from_layer: int | None = None) -> None:
@@ -362,12 +362,12 @@ class Twin:
         ``from_layer``, restart at that layer's first point instead (the row cut short becomes a partial
         bead). ``collision_ok``: the collision service's verdict on the move back."""
         st = self.s
-        self._refuse("recover", ("interrupted",))
+        self._refuse("recover", (Station.INTERRUPTED,))
         row = self.moves.layer_start_row(from_layer) if from_layer is not None else None
         if not collision_ok:
             raise CollisionError("the move back to the interrupted spot was refused by the collision check",
                                  command="recover")
-        st.state, st.reason = "printing", "recovering"
+        st.state, st.reason = Station.PRINTING, "recovering"
         if row is None:
             self._command(lambda: self.moves.resume("recovered"))
             return
@@ -378,7 +378,7 @@ class Twin:
         """Joints where the robot rests and joints it goes to first to recover (the interrupted spot, or
         above ``from_layer``'s first point), for a collision check; None when nothing is interrupted."""
         at = self.s.job.resume_at
-        if self.s.state != "interrupted" or at is None:
+        if self.state != Station.INTERRUPTED or at is None:
             return None
         if from_layer is not None:
             return self.layer_move(from_layer)
@@ -410,7 +410,7 @@ class Twin:
                 st.thermal.check_target(heater, float(val))
         min_c = self.runner.min_extrude_c()
         if (nozzle_c is not None and min_c is not None and 0.0 < nozzle_c < min_c
-                and st.state in ("printing", "paused", "interrupted")):
+                and self.state.print_on):
             raise ValidationError(f"nozzle set point {nozzle_c:g} C is below the material's minimum extrusion "
                                   f"temperature {min_c:g} C (0 switches the heater off)", field="nozzle_c",
                                   min_c=min_c)
@@ -424,7 +424,7 @@ class Twin:
         if flow_r is not None:
             st.flow_r = float(flow_r)
         self.moves.forget_previews()
-        if st.state == "printing" and st.legs and st.legs[0].main:
+        if self.state.printing and st.legs and st.legs[0].main:
             self._command(lambda: self.moves.retime(temp))
 
     def calibrate(self) -> CalibrationResult:
@@ -432,7 +432,7 @@ class Twin:
 
         A program loaded before is unloaded (state ``idle``): it must be re-planned for the new frame."""
         st = self.s
-        self._refuse("calibrate", ("idle", "ready", "stopped", "fault"))
+        self._refuse("calibrate", FREE_STATION_STATES)
         self._busy("calibrate")
         lo, hi = self._plate_box()
         res, _plan, frames = calibrate_plate(st.work_T, np.asarray(self.cell.true_wobj_T(), float), lo, hi,
@@ -446,9 +446,9 @@ class Twin:
             raise UnreachableError(f"probe {i} at {np.round(res.points_base_mm[i], 2).tolist()} mm is unreachable "
                                    f"({reason})", probe=i, reason=reason, gcode_line=-1)
         st.work_T = res.work_object_T.copy()
-        if st.state == "ready":
+        if self.state == Station.READY:
             st.program = None
-            st.state, st.reason = "idle", "calibrated: re-plan the program for the new work object"
+            st.state, st.reason = Station.IDLE, "calibrated: re-plan the program for the new work object"
         return res
 
     # ------------------------------------------------------------------ simulation
@@ -514,7 +514,7 @@ class Twin:
         self.runner.record_partial()
         if st.t_started_s is not None and st.t_ended_s is None:
             st.t_ended_s = t
-        st.state, st.reason = "fault", reason
+        st.state, st.reason = Station.FAULT, reason
         self.runner.emit(events, t, "fault", {"reason": reason})
 
     def _command(self, fn: Callable[[], None]) -> None:
