@@ -29,13 +29,14 @@ from fabric import schemas as s
 from fabric.reference import examples, prose
 from fabric.reference.errors import ERROR_DETAILS
 from fabric.reference.events import EVENTS, JOB_DATA
-from fabric.reference.fields import field_docs, message_doc
+from fabric.reference.fields import field_docs, member_docs, message_doc
 from fabric.reference.machine import describe, event_data_schema, message_schemas, to_json_value
-from fabric.schemas import REGISTRY
+from fabric.schemas import REGISTRY, states
+from fabric.schemas.upload import MIB
 from fabric.wire import codec, errors, qos
-from fabric.wire.keys import ENDPOINTS, SERVICES, TOPICS
+from fabric.wire.keys import ARTIFACT_SOURCES, ARTIFACT_TIMEOUT_S, CELL_PATTERN, ENDPOINTS, SERVICES, TOPICS
 
-__all__ = ["render", "render_json", "description", "facts", "LOSSLESS"]
+__all__ = ["render", "render_json", "description", "facts", "inputs", "LOSSLESS"]
 
 LOSSLESS = {("station", "state"), ("station", "events"), ("slicer", "progress"), ("planner", "progress"),
             ("supervisor", "jobs")}
@@ -48,23 +49,47 @@ def facts() -> dict[str, Any]:
     from fabric.printjobs.queue import STATION_FREE
     from fabric.security.roles import MONITOR_COMMANDS
     from fabric.server.jobs import PROGRESS_PERIOD_S
+    from fabric.server.uploads import UploadStore
     from fabric.services.station import STATE_PERIOD_S, StationService
     from fabric.services.station_messages import JOB_EVENTS
     from fabric.services.telemetry_gate import EXTRUSION_PERIOD_S, TEMPS_PERIOD_S
     from fabric.sim.types import EVENT_KINDS
     from fabric.store.station import StationStore
     from fabric.wire.config import SessionSettings
-    from fabric.wire.keys import _CELL_RE
     pose_hz = inspect.signature(StationService.__init__).parameters["pose_hz"].default
     keep_events = inspect.signature(StationStore.__init__).parameters["keep_events"].default
+    uploads_kept = inspect.signature(UploadStore.__init__).parameters["max_open"].default
     settings = {f.name: f.default for f in dataclasses.fields(SessionSettings)}
     query = {f.name: f.default for f in dataclasses.fields(s.JobsQuery)}
     return {"pose_hz": float(pose_hz), "state_period_s": STATE_PERIOD_S, "extrusion_period_s": EXTRUSION_PERIOD_S,
             "temps_period_s": TEMPS_PERIOD_S, "progress_period_s": PROGRESS_PERIOD_S,
             "job_events": tuple(JOB_EVENTS), "event_kinds": tuple(EVENT_KINDS), "keep_events": int(keep_events),
-            "default_cell": settings["cell"], "cell_pattern": _CELL_RE.pattern, "station_free": STATION_FREE,
+            "default_cell": settings["cell"], "cell_pattern": CELL_PATTERN, "station_free": STATION_FREE,
             "monitor_commands": sorted(f"{svc}/{cmd}" for svc, cmd in MONITOR_COMMANDS),
-            "discovery_s": DISCOVERY_WINDOW_S, "jobs_limit": query["limit"], "jobs_max": s.MAX_JOBS_PAGE}
+            "discovery_s": DISCOVERY_WINDOW_S, "jobs_limit": query["limit"], "jobs_max": s.MAX_JOBS_PAGE,
+            "uploads_kept": int(uploads_kept)}
+
+
+def inputs() -> list[dict[str, Any]]:
+    """Every request that carries a file (a ``bin`` field with a largest size), the field, the upload endpoint
+    that may carry it instead ("" when none) and the most bytes it takes."""
+    rows = []
+    for (svc, cmd), ep in ENDPOINTS.items():
+        if cmd == "upload":                       # the pieces themselves
+            continue
+        docs = field_docs(ep.request)
+        named = (svc, "upload") in ENDPOINTS and any(fd.name == "upload_id" for fd in docs)
+        upload = f"{svc}/upload" if named else ""
+        for fd in docs:
+            if fd.tp is bytes and fd.spec.max_len is not None:
+                rows.append({"command": f"{svc}/{cmd}", "request": ep.request.TYPE, "field": fd.name,
+                             "upload": upload, "max_bytes": fd.spec.max_len})
+    return rows
+
+
+def _mib(n_bytes: int) -> str:
+    """A size in MiB, as the reference writes it (``512``)."""
+    return f"{n_bytes / MIB:g}"
 
 
 # --- what each part says ---------------------------------------------------------------------------------------
@@ -180,8 +205,12 @@ def _constraints(fd: Any) -> str:
         parts.append(f"<= {spec.le:g}")
     if spec.choices is not None:
         parts.append("one of " + ", ".join(f"`{c}`" if c != "" else '`""`' for c in spec.choices))
+    if spec.min_len is not None:
+        parts.append(f"at least {spec.min_len} chars")
     if spec.max_len is not None:
-        parts.append(f"at most {spec.max_len} chars")
+        parts.append(f"at most {_mib(spec.max_len)} MiB" if fd.tp is bytes else f"at most {spec.max_len} chars")
+    if spec.pattern is not None:
+        parts.append(f"matches `{spec.pattern}` whole")
     if fd.default is dataclasses.MISSING:
         parts.append("**required**")
     else:
@@ -225,7 +254,18 @@ def _commands_table() -> list[str]:
         how = f"{q['priority']}{', express' if q['express'] else ''}" + (", bulk" if ep.bulk else "")
         rows.append(f"| `am/<cell>/{svc}/cmd/{cmd}` | [`{ep.request.TYPE}`](#{_anchor(ep.request.TYPE)}) | "
                     f"[`{ep.reply.TYPE}`](#{_anchor(ep.reply.TYPE)}) | {ep.timeout_s:g} s | {how} | {_cell(ep.doc)} |")
+    for svc, src in ARTIFACT_SOURCES.items():
+        q = _qos_of(src.bulk)
+        how = f"{q['priority']}{', express' if q['express'] else ''}" + (", bulk" if src.bulk else "")
+        reply = src.reply.TYPE
+        rows.append(f"| `am/<cell>/{svc}/artifact/<id>` | no payload | [`{reply}`](#{_anchor(reply)}) | "
+                    f"{src.timeout_s:g} s | {how} | {_cell(src.doc)} |")
     return rows
+
+
+def _state_rows(enum: Any) -> str:
+    """The Markdown rows of a state table: each state and its meaning (its comment in fabric.schemas.states)."""
+    return "\n".join(f"| `{value}` | {_cell(text)} |" for value, text in member_docs(enum).items())
 
 
 def _events_rows(f: dict[str, Any]) -> list[str]:
@@ -286,7 +326,7 @@ def render() -> str:
         "default_cell": f["default_cell"], "cell_pattern": f["cell_pattern"],
         "monitor_commands": ", ".join(f"`{c}`" for c in f["monitor_commands"]),
         "services": ", ".join(f"`{svc}`" for svc in SERVICES),
-        "dtypes": ", ".join(f"`{d}`" for d in sorted(codec._ALLOWED_DTYPES)),
+        "dtypes": ", ".join(f"`{d}`" for d in sorted(codec.PACKED_DTYPES)),
         "empty_len": len(codec.encode(s.Empty())), "empty_hex": codec.encode(s.Empty()).hex(" "),
         "cmd_priority": _qos_of(False)["priority"], "bulk_priority": _qos_of(True)["priority"],
         "discovery_s": f"{f['discovery_s']:g}",
@@ -307,15 +347,24 @@ def render() -> str:
         "station_free": ", ".join(f"`{x}`" for x in f["station_free"]),
         "jobs_limit": f["jobs_limit"], "jobs_max": f"{f['jobs_max']:,}",
         "progress_period_s": f"{f['progress_period_s']:g}",
-        "chunk_max_mb": s.upload.UPLOAD_CHUNK_MAX_BYTES >> 20, "chunk_mb": s.upload.UPLOAD_CHUNK_BYTES >> 20,
-        "inline_mb": s.upload.INLINE_MAX_BYTES >> 20,
+        "chunk_max_mib": _mib(s.upload.UPLOAD_CHUNK_MAX_BYTES), "chunk_mib": _mib(s.upload.UPLOAD_CHUNK_BYTES),
+        "inline_mib": _mib(s.upload.INLINE_MAX_BYTES), "uploads_kept": f["uploads_kept"],
+        "model_mib": _mib(s.upload.MAX_MODEL_BYTES), "gcode_mib": _mib(s.upload.MAX_GCODE_BYTES),
+        "input_rows": "\n".join(
+            f"| `{i['command']}` ([`{i['request']}`](#{_anchor(i['request'])})) | `{i['field']}` | "
+            f"{f'`{u}`' if (u := i['upload']) else 'inline only'} | {_mib(i['max_bytes'])} MiB |" for i in inputs()),
+        "print_job_state_rows": _state_rows(states.PrintJob), "job_state_rows": _state_rows(states.Job),
+        "artifact_timeout_s": f"{ARTIFACT_TIMEOUT_S:g}",
+        "artifact_rows": "\n".join(f"| `{svc}` | {', '.join(f'`{m}`' for m in src.media_types)} | {_cell(src.doc)} |"
+                                   for svc, src in ARTIFACT_SOURCES.items()),
     }
     head = ["# am-fabric wire protocol\n",
             "Generated by `python -m fabric.protocol_doc > docs/protocol.md` from the code (`fabric/wire/keys.py`, "
             "`fabric/schemas/`, `fabric/reference/`); the same facts for machines, with a JSON Schema per message, "
             "are in [protocol.json](protocol.json) (`--json`). Tests fail when either is stale.\n",
             "Contents: [Transport](#transport-and-defaults), [Keys](#keys), [Payloads](#payloads), "
-            "[Versions](#versions-_v), [Commands](#commands), [Errors](#errors), [Telemetry](#telemetry), "
+            "[Versions](#versions-_v), [Commands](#commands), [Errors](#errors), [Inputs](#inputs), "
+            "[Telemetry](#telemetry), "
             "[Time bases](#time-bases), [Station states](#station-states), [Events](#events), "
             "[Print jobs](#print-jobs), [Slicing and planning jobs](#slicing-and-planning-jobs), "
             "[Multi-axis G-code](#multi-axis-g-code-curved-layers), "
@@ -327,8 +376,8 @@ def render() -> str:
     out.append(_fill(prose.SECTIONS["commands"], values).rstrip("\n"))
     out += _commands_table()
     out.append("")
-    for key in ("errors", "telemetry", "time_bases", "station_states", "events", "print_jobs", "pipeline_jobs",
-                "multiaxis", "artifacts", "plain_client"):
+    for key in ("errors", "inputs", "telemetry", "time_bases", "station_states", "events", "print_jobs",
+                "pipeline_jobs", "multiaxis", "artifacts", "plain_client"):
         out.append(_fill(prose.SECTIONS[key], values))
     out += _examples_md()
     out += _messages()
@@ -337,7 +386,8 @@ def render() -> str:
 
 def _error_values() -> dict[str, str]:
     return {"unreachable": ", ".join(f"`{r}`" for r in errors.UNREACHABLE_REASONS),
-            "cold": ", ".join(f"`{r}`" for r in errors.COLD_EXTRUSION_REASONS)}
+            "cold": ", ".join(f"`{r}`" for r in errors.COLD_EXTRUSION_REASONS),
+            "decode_reasons": ", ".join(f"`{r}`" for r in codec.DECODE_REASONS)}
 
 
 # --- JSON ----------------------------------------------------------------------------------------------------
@@ -360,7 +410,7 @@ def description() -> dict[str, Any]:
               for (svc, topic), tp in TOPICS.items()]
     error_codes = {code: {"class": cls.__name__, "parent": _parent_code(cls),
                           "details": _fill(ERROR_DETAILS[code], _error_values()).replace("`", "")}
-                   for code, cls in errors._BY_CODE.items()}
+                   for code, cls in errors.ERROR_CLASSES.items()}
     events = {kind: {"when": EVENTS[kind].when, "job_event": kind in f["job_events"],
                      "data": event_data_schema(kind, f["job_events"])} for kind in f["event_kinds"]}
     return describe({
@@ -372,20 +422,28 @@ def description() -> dict[str, Any]:
                  "health_every_service": "am/{cell}/*/cmd/health"},
         "encoding": {"format": "msgpack", "tags": {"_t": "message type", "_v": "schema version"},
                      "empty_request": base64.b64encode(codec.encode(s.Empty())).decode(),
-                     "bin": "base64 text in this document", "packed_array_dtypes": sorted(codec._ALLOWED_DTYPES),
+                     "bin": "base64 text in this document", "packed_array_dtypes": sorted(codec.PACKED_DTYPES),
                      "versioning": "A receiver takes versions 1 to its own of a type (missing fields take their "
-                                   "defaults) and refuses a newer one with a decode error."},
+                                   "defaults) and refuses a newer one with a decode error (reason version), "
+                                   "whatever the type: common.Empty too, also where it stands for a request whose "
+                                   "fields all have defaults.",
+                     "sizes": "Sizes are in bytes; where this description gives one in MiB, 1 MiB = 1048576 bytes "
+                              "(a name ending _mb counts MiB too).",
+                     "decode_reasons": list(codec.DECODE_REASONS)},
         "rates": {"pose_hz": f["pose_hz"], "state_period_s": f["state_period_s"],
                   "extrusion_period_s": f["extrusion_period_s"], "temps_period_s": f["temps_period_s"],
                   "progress_period_s": f["progress_period_s"]},
         "endpoints": endpoints,
+        "artifact_queries": [{"service": svc, "key": f"am/{{cell}}/{svc}/artifact/{{artifact_id}}", "request": None,
+                              "reply": src.reply.TYPE, "timeout_s": src.timeout_s, "bulk": src.bulk,
+                              "qos": _qos_of(src.bulk), "media_types": list(src.media_types), "doc": src.doc}
+                             for svc, src in ARTIFACT_SOURCES.items()],
+        "inputs": inputs(),
         "topics": topics,
-        "artifacts": {"slicer": ["text/x-gcode"], "planner": ["application/x-am-fabric-program+msgpack"],
-                      "supervisor": ["application/octet-stream", "text/x-gcode"],
-                      "station": ["application/x-am-fabric-program+msgpack"]},
+        "artifacts": {svc: list(src.media_types) for svc, src in ARTIFACT_SOURCES.items()},
         "errors": error_codes,
         "events": events,
-        "$defs": message_schemas(REGISTRY, sorted(codec._ALLOWED_DTYPES)),
+        "$defs": message_schemas(REGISTRY, sorted(codec.PACKED_DTYPES)),
     })
 
 

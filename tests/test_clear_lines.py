@@ -65,7 +65,7 @@ def test_the_size_limit_error_names_what_sets_the_limit(tmp_path: Path, monkeypa
         f.truncate(600 << 20)
     with pytest.raises(ValidationError) as err:
         read_input(str(huge))
-    assert str(err.value).endswith("more than the limit of 512 MB (the most the planner accepts)")
+    assert str(err.value).endswith("more than the limit of 512 MiB (the most the planner accepts)")
     model = tmp_path / "part.stl"
     with open(model, "wb") as f:
         f.truncate(300 << 20)

@@ -51,7 +51,7 @@ def test_a_full_disk_refuses_plans_and_uploads_and_an_upload_goes_with_its_job(s
             assert done.state == "done"
             assert list((tmp_path / "planner" / "uploads").iterdir()) == []      # used: removed
             monkeypatch.setenv(RESERVE_ENV, NO_ROOM_MB)                           # the disk fills up
-            with pytest.raises(DiskFull, match=r"planner has .* MB free"):
+            with pytest.raises(DiskFull, match=r"planner has .* MiB free"):
                 client.plan(s.PlanRequest(filename="p.gcode", gcode=GCODE))
             with pytest.raises(DiskFull):
                 client.upload("planner", path, 1 << 20)

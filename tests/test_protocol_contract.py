@@ -289,6 +289,9 @@ def test_real_replies_and_publications_validate_against_the_description(cell_in_
         # first may have been loaded before it could be: a fast plan, a clear plate)
         raw.ask("supervisor", "job_move", s.JobMove(job_id=second["job_id"], position=0))
         raw.ask("supervisor", "job_remove", s.JobQuery(job_id=second["job_id"]))
+        # a file uploaded to the supervisor in a piece (submitting from an upload: tests/test_protocol_as_documented.py)
+        raw.ask("supervisor", "upload", s.UploadChunk(upload_id="contract03", offset=0, total_bytes=len(CUBE_GCODE),
+                                                      data=CUBE_GCODE, sha256=hashlib.sha256(CUBE_GCODE).hexdigest()))
         # the file library: both files are in it; one added, shown and removed
         listed = raw.ask("supervisor", "files", s.FilesQuery(limit=10))
         assert {f["name"] for f in listed["files"]} >= {"cube.gcode", "second.gcode"}

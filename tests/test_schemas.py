@@ -39,7 +39,10 @@ def _strategy(tp: Any, spec=None) -> st.SearchStrategy:
     if tp is bool:
         return st.booleans()
     if tp is str:
-        return st.text(max_size=spec.max_len if spec and spec.max_len else 20)
+        if spec is not None and spec.pattern is not None:
+            return st.from_regex(spec.pattern, fullmatch=True).filter(lambda v: len(v) <= (spec.max_len or 64))
+        shortest = spec.min_len if spec is not None and spec.min_len else 0
+        return st.text(min_size=shortest, max_size=spec.max_len if spec and spec.max_len else 20)
     if tp is bytes:
         return st.binary(max_size=64)
     if tp is np.ndarray:
@@ -55,21 +58,21 @@ def _strategy(tp: Any, spec=None) -> st.SearchStrategy:
     if origin is dict:
         _, vt = typing.get_args(tp)
         return st.dictionaries(st.text(max_size=5), _strategy(vt), max_size=3)
-    if hasattr(tp, "_SPECS"):
+    if hasattr(tp, "SPECS"):
         return _message(tp)
     raise AssertionError(f"no strategy for {tp}")
 
 
 def _message(cls) -> st.SearchStrategy:
-    fields = {name: _strategy(spec.tp, spec) for name, spec in cls._SPECS.items()}
+    fields = {name: _strategy(spec.tp, spec) for name, spec in cls.SPECS.items()}
     return st.fixed_dictionaries(fields).map(lambda kw: cls(**kw))
 
 
 def _equal(a: Any, b: Any) -> bool:
     if isinstance(a, np.ndarray):
         return isinstance(b, np.ndarray) and a.dtype == b.dtype and np.array_equal(a, b)
-    if hasattr(a, "_SPECS"):
-        return type(a) is type(b) and all(_equal(getattr(a, k), getattr(b, k)) for k in a._SPECS)
+    if hasattr(a, "SPECS"):
+        return type(a) is type(b) and all(_equal(getattr(a, k), getattr(b, k)) for k in a.SPECS)
     if isinstance(a, dict):
         return isinstance(b, dict) and a.keys() == b.keys() and all(_equal(a[k], b[k]) for k in a)
     if isinstance(a, (list, tuple)):
@@ -91,7 +94,7 @@ def test_round_trip(name, cls):
 def test_garbage_is_a_typed_error(name, cls):
     values = st.one_of(st.integers(-2 ** 63, 2 ** 63 - 1), st.floats(), st.text(max_size=8), st.none(),
                        st.binary(max_size=8), st.lists(st.integers(0, 9), max_size=3))
-    keys = st.one_of(st.sampled_from(sorted(cls._SPECS) or ["x"]), st.text(max_size=6))
+    keys = st.one_of(st.sampled_from(sorted(cls.SPECS) or ["x"]), st.text(max_size=6))
     tagged = st.dictionaries(keys, values, max_size=6).map(lambda d: {**d, "_t": name, "_v": 1})
     @FAST
     @given(st.one_of(st.binary(max_size=200), st.builds(msgpack.packb, tagged),

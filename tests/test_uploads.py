@@ -91,7 +91,7 @@ def test_sizes_are_checked_before_reading(tmp_path: Path, monkeypatch: pytest.Mo
         f.truncate(600 << 20)
     with pytest.raises(ValidationError) as err:
         read_input(str(huge))
-    assert err.value.details["field"] == "size" and "512 MB" in str(err.value) and "huge.gcode" in str(err.value)
+    assert err.value.details["field"] == "size" and "512 MiB" in str(err.value) and "huge.gcode" in str(err.value)
     with pytest.raises(ValidationError):
         read_whole(str(huge))
     model = tmp_path / "part.stl"
@@ -99,7 +99,7 @@ def test_sizes_are_checked_before_reading(tmp_path: Path, monkeypatch: pytest.Mo
         f.truncate(300 << 20)
     with pytest.raises(ValidationError) as err:
         read_input(str(model))
-    assert "256 MB" in str(err.value)
+    assert "256 MiB" in str(err.value)
     assert isinstance(read_input(str(huge), max_size_mb=1000), LargeInput)   # a larger limit: sent in pieces
     monkeypatch.setenv(LIMIT_ENV, "0.001")
     small = tmp_path / "small.gcode"

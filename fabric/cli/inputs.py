@@ -1,12 +1,12 @@
 """Input files the user names: size checked before a byte is read; small ones inline, large ones uploaded in pieces.
 
-The limit is the environment's ``FABRIC_MAX_INPUT_MB``, else 512 MB for G-code
-and 256 MB for a model (:mod:`fabric.schemas.upload`: the most the planner and
-the slicer accept); a caller of these functions may pass its own. The error of
-a file above it says which limit it is. An empty file is an error naming it.
-A file larger than ``INLINE_MAX_BYTES`` is not read here: it goes to the
-service's ``upload`` endpoint in pieces of a few MB (memory stays bounded in
-the CLI, the hub and the service).
+The limit is the environment's ``FABRIC_MAX_INPUT_MB`` (in MiB, 2^20 bytes), else
+512 MiB for G-code and 256 MiB for a model (:mod:`fabric.schemas.upload`: the most
+the planner and the slicer accept); a caller of these functions may pass its own.
+The error of a file above it says which limit it is. An empty file is an error
+naming it. A file larger than ``INLINE_MAX_BYTES`` is not read here: it goes to
+the service's ``upload`` endpoint in pieces of a few MiB (memory stays bounded in
+the CLI and the hub).
 """
 from __future__ import annotations
 
@@ -16,11 +16,11 @@ from pathlib import Path
 from typing import Any
 
 from fabric.client import Client, input_size
-from fabric.schemas.upload import INLINE_MAX_BYTES, MAX_GCODE_BYTES, MAX_MODEL_BYTES
+from fabric.schemas.upload import INLINE_MAX_BYTES, MAX_GCODE_BYTES, MAX_MODEL_BYTES, MIB
 from fabric.wire.errors import ConfigError, GcodeError, MeshError
 
-__all__ = ["LargeInput", "read_input", "read_whole", "input_limit", "gcode_source", "model_source", "GCODE_SUFFIXES",
-           "LIMIT_ENV"]
+__all__ = ["LargeInput", "read_input", "read_whole", "input_limit", "gcode_source", "model_source", "submit_source",
+           "GCODE_SUFFIXES", "LIMIT_ENV"]
 
 GCODE_SUFFIXES = (".gcode", ".gco", ".g", ".nc")
 LIMIT_ENV = "FABRIC_MAX_INPUT_MB"
@@ -48,13 +48,14 @@ def _limit(path: str, max_size_mb: float | None) -> tuple[int, str]:
         try:
             max_size_mb = float(raw)
         except ValueError:
-            raise ConfigError(f"{LIMIT_ENV} must be a number of MB, got {raw!r}", field=LIMIT_ENV, value=raw) from None
+            raise ConfigError(f"{LIMIT_ENV} must be a number of MiB, got {raw!r}", field=LIMIT_ENV,
+                              value=raw) from None
         hint = f"as {LIMIT_ENV}={raw} sets it"
     if max_size_mb is not None:
         if not (0 < max_size_mb <= 1 << 20):
-            raise ConfigError(f"the input size limit must be in (0, 1048576] MB, got {max_size_mb}",
+            raise ConfigError(f"the input size limit must be in (0, 1048576] MiB, got {max_size_mb}",
                               field="max_size_mb", value=max_size_mb)
-        return int(max_size_mb * 2**20), hint
+        return int(max_size_mb * MIB), hint
     if _is_gcode(path):
         return MAX_GCODE_BYTES, "the most the planner accepts"
     return MAX_MODEL_BYTES, "the most the slicer accepts"
@@ -103,4 +104,11 @@ def model_source(c: Client, data: bytes | LargeInput) -> dict[str, Any]:
     """The SliceRequest fields naming the model: inline, or uploaded to the slicer now."""
     if isinstance(data, LargeInput):
         return {"model": b"", "upload_id": c.upload("slicer", data.path, data.max_bytes)}
+    return {"model": data}
+
+
+def submit_source(c: Client, data: bytes | LargeInput) -> dict[str, Any]:
+    """The JobSubmit fields naming the file to print: inline, or uploaded to the supervisor now."""
+    if isinstance(data, LargeInput):
+        return {"model": b"", "upload_id": c.upload("supervisor", data.path, data.max_bytes)}
     return {"model": data}

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from fabric import schemas as s
-from fabric.cli.inputs import read_whole
+from fabric.cli.inputs import read_input, submit_source
 from fabric.cli.output import StatusLine, emit
 from fabric.cli.pipeline_cmds import parse_sets
 from fabric.cli.progress import print_progress
@@ -122,9 +122,10 @@ def _cmd_samples(a: argparse.Namespace) -> int:
 
 
 def cmd_submit(c: Client, a: argparse.Namespace) -> int:
-    # no --source: the supervisor takes it from the file name (JobSubmit.source "", as any client may send)
-    req = s.JobSubmit(model=read_whole(a.file), filename=Path(a.file).name, source=a.source or "", profile=a.profile,
-                      backend=a.backend, overrides=parse_sets(a.set), start=a.start, rtf=a.rtf,
+    # no --source: the supervisor takes it from the file name (JobSubmit.source "", as any client may send);
+    # a file larger than INLINE_MAX_BYTES is uploaded in pieces first and named by its upload id
+    req = s.JobSubmit(**submit_source(c, read_input(a.file)), filename=Path(a.file).name, source=a.source or "",
+                      profile=a.profile, backend=a.backend, overrides=parse_sets(a.set), start=a.start, rtf=a.rtf,
                       filament_diameter_mm=a.filament_diameter, layers=a.layers)
     return submit_and_follow(c, a, req)
 

@@ -39,7 +39,17 @@ from fabric.schemas.upload import UPLOAD_CHUNK_BYTES
 from fabric.wire import codec
 from fabric.wire.config import SessionSettings
 from fabric.wire.errors import FabricError, NotFound, ServiceUnavailable
-from fabric.wire.keys import ALIVE_EVERY_CELL, ENDPOINTS, SERVICES, TOPICS, Endpoint, Keys, parse_alive
+from fabric.wire.keys import (
+    ALIVE_EVERY_CELL,
+    ARTIFACT_SOURCES,
+    ARTIFACT_TIMEOUT_S,
+    ENDPOINTS,
+    SERVICES,
+    TOPICS,
+    Endpoint,
+    Keys,
+    parse_alive,
+)
 from fabric.wire.qos import BULK_QOS, command_qos
 
 __all__ = ["Client", "Subscription", "AliveSubscription", "wait_connected", "input_size"]
@@ -266,9 +276,12 @@ class Client:
         finally:
             changes.close()
 
-    def artifact(self, service: str, artifact_id: str, timeout: float = 60.0) -> s.Artifact:
-        """A content-addressed artifact (G-code, a program, a model) by its id, from the service that keeps it."""
-        return self._get_one(self.keys.artifact(service, artifact_id), None, s.Artifact, timeout,
+    def artifact(self, service: str, artifact_id: str, timeout: float | None = None) -> s.Artifact:
+        """A content-addressed artifact (G-code, a program, a model) by its id, from the service that keeps it;
+        ``timeout`` None: the one the table declares (``fabric.wire.keys.ARTIFACT_SOURCES``)."""
+        source = ARTIFACT_SOURCES.get(service)
+        wait_s = timeout or (source.timeout_s if source is not None else ARTIFACT_TIMEOUT_S)
+        return self._get_one(self.keys.artifact(service, artifact_id), None, s.Artifact, wait_s,
                              f"{service} artifact {artifact_id}", service=service)
 
     def wait_job(self, service: str, job_id: str, timeout: float = 600.0,

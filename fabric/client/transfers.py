@@ -16,7 +16,7 @@ from typing import BinaryIO
 
 from fabric import schemas as s
 from fabric.client.protocols import Caller
-from fabric.schemas.upload import UPLOAD_CHUNK_BYTES, UPLOAD_CHUNK_MAX_BYTES
+from fabric.schemas.upload import MIB, UPLOAD_CHUNK_BYTES, UPLOAD_CHUNK_MAX_BYTES
 from fabric.wire.errors import BadRequest, ValidationError
 
 __all__ = ["input_size", "upload_file", "export_to_file", "EXPORT_CHUNK_BYTES"]
@@ -39,7 +39,7 @@ def input_size(path: str | os.PathLike[str], max_bytes: int, limit_hint: str = "
     if not os.path.isfile(path):
         raise BadRequest(f"not a file: {path}", file=str(path))
     if size > max_bytes:
-        raise ValidationError(f"{path} is {size / 2**20:,.1f} MB, more than the limit of {max_bytes / 2**20:,.0f} MB"
+        raise ValidationError(f"{path} is {size / MIB:,.1f} MiB, more than the limit of {max_bytes / MIB:,.0f} MiB"
                               + (f" ({limit_hint})" if limit_hint else ""), field="size", file=str(path), value=size,
                               limit=max_bytes)
     return size
@@ -49,7 +49,7 @@ def upload_file(client: Caller, service: str, path: str | os.PathLike[str], max_
                 chunk_bytes: int = UPLOAD_CHUNK_BYTES, on_progress: Callable[[int, int], None] | None = None) -> str:
     """Send a file to ``<service>/upload`` in pieces of ``chunk_bytes`` (its size checked against
     ``max_bytes`` before a byte is read, see :func:`input_size`); returns the upload id to name in the
-    request (``PlanRequest.upload_id``, ``SliceRequest.upload_id``). Memory: one piece."""
+    request (``PlanRequest.upload_id``, ``SliceRequest.upload_id``, ``JobSubmit.upload_id``). Memory: one piece."""
     size = input_size(path, max_bytes)
     uid = uuid.uuid4().hex
     digest = hashlib.sha256()

@@ -11,14 +11,26 @@ from pathlib import Path
 from fabric import schemas as s
 from fabric.programs import content_id
 from fabric.schemas.pipeline import source_of
+from fabric.schemas.upload import MAX_GCODE_BYTES, MAX_MODEL_BYTES, MIB
 from fabric.server.disk import require_room
 from fabric.store.artifacts import ArtifactStore
 from fabric.store.library import LibraryStore, entry_id
 from fabric.wire.errors import NotFound, ValidationError
 
-__all__ = ["FileLibrary", "MODEL_MEDIA"]
+__all__ = ["FileLibrary", "MODEL_MEDIA", "MAX_BYTES", "check_size"]
 
 MODEL_MEDIA = {"model": "application/octet-stream", "gcode": "text/x-gcode"}
+MAX_BYTES = {"model": MAX_MODEL_BYTES, "gcode": MAX_GCODE_BYTES}    # the most the slicer and the planner take
+
+
+def check_size(size: int, source: str, field: str) -> None:
+    """A file of ``source`` (model or gcode) no larger than the service that takes it accepts: a ValidationError
+    naming ``field`` otherwise (a larger model would fail at the slicer, after being queued)."""
+    limit = MAX_BYTES[source]
+    if size > limit:
+        raise ValidationError(f"the {source} is {size / MIB:,.1f} MiB, more than the {limit / MIB:,.0f} MiB the "
+                              f"{'slicer' if source == 'model' else 'planner'} takes", field=field, value=size,
+                              limit=limit)
 
 
 def _pin_owner(file_id: str) -> str:
@@ -39,6 +51,7 @@ class FileLibrary:
         if not name:
             raise ValidationError("a library file needs a file name", field="name")
         kind = source_of(name, source)
+        check_size(len(data), kind, "data")
         cid = content_id(data)
         fid = entry_id(cid, name)
         known = self.store.find(fid)

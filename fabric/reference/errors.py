@@ -6,8 +6,11 @@ __all__ = ["ERROR_DETAILS"]
 ERROR_DETAILS: dict[str, str] = {
     "internal": "`service`, `command`: where an unexpected failure happened (a bug; the service is degraded).",
     "bad_request": "what was wrong, e.g. `file`.",
-    "decode": "`got`, `expected` (a wrong `_t`), or `got`, `supported` (a `_v` newer than the service knows).",
-    "validation": "`field` (the dotted path of the field), `schema` (the message type).",
+    "decode": "`reason` (one of @@decode_reasons@@), `expected` (the message type asked for); with `reason` `type`: "
+              "`got` (the `_t` received); with `reason` `version`: `got` (the `_v` received), `supported` (the "
+              "newest version the receiver knows).",
+    "validation": "`field` (the dotted path of the field; `\"\"`: the whole message), `schema` (the message type: "
+                  "the request's when the service's own check of it refused it), always.",
     "gcode": "`line` (1-based), `text`.",
     "mesh": "`file`, `reason` (`empty`, `format`, `truncated`, `open`, ...).",
     "profile": "`key` (the profile entry at fault), `value`.",
@@ -28,5 +31,5 @@ ERROR_DETAILS: dict[str, str] = {
     "forbidden": "`role`, `service`, `command`.",
     "store": "`file`, `reason` (`damaged`, `newer`, `migration`, `open`); `problem` when damaged; `table`, "
              "`version` when newer or migrating.",
-    "disk_full": "`service`, `path`, `free_mb`, `need_mb`.",
+    "disk_full": "`service`, `path`, `free_mb`, `need_mb` (in MiB).",
 }

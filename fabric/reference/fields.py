@@ -2,9 +2,11 @@
 
 A field's description is its comments in the schema's source: comment lines right
 above it (at its indentation), the comment at the end of its line, and comment
-lines right below it indented further (a continuation). A message's description
-is its whole docstring. Units come from the field name's suffix (house rule:
-names carry units), defaults and ranges from the field's declaration.
+lines right below it indented further (a continuation); a state's meaning (a
+member of an enum of ``fabric.schemas.states``) is read the same way. A
+message's description is its whole docstring. Units come from the field name's
+suffix (house rule: names carry units), defaults and ranges from the field's
+declaration.
 """
 from __future__ import annotations
 
@@ -16,12 +18,13 @@ import textwrap
 import tokenize
 import typing
 from dataclasses import dataclass
+from enum import Enum
 from functools import cache
 from typing import Any
 
 import numpy as np
 
-__all__ = ["FieldDoc", "message_doc", "field_docs", "unit_of", "UNITS", "default_of", "json_default"]
+__all__ = ["FieldDoc", "message_doc", "field_docs", "unit_of", "UNITS", "default_of", "json_default", "member_docs"]
 
 # name suffix -> unit, longest first where one suffix ends another
 UNITS: tuple[tuple[str, str], ...] = (
@@ -83,7 +86,13 @@ def field_docs(cls: type) -> list[FieldDoc]:
     hints = typing.get_type_hints(cls)
     comments = _comments(cls)
     return [FieldDoc(name, hints[name], spec, comments.get(name, ""), unit_of(name), default_of(cls, name))
-            for name, spec in cls._SPECS.items()]  # type: ignore[attr-defined]
+            for name, spec in cls.SPECS.items()]  # type: ignore[attr-defined]
+
+
+def member_docs(states: type[Enum]) -> dict[str, str]:
+    """Every member of the enum ``states`` (its value) -> its meaning (its comments; "" when it has none)."""
+    comments = _comments(states)
+    return {str(member.value): comments.get(member.name, "") for member in states}
 
 
 @cache
@@ -100,6 +109,8 @@ def _comments(cls: type) -> dict[str, str]:
     body = next(n for n in ast.parse(source).body if isinstance(n, ast.ClassDef)).body
     fields = [(n.target.id, n.lineno, n.end_lineno or n.lineno, n.col_offset) for n in body
               if isinstance(n, ast.AnnAssign) and isinstance(n.target, ast.Name)]
+    fields += [(n.targets[0].id, n.lineno, n.end_lineno or n.lineno, n.col_offset) for n in body   # enum members
+               if isinstance(n, ast.Assign) and len(n.targets) == 1 and isinstance(n.targets[0], ast.Name)]
     out = {}
     for name, first, last, col in fields:
         parts: list[str] = []

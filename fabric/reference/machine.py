@@ -71,8 +71,10 @@ def _type_schema(tp: Any, spec: Any | None) -> dict[str, Any]:
         return {"type": "object", "additionalProperties": _type_schema(typing.get_args(tp)[1], None)}
     if isinstance(tp, type) and hasattr(tp, "TYPE"):
         return _ref(tp.TYPE)
+    if tp is bytes:
+        return _bin_schema(spec)
     base: dict[str, Any] = {float: {"type": "number"}, int: {"type": "integer"}, bool: {"type": "boolean"},
-                            str: {"type": "string"}, bytes: {"$ref": "#/$defs/bin"}}[tp]
+                            str: {"type": "string"}}[tp]
     base = dict(base)
     if spec is not None:
         if spec.ge is not None:
@@ -81,9 +83,22 @@ def _type_schema(tp: Any, spec: Any | None) -> dict[str, Any]:
             base["maximum"] = spec.le
         if spec.choices is not None:
             base["enum"] = list(spec.choices)
+        if spec.min_len is not None:
+            base["minLength"] = spec.min_len
         if spec.max_len is not None:
             base["maxLength"] = spec.max_len
+        if spec.pattern is not None:
+            base["pattern"] = f"^(?:{spec.pattern})$"     # JSON Schema's pattern is not anchored; the schema's is
     return base
+
+
+def _bin_schema(spec: Any | None) -> dict[str, Any]:
+    """A ``bin`` field: base64 text here, at most ``spec.max_len`` bytes (as base64: 4 characters per 3 bytes)."""
+    out: dict[str, Any] = {"$ref": "#/$defs/bin"}
+    if spec is not None and spec.max_len is not None:
+        out["maxLength"] = 4 * -(-spec.max_len // 3)
+        out["x-max-bytes"] = spec.max_len
+    return out
 
 
 def _message_schema(name: str, cls: type) -> dict[str, Any]:

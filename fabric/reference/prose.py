@@ -43,20 +43,25 @@ Every payload is one **msgpack** map holding the message's fields plus two tags:
 | `_t` | message type, e.g. `station.Pose` |
 | `_v` | schema version (integer; each message's heading gives its current version) |
 
-Field names carry their unit (`_mm`, `_mm3`, `_s`, `_mm_s`, `_deg`, `_rad`, `_c` Celsius, `_r` ratio).
+Field names carry their unit (`_mm`, `_mm3`, `_s`, `_mm_s`, `_deg`, `_rad`, `_c` Celsius, `_r` ratio,
+`_bytes`). **Sizes** travel in bytes; this document writes large ones in **MiB**: 1 MiB = 2^20 = 1,048,576
+bytes, everywhere (a name ending `_mb`, such as `free_mb` or `$FABRIC_MAX_INPUT_MB`, counts MiB too).
 Strings are UTF-8 (msgpack `str`), bytes are msgpack `bin`, nil is msgpack `nil`. Small fixed vectors (a
 position, six joints) are msgpack arrays of floats. **Bulk numeric data** (a program's columns) is a
 *packed array*: the map `{"nd": true, "dtype": "<f8", "shape": [n, 3], "data": <bin>}`, little-endian,
 C order, rebuilt with `numpy.frombuffer(data, dtype).reshape(shape)`; dtypes: @@dtypes@@.
 
 A message carries **every field** of its version, defaults included. A decoder checks the tags, every
-field's type and range, and rejects a field it does not know (keys starting with `_` are ignored).
-A missing field takes its default; a missing field without one is a `validation` error naming it.
+field's type and constraints (range, choices, length, the pattern a string matches whole, the most bytes a
+`bin` holds: each message's table, and its JSON Schema, state them), and rejects a field it does not know
+(keys starting with `_` are ignored). A missing field takes its default; a missing field without one is a
+`validation` error naming it.
 
 **Sending `common.Empty`.** A command without arguments still takes a payload: the map with the tags only,
 `{"_t": "common.Empty", "_v": 1}`, in msgpack the @@empty_len@@ bytes `@@empty_hex@@`. An empty payload is a
-`decode` error. A service also takes `common.Empty` for any request whose fields all have defaults (every
-field then at its default): a command that grows optional arguments keeps answering older clients.
+`decode` error with `details.reason` `empty` and `details.expected` the request's type. A service also
+takes `common.Empty` for any request whose fields all have defaults (every field then at its default): a
+command that grows optional arguments keeps answering older clients.
 
 **Examples in this document** write msgpack as JSON: a map is an object, an array an array, nil `null`.
 A msgpack `bin` is written as the string `"bin:"` followed by its content as text (or a placeholder in
@@ -73,8 +78,11 @@ are never removed, renamed or retyped under the same type name). The rule, on ev
 * a **sender** writes its current version in `_v`, and every field of that version;
 * a **receiver** takes versions 1 up to the one it knows: fields the sender did not send take their
   defaults (every field added after version 1 has one), so an older sender is understood;
-* a message of a **newer** version than the receiver knows is refused with `decode`
-  (`details.got`, `details.supported`): it may carry a field the receiver cannot honour.
+* a message of a **newer** version than the receiver knows is refused with `decode` (`details.reason`
+  `version`, `details.got`, `details.supported`), whatever its type: it may carry a field the receiver
+  cannot honour. `common.Empty` is no exception, also where it stands for a request whose fields all have
+  defaults: `{"_t": "common.Empty", "_v": 2}` is refused by a receiver that knows version 1. A `_v` that
+  is not an integer of at least 1 is refused the same way.
 
 So upgrade services before their clients. A client in another language written against this document
 sends the versions listed here; reading, it may ignore fields it does not know, to keep working with
@@ -96,6 +104,9 @@ the query's final message would only add its trip back through each hop. *Bulk* 
 or reply can carry megabytes: models, G-code, exports, meshes) and artifact queries travel at the default
 `@@bulk_priority@@` priority, batched, with Zenoh's default consolidation, so they never hold up commands.
 Query target: Zenoh's default (`BEST_MATCHING`).
+
+**Artifact queries** are in the table too: a query on `am/<cell>/<service>/artifact/<id>` with **no payload**
+(see [Artifacts](#artifacts)), answered with `common.Artifact` or `not_found`.
 
 **An unknown command** gets an error reply at once: each service also serves `am/<cell>/<service>/cmd/**`
 and answers a key it does not serve with `not_found` (`details.service`, `details.command`,
@@ -127,9 +138,10 @@ ERRORS = """\
 
 An error reply's payload is `common.Error`: `{"code": str, "message": str, "details": map}`. The code is
 stable; the message says what went wrong and what to do, for people; the details are plain values to act
-on. A service answers malformed payloads with `decode`/`validation` and keeps serving; an unexpected
-failure is `internal` (logged with its traceback, and the service reports itself degraded). The codes,
-as `fabric/wire/errors.py` draws them (a client raises the class of the code):
+on. A service answers malformed payloads with `decode`/`validation` and keeps serving (a `validation`
+error always names the `field` and the `schema`); an unexpected failure is `internal` (logged with its
+traceback, and the service reports itself degraded). The codes, as `fabric/wire/errors.py` draws them (a
+client raises the class of the code):
 
 ```
 @@error_tree@@
@@ -148,6 +160,33 @@ moving carries `details.reason` `moving`; a refusal because of the part on the p
 `details.plate` (`occupied` or `clear`) and `details.plate_job_id`. A `state` error whose message ends
 "nothing was done: ask again" is a lost compare-and-set (the station changed while a move was being
 checked): asking again is safe.
+"""
+
+INPUTS = """\
+## Inputs
+
+A model or a G-code file reaches a service **inline** (the request's `bin` field carries it) or
+**uploaded** in pieces first (the request names the upload). Sizes in MiB (2^20 bytes):
+
+| request | inline field | or uploaded to | the most it takes |
+|---|---|---|---|
+@@input_rows@@
+
+A larger input, inline or uploaded, is a `validation` error naming the field. The supervisor takes a model
+(to slice) up to @@model_mib@@ MiB and G-code up to @@gcode_mib@@ MiB, what the slicer and the planner take. An
+inline input is held whole at once by the sender, the hub and the service: fabric's client sends an input
+larger than @@inline_mib@@ MiB by upload, and a client should do the same.
+
+**Uploads.** Send `upload.Chunk`s to `<service>/upload` in order: offset 0 first (it starts the upload, or
+starts it again), then each piece at the offset where the last one ended, at most @@chunk_max_mib@@ MiB each
+(fabric's client sends @@chunk_mib@@ MiB); the last piece carries the whole input's `sha256` (hex). Each piece
+is answered with `upload.Status`; once it says `done` (the sha256 matched), name the `upload_id` in the
+request with the inline field empty. The sender chooses the `upload_id`: 8 to 64 of `A-Za-z0-9_-` (the
+pattern is in the schemas). A piece at another offset is a `bad_request` (`details.expected`: the offset
+wanted; start again at 0), a wrong sha256 a `bad_request` naming `sha256` (send it again). An upload serves
+one request, which removes it: naming it again, or naming one that never finished, is `not_found`. A service
+keeps at most @@uploads_kept@@ finished uploads that no request named, and as many unfinished ones (beyond
+that the oldest goes), and forgets the unfinished ones when it restarts.
 """
 
 TELEMETRY = """\
@@ -228,6 +267,16 @@ late, asks `station/cmd/events` with `since_seq` (inclusive) for what it missed,
 `next_seq` until `last_seq`; subscribe first, read the history, then drop the duplicates by `seq`. The
 station keeps the last @@keep_events@@ events. `kinds` filters the history by kind.
 
+**Paging** (`station.EventsQuery` -> `station.EventList`): a page holds the events with `seq` >= `since_seq`
+(inclusive), oldest first, at most `limit` of them (of `kinds` only, when given); an older `since_seq` than
+the oldest event kept starts at the oldest kept (its `seq` shows the gap). `last_seq` is the `seq` of the
+newest event logged when the page was read, itself **included**: it is on a page (`since_seq` = `last_seq`
+returns it), and reading is complete when `next_seq` > `last_seq`. `next_seq` is the `since_seq` of the next
+page: the page's last `seq` + 1. An **empty page** (`events` `[]`, no error) means nothing more to read now
+(no event from `since_seq`, or none of `kinds`): its `next_seq` is the larger of `since_seq` and
+`last_seq` + 1, its `last_seq` as above (0 while the log is empty). `station/beads` pages by `first` and
+`limit` the same way: a page past the end is empty, with `first` = `total`.
+
 Every event has `t_sim_s`, the `row` and `gcode_line` of the program at that moment and the `layer`
 (0-based, -1 when none). Events of a print job (@@job_events@@) also carry `job_id` and `elapsed_s`
 (simulated seconds since the print started) when its program was loaded for a job.
@@ -241,7 +290,10 @@ PRINT_JOBS = """\
 ## Print jobs
 
 `supervisor/submit` (`supervisor.JobSubmit`) queues a print job and answers at once with
-`common.JobAccepted` (`kind` `print`); the job is durable from then on.
+`common.JobAccepted` (`kind` `print`); the job is durable from then on. The file to print comes in exactly
+one of three ways: inline in `model`; uploaded in pieces to `supervisor/upload` and named by `upload_id`
+(`model` empty; see [Inputs](#inputs)), as `fabric-cli job submit` does for a file larger than @@inline_mib@@
+MiB; or from the file library by `file_id` (`model` empty). Two of them, or none, is a `validation` error.
 
 **Submit defaults.** `source` empty (the default) is taken from the file name at the supervisor:
 @@gcode_suffixes@@ are G-code (planned as they are), @@model_suffixes@@ models (sliced first); any other
@@ -256,6 +308,14 @@ when its turn comes and waits for the operator's `station/start`.
 cannot be prepared (a G-code error, an unreachable target, a collision, cold extrusion) ends `failed` with
 its typed `error`. Waiting jobs (`queued`, preparing) can be reordered (`job_move`) and removed
 (`job_remove`); a job on the station cannot be removed.
+
+### Print job states
+
+`supervisor.JobRecord.state`, and `JobsQuery.states`:
+
+| state | meaning |
+|---|---|
+@@print_job_state_rows@@
 
 **Loading and the plate gate.** The station owns the part on the plate: a print's first bead puts a
 part there (`station.State.plate_clear` false, `plate_mm3`, `plate_job_id`), and it stays until the
@@ -297,8 +357,11 @@ it.
 **Pagination** of `supervisor/jobs`: `supervisor.JobsQuery` asks `limit` records (default @@jobs_limit@@,
 at most @@jobs_max@@) from the `offset`-th (0-based) in queue order, of `states` only when given; the
 reply's `total` is how many match in all and `offset` echoes the place of its first record. Page on with
-`offset + len(jobs)` until it reaches `total`. `common.Empty` (what older clients send) asks the first
-page. `job_move` answers with the first page of the queue after the move (up to 100 records, and `total`).
+`offset + len(jobs)` until it reaches `total`. A page at or past the end (`offset` >= `total`, or `limit`
+0) is empty: `jobs` `[]`, `total` as ever, `offset` as asked (no error). `common.Empty` (what older clients
+send) asks the first page. `job_move` answers with the first page of the queue after the move (up to 100
+records, and `total`). `supervisor/files` pages the same way (`offset`, `limit`, `total`; an empty page past
+the end).
 
 **The file library.** Every file submitted enters the supervisor's library once per content and name
 (`supervisor.LibraryFile`: its `file_id`, size, when it was added and last used, how many jobs were made
@@ -326,10 +389,14 @@ ends `done` with `result_id` (the G-code's or the program's artifact id) or `fai
 `error`. `slicer/result` and `planner/summary` give the result's summary by that id. A service keeps the
 statuses of its last jobs in memory only: after a restart, ask for the result by its artifact id.
 
-**Large inputs** travel in pieces: send `upload.Chunk`s to `<service>/upload` (offset 0 first, then where
-the last piece ended; at most @@chunk_max_mb@@ MB each, the client sends @@chunk_mb@@ MB), the last with the
-whole input's `sha256`; once `done`, name the `upload_id` in the request (`SliceRequest.upload_id`,
-`PlanRequest.upload_id`) with an empty inline field. Inline inputs up to @@inline_mb@@ MB are usual.
+The model or the G-code comes inline or uploaded (see [Inputs](#inputs)); `PlanRequest.gcode_id` names
+G-code the slicer made instead.
+
+`common.JobStatus.state`:
+
+| state | meaning |
+|---|---|
+@@job_state_rows@@
 """
 
 MULTIAXIS = """\
@@ -371,15 +438,13 @@ ARTIFACTS = """\
 ## Artifacts
 
 Results are content-addressed: the id is the sha256 (hex) of the bytes. Ask for one with a query on
-`am/<cell>/<service>/artifact/<id>` with **no payload** (bulk QoS); the reply is `common.Artifact`, or a
-`not_found` error. What each service keeps:
+`am/<cell>/<service>/artifact/<id>` with **no payload** (bulk QoS) and wait for it at most
+@@artifact_timeout_s@@ s (the [Commands](#commands) table has a row per service); the reply is
+`common.Artifact`, or a `not_found` error. What each service keeps:
 
-| service | artifacts |
-|---|---|
-| `slicer` | G-code (`text/x-gcode`): `JobStatus.result_id` of a slicing job, `SliceResult.gcode_id`, `JobRecord.gcode_id` |
-| `planner` | programs (`application/x-am-fabric-program+msgpack`): `JobStatus.result_id` of a planning job, `PlanSummary.program_id`, `JobRecord.program_id` |
-| `supervisor` | submitted files (`application/octet-stream` models, `text/x-gcode`): `JobRecord.model_id` |
-| `station` | the programs it loaded |
+| service | media types | artifacts |
+|---|---|---|
+@@artifact_rows@@
 
 **A program artifact**'s `data` is an encoded `planner.ProgramMsg` (a msgpack map with its own `_t` and
 `_v`): its `columns`, one packed array per column with one row per instruction, the work object `wobj`
@@ -427,7 +492,7 @@ nothing of this project.
 """
 
 SECTIONS = {"transport": TRANSPORT, "keys": KEYS, "payloads": PAYLOADS, "versions": VERSIONS,
-            "commands": COMMANDS, "errors": ERRORS, "telemetry": TELEMETRY, "time_bases": TIME_BASES,
+            "commands": COMMANDS, "errors": ERRORS, "inputs": INPUTS, "telemetry": TELEMETRY, "time_bases": TIME_BASES,
             "station_states": STATION_STATES, "events": EVENTS, "print_jobs": PRINT_JOBS,
             "pipeline_jobs": PIPELINE_JOBS, "multiaxis": MULTIAXIS, "artifacts": ARTIFACTS,
             "plain_client": PLAIN_CLIENT}

@@ -4,17 +4,20 @@ A schema is a dataclass decorated with ``@schema("area.Name", version)``. Its
 fields are annotated with plain types (``int``, ``float``, ``str``, ``bool``,
 ``bytes``, ``list[X]``, ``dict[str, X]``, ``X | None``, nested schemas,
 ``Any`` for free-form plain values) or ``np.ndarray`` for bulk numeric data.
-Ranges, choices and array dtypes/shapes are declared with :func:`f`.
+Ranges, choices, lengths, text patterns, the size of a ``bytes`` field and
+array dtypes/shapes are declared with :func:`f`.
 
 Validation turns a plain decoded mapping into the dataclass, checking every
 field and raising :class:`~fabric.wire.errors.ValidationError` whose
-``details['field']`` is the dotted path of the offending field.
+``details['field']`` is the dotted path of the offending field and
+``details['schema']`` the message type it was validated as.
 """
 from __future__ import annotations
 
 import dataclasses
 import functools
 import math
+import re
 import types
 import typing
 from collections.abc import Callable
@@ -27,7 +30,7 @@ from fabric.wire.errors import ValidationError
 
 __all__ = ["schema", "f", "REGISTRY", "validate_into", "to_plain"]
 
-REGISTRY: dict[str, type[Any]] = {}   # type name -> schema class (with TYPE, VERSION and _SPECS set)
+REGISTRY: dict[str, type[Any]] = {}   # type name -> schema class (with TYPE, VERSION and SPECS, its fields, set)
 T = TypeVar("T")
 _MISSING = dataclasses.MISSING
 
@@ -41,9 +44,15 @@ else:
 def f(default: Any = _MISSING, *, ge: float | None = None, le: float | None = None,
       choices: tuple[Any, ...] | None = None, dtype: str | None = None,
       shape: tuple[int | None, ...] | None = None, factory: Callable[[], Any] | None = None,
-      max_len: int | None = None) -> Any:
-    """Declare a field with constraints (range, choices, ndarray dtype and shape, length)."""
-    meta = {"ge": ge, "le": le, "choices": choices, "dtype": dtype, "shape": shape, "max_len": max_len}
+      max_len: int | None = None, min_len: int | None = None, pattern: str | None = None) -> Any:
+    """Declare a field with constraints (range, choices, ndarray dtype and shape, length, pattern).
+
+    ``max_len`` and ``min_len`` count characters of a ``str`` and bytes of a ``bytes`` field; ``pattern`` is a
+    regular expression a ``str`` must match whole (written so that JSON Schema's ``pattern`` reads it alike)."""
+    if pattern is not None:
+        re.compile(pattern)                 # a bad pattern is a bug in the declaration: fail at import
+    meta = {"ge": ge, "le": le, "choices": choices, "dtype": dtype, "shape": shape, "max_len": max_len,
+            "min_len": min_len, "pattern": pattern}
     if factory is not None:
         return dataclasses.field(default_factory=factory, metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
@@ -60,6 +69,8 @@ class FieldSpec:
     dtype: str | None = None
     shape: tuple[int | None, ...] | None = None
     max_len: int | None = None
+    min_len: int | None = None
+    pattern: str | None = None
 
 
 @dataclass_transform(field_specifiers=(f,))
@@ -73,7 +84,7 @@ def schema(type_name: str, version: int = 1) -> Callable[[type[T]], type[T]]:
         for fld in dataclasses.fields(dc):  # type: ignore[arg-type]  # typeshed: dataclass() returns type[T]
             required = fld.default is _MISSING and fld.default_factory is _MISSING
             specs[fld.name] = FieldSpec(fld.name, hints[fld.name], required, **dict(fld.metadata))
-        dc.TYPE, dc.VERSION, dc._SPECS = type_name, version, specs  # type: ignore[attr-defined]
+        dc.TYPE, dc.VERSION, dc.SPECS = type_name, version, specs  # type: ignore[attr-defined]
         if type_name in REGISTRY:
             raise RuntimeError(f"schema {type_name} declared twice")
         REGISTRY[type_name] = dc
@@ -82,22 +93,33 @@ def schema(type_name: str, version: int = 1) -> Callable[[type[T]], type[T]]:
     return wrap
 
 
-def validate_into(cls: type[T], data: Any, path: str = "") -> T:
-    """Build ``cls`` from a plain mapping, validating every field."""
+def validate_into(cls: type[T], data: Any) -> T:
+    """Build ``cls`` from a plain mapping, validating every field; a ValidationError names the field
+    (``field``, a dotted path) and the message type it was validated as (``schema``)."""
+    try:
+        return _validate(cls, data, "")
+    except ValidationError as err:
+        err.details.setdefault("schema", cls.TYPE)  # type: ignore[attr-defined]
+        raise
+
+
+def _validate(cls: type[T], data: Any, path: str) -> T:
+    """``validate_into`` for the message ``cls`` at ``path`` inside the one being validated (errors name the
+    field by its path from the top; ``validate_into`` adds the top message's type)."""
     if not isinstance(data, dict):
         raise ValidationError(f"{path or cls.TYPE}: expected a map, got {type(data).__name__}",  # type: ignore[attr-defined]
-                              field=path or "", schema=cls.TYPE)  # type: ignore[attr-defined]
-    specs: dict[str, FieldSpec] = cls._SPECS  # type: ignore[attr-defined]
+                              field=path)
+    specs: dict[str, FieldSpec] = cls.SPECS  # type: ignore[attr-defined]
     unknown = [k for k in data if k not in specs and not (isinstance(k, str) and k.startswith("_"))]
     if unknown:
         name = f"{path}.{unknown[0]}" if path else str(unknown[0])
-        raise ValidationError(f"unknown field '{name}' in {cls.TYPE}", field=name, schema=cls.TYPE)  # type: ignore[attr-defined]
+        raise ValidationError(f"unknown field '{name}' in {cls.TYPE}", field=name)  # type: ignore[attr-defined]
     kwargs = {}
     for name, spec in specs.items():
         fpath = f"{path}.{name}" if path else name
         if name not in data:
             if spec.required:
-                raise ValidationError(f"missing field '{fpath}' in {cls.TYPE}", field=fpath, schema=cls.TYPE)  # type: ignore[attr-defined]
+                raise ValidationError(f"missing field '{fpath}' in {cls.TYPE}", field=fpath)  # type: ignore[attr-defined]
             continue
         kwargs[name] = _check(spec.tp, data[name], fpath, spec)
     return cls(**kwargs)
@@ -139,12 +161,13 @@ def _check(tp: Any, value: Any, fpath: str, spec: FieldSpec | None) -> Any:
             raise _fail(fpath, f"expected a string, got {type(value).__name__}")
         if spec and spec.choices is not None and value not in spec.choices:
             raise _fail(fpath, f"'{value}' is not one of {list(spec.choices)}")
-        if spec and spec.max_len is not None and len(value) > spec.max_len:
-            raise _fail(fpath, f"longer than {spec.max_len}")
-        return value
+        return _text(value, fpath, spec)
     if tp is bytes:
         if not isinstance(value, (bytes, bytearray)):
             raise _fail(fpath, f"expected bytes, got {type(value).__name__}")
+        if spec and spec.max_len is not None and len(value) > spec.max_len:
+            raise _fail(fpath, f"{len(value):,} bytes, more than the {spec.max_len:,} it may hold (send a larger "
+                               f"input by upload)")
         return bytes(value)
     if tp is np.ndarray:
         return _array(value, fpath, spec)
@@ -166,9 +189,22 @@ def _check(tp: Any, value: Any, fpath: str, spec: FieldSpec | None) -> Any:
                 raise _fail(fpath, "map keys must be strings")
             out[k] = _check(vt, v, f"{fpath}.{k}", None)
         return out
-    if isinstance(tp, type) and hasattr(tp, "_SPECS"):
-        return validate_into(tp, value, fpath)
+    if isinstance(tp, type) and hasattr(tp, "SPECS"):
+        return _validate(tp, value, fpath)
     raise _fail(fpath, f"unsupported schema type {tp!r}")  # a bug in a schema declaration
+
+
+def _text(value: str, fpath: str, spec: FieldSpec | None) -> str:
+    """A string's length and pattern, as its spec declares them."""
+    if spec is None:
+        return value
+    if spec.max_len is not None and len(value) > spec.max_len:
+        raise _fail(fpath, f"longer than {spec.max_len}")
+    if spec.min_len is not None and len(value) < spec.min_len:
+        raise _fail(fpath, f"'{value}' is shorter than {spec.min_len} characters")
+    if spec.pattern is not None and not re.fullmatch(spec.pattern, value):
+        raise _fail(fpath, f"'{value[:80]}' does not match {spec.pattern}")
+    return value
 
 
 def _range(value: float, fpath: str, spec: FieldSpec | None) -> Any:

@@ -8,7 +8,9 @@ the last job made from it (so that "print again" needs nothing else) and what th
 from __future__ import annotations
 
 from fabric.schemas.base import f, schema
+from fabric.schemas.ids import FILE_ID_MIN_CHARS
 from fabric.schemas.pipeline import BACKENDS, JOB_SOURCES, LAYER_MODES
+from fabric.schemas.upload import MAX_SUBMIT_BYTES
 
 __all__ = ["FileAdd", "FileList", "FileQuery", "FilesQuery", "LibraryFile", "MAX_FILES_PAGE"]
 
@@ -58,7 +60,8 @@ class FileList:
 @schema("supervisor.FileAdd")
 class FileAdd:
     """Add a file to the library without printing it (``source`` "": from the file name, as ``JobSubmit``)."""
-    data: bytes                                      # the file's bytes
+    data: bytes = f(max_len=MAX_SUBMIT_BYTES)        # the file's bytes (a model: at most what the slicer
+                                                     # takes, see Inputs)
     name: str = f(max_len=255)                       # its name (a path's last part is kept)
     source: str = f(default="", choices=("", *JOB_SOURCES))     # model, gcode, or "": from the name
 
@@ -66,4 +69,4 @@ class FileAdd:
 @schema("supervisor.FileQuery")
 class FileQuery:
     """One library entry by its ``file_id`` (a unique prefix of at least 6 characters is enough)."""
-    file_id: str = f(max_len=64)                     # the entry's id, or a unique start of it
+    file_id: str = f(min_len=FILE_ID_MIN_CHARS, max_len=64)   # the entry's id, or a unique start of it

@@ -7,8 +7,10 @@ import numpy as np
 
 from fabric.schemas.base import f, schema
 from fabric.schemas.common import ErrorReply
+from fabric.schemas.ids import FILE_ID_OR_NONE, UPLOAD_ID_OR_NONE
 from fabric.schemas.states import PRINT_JOB_STATES
 from fabric.schemas.station import CellInfo
+from fabric.schemas.upload import MAX_GCODE_BYTES, MAX_MODEL_BYTES, MAX_SUBMIT_BYTES
 from fabric.wire.errors import COLD_EXTRUSION_REASONS, UNREACHABLE_REASONS, ValidationError
 
 BACKENDS = ("builtin", "prusaslicer", "slic3r")
@@ -29,14 +31,16 @@ class SliceRequest:
 
     Version 3: ``layers`` "curved" slices along curved layers (builtin back-end only) and writes the
     multi-axis G-code dialect (every move carries the nozzle axis as I J K)."""
-    model: bytes                    # the model file's bytes (STL, OBJ or 3MF); empty when ``upload_id`` is given
+    model: bytes = f(max_len=MAX_MODEL_BYTES)   # the model file's bytes (STL, OBJ or 3MF); empty when ``upload_id``
+                                                # is given
     filename: str = f(max_len=255)  # its file name: the suffix (.stl, .obj, .3mf) says the format
     profile: str = "taz-pla-medium"     # the slicing profile (``slicer/backends`` lists them)
     backend: str = f(default="builtin", choices=BACKENDS)   # the slicer that slices it
     overrides: dict[str, str] = f(factory=dict)     # profile keys set for this slice, values as text
     center_xy_mm: list[float] | None = f(default=None, shape=(2,))  # where the part's center goes, plate frame
                                                                     # (nil: the plate's center)
-    upload_id: str = f(default="", max_len=64)      # a model sent in chunks to slicer/upload (``model`` is empty)
+    upload_id: str = f(default="", max_len=64, pattern=UPLOAD_ID_OR_NONE)   # a model sent in chunks to
+                                                    # slicer/upload (``model`` is empty)
     layers: str = f(default="planar", choices=LAYER_MODES)   # planar, or curved (builtin only; multi-axis G-code)
 
 
@@ -75,7 +79,8 @@ class PlanRequest:
 
     ``filament_diameter_mm`` overrides what the G-code states (None: as stated, else assumed and said so).
     Version 4: ``max_turn_deg`` (G-code in the multi-axis dialect). Version 5: ``linear_tol_mm``."""
-    gcode: bytes = b""              # the G-code itself (inline: up to 4 MB is usual; larger goes by upload)
+    gcode: bytes = f(default=b"", max_len=MAX_GCODE_BYTES)  # the G-code itself, inline (see Inputs: a large
+                                    # file goes by upload)
     gcode_id: str = ""              # or the slicer's G-code artifact id
     filename: str = "part.gcode"    # a name for it (messages and the program's name)
     offset_mm: list[float] = f(factory=lambda: [0.0, 0.0, 0.0], shape=(3,))   # where the G-code origin goes,
@@ -91,7 +96,8 @@ class PlanRequest:
     filament_diameter_mm: float | None = f(default=None, ge=0.5, le=5.0)   # nil: as the G-code states, else
                                     # 1.75 assumed (and said so in the summary's warnings)
     allow_off_plate: bool = False               # targets off the plate or below it: counted, not fatal
-    upload_id: str = f(default="", max_len=64)  # or G-code sent in chunks to planner/upload
+    upload_id: str = f(default="", max_len=64, pattern=UPLOAD_ID_OR_NONE)  # or G-code sent in chunks to
+                                    # planner/upload
     max_turn_deg: float = f(default=5.0, ge=0.1, le=90.0)   # multi-axis G-code: a move turning the nozzle axis
                                     # more than this is planned as equal pieces
     linear_tol_mm: float = f(default=0.1, ge=0.01, le=10.0)  # a linear move whose joints, interpolated between
@@ -361,7 +367,8 @@ class JobRecord:
     """One print job: what was submitted, where it is, what each stage produced, and how it ended.
 
     ``state`` goes queued -> slicing -> planning -> checking -> (queued, prepared) -> loaded ->
-    printing <-> paused -> finished | stopped | failed | interrupted (see PRINT_JOB_STATES).
+    printing <-> paused -> finished | stopped | failed | interrupted (each state's meaning: "Print job
+    states" in the protocol reference).
     Times ending in ``_s`` without "elapsed" are wall-clock epoch seconds (0 = not yet).
     ``segments`` are the runs of its print (a stop and a restart at a layer, an interruption and its
     recovery: each a segment); ``started_s`` is the first one's start, the durations and the material are
@@ -420,19 +427,23 @@ class FabricStatus:
     station_cell: CellInfo | None = None        # the cell model the station runs (nil: no station answered)
 
 
-@schema("supervisor.JobSubmit", version=6)
+@schema("supervisor.JobSubmit", version=7)
 class JobSubmit:
     """STL/OBJ/3MF bytes -> slice -> plan -> collision check -> load (-> start); or G-code bytes
     (``source`` "gcode") -> plan -> check -> load (-> start). The file enters the supervisor's library
-    (``supervisor/files``); ``model`` empty and ``file_id`` given prints a library file again (version 5).
+    (``supervisor/files``). It comes in one of three ways: inline (``model``), uploaded in chunks to
+    ``supervisor/upload`` (``upload_id``, ``model`` empty; version 7), or from the library (``file_id``,
+    ``model`` empty: prints a library file again; version 5).
 
     ``source`` empty (the default) is taken from ``filename``: .gcode, .gco, .g and .nc are G-code; .stl,
     .obj and .3mf a model; any other name is a ``validation`` error naming ``source``. The print runs at
     real time (``rtf`` 1) unless asked otherwise, as ``fabric-cli job submit`` does. Version 3: ``source``
     defaults to "" (inferred) and ``rtf`` to 1 (it was "model" and 0, as fast as possible). Version 6:
     ``layers`` "curved" slices a model along curved layers with a tilted nozzle (built-in slicer; the
-    multi-axis G-code dialect, planned with the nozzle axis of every move)."""
-    model: bytes                                # the file's bytes (a model, or G-code); empty with ``file_id``
+    multi-axis G-code dialect, planned with the nozzle axis of every move). Version 7: ``upload_id``."""
+    model: bytes = f(max_len=MAX_SUBMIT_BYTES)     # the file's bytes (a model, or G-code; a model:
+                                                # at most what the slicer takes, see Inputs); empty with
+                                                # ``upload_id`` or ``file_id``
     filename: str = f(max_len=255)              # its name (its suffix gives ``source`` when that is empty;
                                                 # "" with ``file_id``: the library's name)
     source: str = f(default="", choices=("", *JOB_SOURCES))    # model, gcode, or "": from the file name
@@ -445,9 +456,12 @@ class JobSubmit:
     filament_diameter_mm: float | None = f(default=None, ge=0.5, le=5.0)   # the filament the print uses, for
                                                 # G-code that does not say it (nil: as stated, else assumed);
                                                 # a model is sliced for it (version 4)
-    file_id: str = f(default="", max_len=64)    # a library entry to print (``model`` empty), version 5
+    file_id: str = f(default="", max_len=64, pattern=FILE_ID_OR_NONE)   # a library entry to print (``model``
+                                                # empty; its id or a start of it), version 5
     layers: str = f(default="planar", choices=LAYER_MODES)     # planar, or curved (a model, builtin slicer;
                                                 # version 6)
+    upload_id: str = f(default="", max_len=64, pattern=UPLOAD_ID_OR_NONE)  # a file sent in chunks to
+                                                # supervisor/upload (``model`` empty), version 7
 
 
 def source_of(filename: str, source: str = "") -> str:

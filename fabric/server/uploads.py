@@ -16,13 +16,15 @@ import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fabric.schemas.upload import UPLOAD_CHUNK_MAX_BYTES, UPLOAD_ID_PATTERN, UploadChunk, UploadStatus
+from fabric.schemas.ids import UPLOAD_ID_PATTERN
+from fabric.schemas.upload import MIB, UPLOAD_CHUNK_MAX_BYTES, UploadChunk, UploadStatus
 from fabric.server.disk import require_room
 from fabric.wire.errors import BadRequest, NotFound, ValidationError
 
 __all__ = ["UploadStore"]
 
 _ID = re.compile(UPLOAD_ID_PATTERN)
+_CHUNK: str = UploadChunk.TYPE  # type: ignore[attr-defined]  # the message whose fields these checks are about
 
 
 @dataclass
@@ -48,14 +50,15 @@ class UploadStore:
         """Take the next piece of an upload; the last one (offset + len == total) checks the sha256."""
         uid = chunk.upload_id
         if not _ID.fullmatch(uid):
-            raise ValidationError(f"upload_id must match {UPLOAD_ID_PATTERN}", field="upload_id", value=uid[:64])
+            raise ValidationError(f"upload_id must match {UPLOAD_ID_PATTERN}", field="upload_id", value=uid[:64],
+                                  schema=_CHUNK)
         if chunk.total_bytes > self.max_bytes:
-            raise ValidationError(f"the input is {chunk.total_bytes / 2**20:.1f} MB, more than this service takes "
-                                  f"({self.max_bytes / 2**20:.0f} MB)", field="total_bytes",
-                                  value=chunk.total_bytes, limit=self.max_bytes)
+            raise ValidationError(f"the input is {chunk.total_bytes / MIB:.1f} MiB, more than this service takes "
+                                  f"({self.max_bytes / MIB:.0f} MiB)", field="total_bytes",
+                                  value=chunk.total_bytes, limit=self.max_bytes, schema=_CHUNK)
         if len(chunk.data) > UPLOAD_CHUNK_MAX_BYTES:
-            raise ValidationError(f"a piece is at most {UPLOAD_CHUNK_MAX_BYTES >> 20} MB", field="data",
-                                  value=len(chunk.data))
+            raise ValidationError(f"a piece is at most {UPLOAD_CHUNK_MAX_BYTES / MIB:g} MiB", field="data",
+                                  value=len(chunk.data), schema=_CHUNK)
         with self._lock:
             part = self._open.get(uid)
             if chunk.offset == 0:

@@ -13,13 +13,14 @@ import hashlib
 from pathlib import Path
 
 from fabric import schemas as s
+from fabric.schemas.ids import FILE_ID_MIN_CHARS
 from fabric.store.sqlite import Database, Table
 from fabric.wire import codec
 from fabric.wire.errors import NotFound, ValidationError
 
 __all__ = ["LIBRARY_TABLE", "LibraryStore", "entry_id", "MIN_ID_PREFIX"]
 
-MIN_ID_PREFIX = 6                     # a shorter prefix of a file id is refused (too easy to mean two files)
+MIN_ID_PREFIX = FILE_ID_MIN_CHARS     # a shorter prefix of a file id is refused (too easy to mean two files)
 
 LIBRARY_TABLE = Table("library", 1, """
 CREATE TABLE library (

@@ -7,6 +7,11 @@ An ``np.ndarray`` field travels as the map ``{"nd": true, "dtype": "<f8",
 floats and any msgpack + numpy reader can rebuild it with ``np.frombuffer``.
 A ``common.Empty`` message decodes as any type whose fields all have
 defaults: a command that grows arguments still answers older clients.
+
+Every :class:`~fabric.wire.errors.DecodeError` of :func:`decode` carries
+``reason`` (one of ``DECODE_REASONS``) and ``expected`` (the message type
+asked for); a wrong type also ``got`` (the ``_t`` received), a version this
+side does not speak ``got`` (the ``_v`` received) and ``supported``.
 """
 from __future__ import annotations
 
@@ -19,11 +24,18 @@ import numpy as np
 from fabric.schemas.base import REGISTRY, to_plain, validate_into
 from fabric.wire.errors import DecodeError
 
-__all__ = ["encode", "encode_pieces", "Spliced", "decode", "decode_any", "pack", "unpack", "MAX_ARRAY_BYTES"]
+__all__ = ["encode", "encode_pieces", "Spliced", "decode", "decode_any", "pack", "unpack", "MAX_ARRAY_BYTES",
+           "PACKED_DTYPES", "DECODE_REASONS"]
 
 T = TypeVar("T")
 MAX_ARRAY_BYTES = 1 << 30          # refuse absurd arrays before allocating
-_ALLOWED_DTYPES = {"<f8", "<f4", "<i8", "<i4", "<i2", "|i1", "|u1", "<u2", "<u4", "<u8", "|b1"}
+PACKED_DTYPES = frozenset({"<f8", "<f4", "<i8", "<i4", "<i2", "|i1", "|u1", "<u2", "<u4", "<u8", "|b1"})
+"""The dtypes a packed array may have (numpy's ``dtype.str``: little-endian, or one byte)."""
+
+DECODE_REASONS = ("empty", "msgpack", "not_map", "array", "type", "version")
+"""Why a payload is not a message (``DecodeError.details['reason']``): no bytes at all, bytes that are not
+msgpack, msgpack that is not a map, a packed array that does not add up, a map of another type (``_t``),
+or of a version this side does not speak (``_v``: newer than it knows, or not a positive integer)."""
 
 
 def _default(obj: Any) -> Any:
@@ -45,14 +57,15 @@ def _hook(obj: dict) -> Any:
 
 def _unpack_array(obj: dict) -> np.ndarray:
     dtype, shape, data = obj.get("dtype"), obj.get("shape"), obj.get("data")
-    if dtype not in _ALLOWED_DTYPES or not isinstance(data, bytes):
-        raise DecodeError(f"bad packed array: dtype {dtype!r}", dtype=str(dtype))
+    if dtype not in PACKED_DTYPES or not isinstance(data, bytes):
+        raise DecodeError(f"bad packed array: dtype {dtype!r}", reason="array", dtype=str(dtype))
     if not isinstance(shape, list) or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in shape):
-        raise DecodeError(f"bad packed array shape {shape!r}")
+        raise DecodeError(f"bad packed array shape {shape!r}", reason="array")
     dt = np.dtype(dtype)
     count = int(np.prod(shape, dtype=np.int64)) if shape else 1
     if count * dt.itemsize != len(data) or len(data) > MAX_ARRAY_BYTES:
-        raise DecodeError(f"packed array of shape {shape} and dtype {dtype} does not match {len(data)} bytes")
+        raise DecodeError(f"packed array of shape {shape} and dtype {dtype} does not match {len(data)} bytes",
+                          reason="array")
     return np.frombuffer(data, dtype=dt).reshape(shape)
 
 
@@ -69,7 +82,8 @@ def unpack(data: bytes) -> Any:
     except DecodeError:
         raise
     except (msgpack.ExtraData, msgpack.FormatError, msgpack.StackError, ValueError, TypeError) as exc:
-        raise DecodeError(f"payload is not valid msgpack: {exc}", reason=type(exc).__name__) from exc
+        raise DecodeError(f"payload is not valid msgpack: {type(exc).__name__} {exc}".rstrip(),
+                          reason="msgpack") from exc
 
 
 def encode(msg: Any) -> bytes:
@@ -149,34 +163,52 @@ def _bin_header(size: int) -> bytes:
 
 
 def decode(data: bytes, expected: type[T]) -> T:
-    """Decode ``data`` as a message of type ``expected``, validating every field."""
-    body = unpack(data)
+    """Decode ``data`` as a message of type ``expected``, validating every field. A message of a version newer
+    than this side's is refused whatever its type (``common.Empty`` taken for an all-default request too)."""
+    want: str = expected.TYPE  # type: ignore[attr-defined]
+    if not data:
+        raise DecodeError(f"the payload is empty, expected a {want} map: a request without arguments is "
+                          f"common.Empty, the map {{\"_t\": \"common.Empty\", \"_v\": 1}}", reason="empty",
+                          expected=want)
+    try:
+        body = unpack(data)
+    except DecodeError as err:
+        err.details.setdefault("expected", want)
+        raise
     if not isinstance(body, dict):
-        raise DecodeError(f"payload is a {type(body).__name__}, expected a {expected.TYPE} map",  # type: ignore[attr-defined]
-                          expected=expected.TYPE)  # type: ignore[attr-defined]
-    tname, version = body.get("_t"), body.get("_v")
+        raise DecodeError(f"payload is a {type(body).__name__}, expected a {want} map", reason="not_map",
+                          expected=want)
+    tname = body.get("_t")
     if tname == "common.Empty" and body.keys() <= {"_t", "_v"} and _all_optional(expected):
         # a request that grew arguments (supervisor/jobs: common.Empty -> JobsQuery): an older client's
         # empty request is the new one with every field at its default
+        _check_version(body, REGISTRY["common.Empty"], want)
         return validate_into(expected, {})
-    if tname != expected.TYPE:  # type: ignore[attr-defined]
-        raise DecodeError(f"payload is a {tname!r} message, expected {expected.TYPE}",  # type: ignore[attr-defined]
-                          got=str(tname), expected=expected.TYPE)  # type: ignore[attr-defined]
-    if not isinstance(version, int) or isinstance(version, bool) or not 1 <= version <= expected.VERSION:  # type: ignore[attr-defined]
-        raise DecodeError(f"{tname} version {version!r} is not supported (this side speaks up to "
-                          f"v{expected.VERSION})", got=version, supported=expected.VERSION)  # type: ignore[attr-defined]
+    if tname != want:
+        raise DecodeError(f"payload is a {tname!r} message, expected {want}", reason="type", got=str(tname),
+                          expected=want)
+    _check_version(body, expected, want)
     return validate_into(expected, body)
+
+
+def _check_version(body: dict, cls: type, want: str) -> None:
+    """Refuse a ``_v`` this side does not speak for the message type ``cls``: not an integer from 1 to its own."""
+    version, newest = body.get("_v"), cls.VERSION  # type: ignore[attr-defined]
+    if not isinstance(version, int) or isinstance(version, bool) or not 1 <= version <= newest:
+        raise DecodeError(f"{body.get('_t')} version {version!r} is not supported (this side speaks up to "
+                          f"v{newest})", reason="version", got=version, supported=newest, expected=want)
 
 
 def _all_optional(cls: type) -> bool:
     """Whether every field of the schema ``cls`` has a default (so an empty message is a valid one)."""
-    return all(not spec.required for spec in cls._SPECS.values())  # type: ignore[attr-defined]
+    return all(not spec.required for spec in cls.SPECS.values())  # type: ignore[attr-defined]
 
 
 def decode_any(data: bytes) -> Any:
     """Decode a message whose type is read from its ``_t`` tag."""
-    body = unpack(data)
+    body = unpack(data) if data else None
     if not isinstance(body, dict) or body.get("_t") not in REGISTRY:
-        raise DecodeError("payload has no known message type tag")
+        got = body.get("_t") if isinstance(body, dict) else None
+        raise DecodeError("payload has no known message type tag", reason="type", got=str(got), expected="")
     return decode(data, REGISTRY[body["_t"]])
 

@@ -28,7 +28,10 @@ Every error carries ``details``: a dict of plain values that a caller can act
 on. Each detail has one type wherever the error is raised; the ones a caller
 may rely on, by class (others may be present)::
 
-    ValidationError    field: str (dotted path), schema: str
+    DecodeError        reason: str (one of fabric.wire.codec.DECODE_REASONS), expected: str (the message
+                       type asked for); reason "type": got: str (the _t received); reason "version":
+                       got (the _v received), supported: int
+    ValidationError    field: str (dotted path; "" for the whole message), schema: str (the message type)
     GcodeError         line: int (1-based), text: str
     MeshError          file: str, reason: str ("empty", "format", "truncated", "open", ...)
     ConfigError        field: str (``section.key``), value
@@ -45,7 +48,7 @@ may rely on, by class (others may be present)::
     StoreError         file: str, reason: str ("damaged", "newer", "migration", "open"), for "damaged"
                        problem: str (what SQLite or its quick_check found), and for
                        "newer" and "migration" table: str, version: int
-    DiskFull           service: str, path: str, free_mb: float, need_mb: float
+    DiskFull           service: str, path: str, free_mb: float, need_mb: float (MiB)
 """
 from __future__ import annotations
 
@@ -56,7 +59,7 @@ __all__ = [
     "MeshError", "ProfileError", "ConfigError", "PlacementError", "UnreachableError",
     "CollisionError", "StateError", "NotFound", "SlicerError", "ServiceUnavailable",
     "PermissionDenied", "StoreError", "InternalError", "error_from_code", "UNREACHABLE_REASONS",
-    "ColdExtrusionError", "COLD_EXTRUSION_REASONS",
+    "ColdExtrusionError", "COLD_EXTRUSION_REASONS", "ERROR_CLASSES",
 ]
 
 UNREACHABLE_REASONS = ("out of reach", "joint limit", "singular", "joint jump", "off the plate", "below the plate")
@@ -195,22 +198,23 @@ class InternalError(FabricError):
     code = "internal"
 
 
-_BY_CODE: dict[str, type[FabricError]] = {}
+ERROR_CLASSES: dict[str, type[FabricError]] = {}
+"""Every error code -> the class a client raises for it, in the tree's order (``internal``: InternalError)."""
 
 
 def _register(cls: type[FabricError]) -> None:
-    _BY_CODE[cls.code] = cls
+    ERROR_CLASSES[cls.code] = cls
     for sub in cls.__subclasses__():
         _register(sub)
 
 
 _register(FabricError)
-_BY_CODE["internal"] = InternalError
+ERROR_CLASSES["internal"] = InternalError
 
 
 def error_from_code(code: str, message: str, details: dict[str, Any] | None = None) -> FabricError:
     """Rebuild the typed exception for an error reply (unknown codes become InternalError)."""
-    cls = _BY_CODE.get(code, InternalError)
+    cls = ERROR_CLASSES.get(code, InternalError)
     err = cls.__new__(cls)
     FabricError.__init__(err, message, **(details or {}))
     return err

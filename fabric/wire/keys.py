@@ -18,11 +18,14 @@ from typing import Any
 from fabric import schemas as s
 
 __all__ = ["ROOT", "SERVICES", "TOPICS", "Endpoint", "ENDPOINTS", "endpoints_of", "Keys", "valid_cell", "parse_alive",
-           "ALIVE_EVERY_CELL", "EVERY_KEY"]
+           "ALIVE_EVERY_CELL", "EVERY_KEY", "CELL_PATTERN", "ArtifactSource", "ARTIFACT_SOURCES",
+           "ARTIFACT_TIMEOUT_S"]
 
 ROOT = "am"
 SERVICES = ("station", "slicer", "planner", "collision", "supervisor")
-_CELL_RE = re.compile(r"^[A-Za-z0-9_\-]{1,64}$")
+CELL_PATTERN = r"^[A-Za-z0-9_\-]{1,64}$"
+"""What a cell name matches (it is a chunk of every key)."""
+_CELL_RE = re.compile(CELL_PATTERN)
 
 # Telemetry topics: (service, topic) -> payload type.
 TOPICS: dict[tuple[str, str], type[Any]] = {
@@ -111,6 +114,8 @@ _TABLE = [
     _ep("supervisor", "status", s.Empty, s.FabricStatus, doc="services alive and the current job"),
     _ep("supervisor", "submit", s.JobSubmit, s.JobAccepted, 30.0,
         "queue a print job: slice -> plan -> check -> load (-> start)", bulk=True),
+    _ep("supervisor", "upload", s.UploadChunk, s.UploadStatus, 30.0,
+        "a large file to submit (JobSubmit.upload_id), in chunks assembled on disk", bulk=True),
     _ep("supervisor", "job", s.JobQuery, s.JobRecord, doc="one print job's whole record"),
     _ep("supervisor", "jobs", s.JobsQuery, s.JobList, doc="a page of the print jobs: the queue and the history"),
     _ep("supervisor", "job_remove", s.JobQuery, s.Ack, doc="remove a job that is not on the station"),
@@ -127,6 +132,34 @@ _TABLE = [
 _TABLE += [_ep(svc, "health", s.Empty, s.Health, 2.0, "ok, or degraded with the reasons") for svc in SERVICES]
 ENDPOINTS: dict[tuple[str, str], Endpoint] = {(e.service, e.command): e for e in _TABLE}
 
+ARTIFACT_TIMEOUT_S = 60.0
+"""How long a caller waits for the reply to an artifact query (a program's artifact can be a hundred MiB)."""
+
+
+@dataclass(frozen=True)
+class ArtifactSource:
+    """A service that keeps content-addressed artifacts: a query on ``am/<cell>/<service>/artifact/<id>`` with no
+    payload is answered with ``common.Artifact`` (or a ``not_found`` error) within ``timeout_s``, at bulk QoS.
+    Every service serves the key; these are the ones that keep artifacts (the others answer ``not_found``)."""
+    service: str
+    media_types: tuple[str, ...]    # what its artifacts hold (``common.Artifact.media_type``)
+    doc: str                        # which artifacts, and where their ids come from
+    timeout_s: float = ARTIFACT_TIMEOUT_S
+    bulk: bool = True               # travels at data priority, batched, as bulk commands do
+    reply: type[Any] = s.Artifact   # what answers the query
+
+
+ARTIFACT_SOURCES: dict[str, ArtifactSource] = {a.service: a for a in (
+    ArtifactSource("slicer", ("text/x-gcode",),
+                   "a G-code by its id: a slicing job's result_id, SliceResult.gcode_id, JobRecord.gcode_id"),
+    ArtifactSource("planner", ("application/x-am-fabric-program+msgpack",),
+                   "a program by its id: a planning job's result_id, PlanSummary.program_id, JobRecord.program_id"),
+    ArtifactSource("supervisor", ("application/octet-stream", "text/x-gcode"),
+                   "a submitted file (a model, or G-code) by its id: JobRecord.model_id, LibraryFile.content_id"),
+    ArtifactSource("station", ("application/x-am-fabric-program+msgpack",), "a program it loaded, by its id"),
+)}
+"""service -> the artifacts it keeps."""
+
 
 def endpoints_of(service: str) -> list[Endpoint]:
     """The endpoints ``service`` serves, in table order (its handlers are derived from these)."""
@@ -137,7 +170,7 @@ def endpoints_of(service: str) -> list[Endpoint]:
 
 def valid_cell(cell: str) -> str:
     if not _CELL_RE.match(cell):
-        raise ValueError(f"cell name {cell!r} must match {_CELL_RE.pattern}")
+        raise ValueError(f"cell name {cell!r} must match {CELL_PATTERN}")
     return cell
 
 
