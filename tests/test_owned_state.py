@@ -18,6 +18,7 @@ from fabric.wire.errors import StateError
 
 pytestmark = pytest.mark.timeout(120)
 SERVICES = Path(__file__).resolve().parents[1] / "fabric" / "services"
+BY_HAND = ("writer.call", "_step", "journal.checkpoint", "_checkpoint")     # what only the command runner calls
 
 
 class _Counter:
@@ -111,7 +112,7 @@ def test_no_station_command_steps_or_checkpoints_by_hand() -> None:
         for node in ast.walk(tree):
             if isinstance(node, ast.FunctionDef) and (node.name.startswith(("on_", "cmd_")) or node.name == "act"):
                 calls = {ast.unparse(n.func) for n in ast.walk(node) if isinstance(n, ast.Call)}
-                by_hand = {c for c in calls if c.endswith(("writer.call", "_step", "journal.checkpoint", "_checkpoint"))}
+                by_hand = {c for c in calls if c.endswith(BY_HAND)}
                 assert not by_hand, f"{path.name}:{node.lineno} {node.name} steps or checkpoints by hand: {by_hand}"
 
 
