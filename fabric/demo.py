@@ -22,6 +22,7 @@ from fabric.cli.up import CellProcesses
 from fabric.client import Client
 from fabric.client.follow import follow_print
 from fabric.programs import program_from_artifact
+from fabric.schemas.states import PrintJob
 from fabric.viz import toolpath_png
 from fabric.wire.config import SessionSettings
 from fabric.wire.errors import FabricError
@@ -55,11 +56,11 @@ def run_demo(client: Client, model: Path, out: Path, profile: str, backend: str,
         stages: list[str] = []
 
         def progress(rec: s.JobRecord) -> None:
-            label = "prepared" if rec.prepared and rec.state == "queued" else rec.state
+            label = "prepared" if rec.prepared and rec.state == PrintJob.QUEUED else rec.state
             if label and (not stages or stages[-1] != label):
                 stages.append(label)
                 say(f"  {label} ...")
-        client.wait_print_job(acc.job_id, lambda r: r.state in ("printing", "loaded"), on_change=progress)
+        client.wait_print_job(acc.job_id, lambda r: r.state.printing or r.state == PrintJob.LOADED, on_change=progress)
         end = follow_print(client, timeout_s=3600)
         rec = client.wait_print_job(acc.job_id, lambda r: False, timeout=60)     # its final record
         t_wall = time.monotonic() - t0

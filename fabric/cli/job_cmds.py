@@ -17,6 +17,7 @@ from fabric.client import Client
 from fabric.client.follow import follow_print
 from fabric.printjobs.history import estimate_text, material_text, override_lines, segment_lines, state_text
 from fabric.samples import SAMPLES_DIR, Sample, samples
+from fabric.schemas.states import PrintJob
 from fabric.wire.errors import NotFound, ValidationError
 
 __all__ = ["register", "submit_and_follow", "add_follow_args"]
@@ -30,7 +31,7 @@ def _shown(reply: Any, a: argparse.Namespace, text: Callable[[Any], str]) -> int
 
 def _settled(rec: s.JobRecord) -> bool:
     """Submission is over: the job is on the station, prepared and waiting for something, or ended."""
-    return (rec.state in s.ON_STATION_JOB_STATES or rec.state in s.FINAL_JOB_STATES
+    return (rec.state.on_station or rec.state.ended
             or (rec.prepared and rec.waiting_for != ""))
 
 
@@ -140,7 +141,7 @@ def submit_and_follow(c: Client, a: argparse.Namespace, req: s.JobSubmit) -> int
         rec = c.wait_print_job(acc.job_id, _settled, timeout=a.timeout or 3600.0,
                                on_change=_show_change(a.json, status))
     result: dict = {"job": rec}
-    if a.follow and rec.state in ("printing", "loaded") and a.start:
+    if a.follow and (rec.state.printing or rec.state == PrintJob.LOADED) and a.start:
         try:
             with print_progress(c, acc.job_id, quiet=a.json):    # layer, %, volume, ETA on stderr
                 result["end"] = follow_print(c, timeout_s=a.timeout)
@@ -151,7 +152,7 @@ def submit_and_follow(c: Client, a: argparse.Namespace, req: s.JobSubmit) -> int
         result["time"] = c.time()
     emit(result, a.json, lambda r: _record_text(r["job"])
          + (f"\n  print {r['end'].kind} at t={r['end'].t_sim_s:.1f} s" if r.get("end") else ""))
-    return 1 if result["job"].state == "failed" else 0
+    return 1 if result["job"].state == PrintJob.FAILED else 0
 
 
 def add_follow_args(p: argparse.ArgumentParser) -> None:

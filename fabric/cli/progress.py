@@ -19,6 +19,7 @@ from typing import TextIO
 
 from fabric import schemas as s
 from fabric.client import Client
+from fabric.schemas.states import Station
 
 __all__ = ["PrintProgress", "print_progress", "eta_text"]
 
@@ -51,7 +52,7 @@ class PrintProgress:
 
     def eta_s(self, st: s.StationState, now: float) -> float | None:
         """Wall seconds left: simulated time left over the measured pace (else the real-time factor)."""
-        if st.state == "paused":
+        if st.state == Station.PAUSED:
             return None
         self._pace.append((now, st.t_sim_s))
         while len(self._pace) > 2 and now - self._pace[0][0] > PACE_WINDOW_S:
@@ -64,7 +65,7 @@ class PrintProgress:
     def text(self, st: s.StationState, eta: float | None) -> str:
         layers = f"layer {st.layer + 1}/{st.layers_total}" if st.layer >= 0 else f"layer -/{st.layers_total}"
         volume = f"{st.deposited_mm3:.0f}/{st.planned_mm3:.0f} mm3"
-        tail = f"ETA {eta_text(eta)}" if st.state == "printing" else st.state
+        tail = f"ETA {eta_text(eta)}" if st.state.printing else st.state
         return f"{layers}  {100 * st.progress_r:5.1f}%  {volume}  {tail}"
 
     def update(self, st: s.StationState, now: float | None = None) -> None:
@@ -96,7 +97,7 @@ class PrintProgress:
             return
         done = f"layer {max(st.layer, 0) + 1}/{st.layers_total}  {100 * st.progress_r:5.1f}%  " \
                f"{st.deposited_mm3:.0f}/{st.planned_mm3:.0f} mm3  " \
-               f"{st.state if st.state in ('printing', 'paused') else (st.reason or st.state)}"
+               f"{st.state if st.state.in_print else (st.reason or st.state)}"
         if self.tty:
             filled = int(round(BAR_WIDTH * st.progress_r))
             self.out.write(f"\r  [{'#' * filled}{'-' * (BAR_WIDTH - filled)}] {done}\033[K\n")

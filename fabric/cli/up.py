@@ -374,7 +374,7 @@ def stop_print_first(settings: SessionSettings, say=print, wait_s: float = STOP_
     try:
         with Client.connect(settings) as client:
             state = client.state().state
-            if state not in ("printing", "paused"):
+            if not state.in_print:
                 return
             events = client.subscribe("station", "events")
             try:

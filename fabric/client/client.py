@@ -17,7 +17,7 @@ import queue
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any, BinaryIO
+from typing import Any, BinaryIO, cast
 
 import zenoh
 
@@ -35,6 +35,7 @@ from fabric.client.sessions import (
 )
 from fabric.client.subscriptions import AliveSubscription, Subscription
 from fabric.client.transfers import EXPORT_CHUNK_BYTES, export_to_file, input_size, upload_file
+from fabric.schemas.states import PrintJob
 from fabric.schemas.upload import UPLOAD_CHUNK_BYTES
 from fabric.wire import codec
 from fabric.wire.config import SessionSettings
@@ -375,7 +376,8 @@ class Client:
     def jobs(self, offset: int = 0, limit: int = 100, states: Sequence[str] = ()) -> s.JobList:
         """A page of the print jobs in queue order (``limit`` up to ``s.MAX_JOBS_PAGE``; ``states``: only
         those); ``total`` says how many there are in all."""
-        return self.call("supervisor", "jobs", s.JobsQuery(offset=offset, limit=limit, states=list(states)))
+        wanted = cast(list[PrintJob], list(states))        # the message turns them into members, or refuses
+        return self.call("supervisor", "jobs", s.JobsQuery(offset=offset, limit=limit, states=wanted))
     def job_remove(self, job_id: str) -> s.Ack:
         return self.call("supervisor", "job_remove", s.JobQuery(job_id=job_id))
     def job_move(self, job_id: str, position: int) -> s.JobList:

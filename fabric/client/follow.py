@@ -21,7 +21,7 @@ def follow_print(client: Caller, timeout_s: float | None = None) -> s.Event:
     try:
         last = client.call("station", "events", s.EventsQuery(limit=1)).last_seq
         st = client.call("station", "state")
-        if st.state not in ("printing", "paused"):
+        if not st.state.in_print:
             for ev in reversed(client.call("station", "events", s.EventsQuery(since_seq=max(0, last - 50))).events):
                 if ev.kind in END_EVENTS:
                     return ev

@@ -11,6 +11,7 @@ from collections.abc import Callable
 
 from fabric import schemas as s
 from fabric.client.protocols import Caller
+from fabric.schemas.states import Job, PrintJob
 from fabric.wire.errors import ServiceUnavailable, error_from_code
 
 __all__ = ["wait_job", "wait_print_job"]
@@ -23,7 +24,7 @@ def wait_job(client: Caller, service: str, job_id: str, timeout: float = 600.0,
     try:
         end = time.monotonic() + timeout
         st = client.call(service, "job", s.JobQuery(job_id=job_id))
-        while st.state in ("queued", "running"):
+        while not st.state.ended:
             if on_progress:
                 on_progress(st)
             left = end - time.monotonic()
@@ -36,7 +37,7 @@ def wait_job(client: Caller, service: str, job_id: str, timeout: float = 600.0,
                 continue
             if msg.job_id == job_id:
                 st = msg
-        if st.state == "failed" and st.error is not None:
+        if st.state == Job.FAILED and st.error is not None:
             raise error_from_code(st.error.code, st.error.message, st.error.details)
         if on_progress:
             on_progress(st)                 # the end too: a progress line left at 85 % reads as a job cut short
@@ -53,7 +54,7 @@ def wait_print_job(client: Caller, job_id: str, done: Callable[[s.JobRecord], bo
     try:
         end = time.monotonic() + timeout
         rec = _record(client, job_id)
-        while not done(rec) and rec.state not in s.FINAL_JOB_STATES:
+        while not done(rec) and not rec.state.ended:
             if on_change:
                 on_change(rec)
             left = end - time.monotonic()
@@ -67,7 +68,7 @@ def wait_print_job(client: Caller, job_id: str, done: Callable[[s.JobRecord], bo
                 continue
             if msg.job_id == job_id:
                 rec = msg
-        if rec.state == "failed" and rec.error is not None:
+        if rec.state == PrintJob.FAILED and rec.error is not None:
             raise error_from_code(rec.error.code, rec.error.message, rec.error.details)
         return rec
     finally:

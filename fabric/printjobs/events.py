@@ -13,11 +13,13 @@ less what the segments before it deposited.
 from __future__ import annotations
 
 from fabric import schemas as s
+from fabric.schemas.states import PrintJob
 
 __all__ = ["JOB_EVENT_KINDS", "apply_event", "job_id_of_event", "run_share_mm3"]
 
-_STATE_OF = {"started": "printing", "resumed": "printing", "recovered": "printing", "paused": "paused",
-             "finished": "finished", "stopped": "stopped", "fault": "failed", "interrupted": "interrupted"}
+_STATE_OF = {"started": PrintJob.PRINTING, "resumed": PrintJob.PRINTING, "recovered": PrintJob.PRINTING,
+             "paused": PrintJob.PAUSED, "finished": PrintJob.FINISHED, "stopped": PrintJob.STOPPED,
+             "fault": PrintJob.FAILED, "interrupted": PrintJob.INTERRUPTED}
 _ENDED_AS = {"finished": "finished", "stopped": "stopped", "fault": "failed", "interrupted": "interrupted"}
 _OVERRIDES = ("speed_r", "flow_r", "nozzle_c", "bed_c")
 
@@ -45,7 +47,7 @@ def apply_event(rec: s.JobRecord, event: s.Event, wall_s: float) -> bool:
     data = event.data if isinstance(event.data, dict) else {}
     if kind == "override":
         return _override(rec, event, data, wall_s)
-    if kind == "layer" and rec.state == "printing":
+    if kind == "layer" and rec.state == PrintJob.PRINTING:
         rec.layer = int(event.layer)
         rec.stage = f"printing layer {event.layer + 1}"
         seg = _running(rec, event, data, wall_s)
@@ -54,7 +56,7 @@ def apply_event(rec: s.JobRecord, event: s.Event, wall_s: float) -> bool:
         return True
     if kind not in _STATE_OF:
         return False
-    if rec.state in s.FINAL_JOB_STATES and kind != "started":    # a stopped print restarted at a layer
+    if rec.state.ended and kind != "started":    # a stopped print restarted at a layer
         return False
     rec.state = _STATE_OF[kind]
     rec.updated_s = wall_s
@@ -151,7 +153,7 @@ def _deposited(rec: s.JobRecord, seg: s.JobSegment, data: dict) -> None:
 
 def _override(rec: s.JobRecord, event: s.Event, data: dict, wall_s: float) -> bool:
     """An override set while the job was on the station: kept in its record."""
-    if rec.state not in s.ON_STATION_JOB_STATES:
+    if not rec.state.on_station:
         return False
     values = {k: float(data[k]) for k in _OVERRIDES if isinstance(data.get(k), (int, float))}
     if not values:

@@ -6,6 +6,7 @@ import time
 from collections.abc import Callable
 
 from fabric import schemas as s
+from fabric.schemas.states import PrintJob
 
 __all__ = ["duration_text", "segment_lines", "override_lines", "material_text", "estimate_text", "state_text"]
 
@@ -32,7 +33,7 @@ def estimate_text(estimate_s: float, words: Callable[[float], str] = lambda t: f
 def state_text(rec: s.JobRecord) -> str:
     """The job's state, ``queued (prepared)`` while a queued job is sliced, planned and checked ahead (once it
     is on the station, or has ended, being prepared says nothing more)."""
-    return rec.state + (" (prepared)" if rec.prepared and rec.state == "queued" else "")
+    return rec.state + (" (prepared)" if rec.prepared and rec.state == PrintJob.QUEUED else "")
 
 
 def material_text(rec: s.JobRecord) -> str:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from fabric import schemas as s
 from fabric.printjobs.events import run_share_mm3
+from fabric.schemas.states import PrintJob
 
 __all__ = ["LIVE_PERIOD_S", "apply_live"]
 
@@ -23,7 +24,7 @@ LIVE_PERIOD_S = 2.0
 
 def apply_live(rec: s.JobRecord, st: s.StationState, wall_s: float) -> bool:
     """Write the station's figures ``st`` onto ``rec`` while that job prints; True when the record changed."""
-    if rec.state != "printing" or st.state != "printing" or st.job_id != rec.job_id:
+    if rec.state != PrintJob.PRINTING or not st.state.printing or st.job_id != rec.job_id:
         return False
     seg = rec.segments[-1] if rec.segments and not rec.segments[-1].ended else None
     if seg is None or st.t_sim_s < seg.t_sim_start_s:

@@ -19,6 +19,7 @@ from collections.abc import Callable
 
 from fabric import schemas as s
 from fabric.client import Client
+from fabric.schemas.states import PrintJob
 from fabric.store.artifacts import ArtifactStore
 from fabric.wire.errors import (
     ColdExtrusionError,
@@ -56,25 +57,25 @@ class Preparer:
         error it is ``failed`` with the error. Progress is saved (and published) as it goes."""
         try:
             if rec.source == "model":
-                self._stage(rec, "slicing", 0.0, lambda: self._slice(rec))
-            self._stage(rec, "planning", 0.3, lambda: self._plan(rec))
-            self._stage(rec, "checking", 0.7, lambda: self._check(rec))
+                self._stage(rec, PrintJob.SLICING, 0.0, lambda: self._slice(rec))
+            self._stage(rec, PrintJob.PLANNING, 0.3, lambda: self._plan(rec))
+            self._stage(rec, PrintJob.CHECKING, 0.7, lambda: self._check(rec))
         except FabricError as err:
             wire = err.to_wire()
-            rec.state, rec.reason = "failed", f"{err.code}: {err.message}"
+            rec.state, rec.reason = PrintJob.FAILED, f"{err.code}: {err.message}"
             rec.error = s.ErrorReply(code=wire["code"], message=wire["message"], details=wire["details"])
             rec.stage, rec.ended_s = "failed", time.time()
             log.info("job %s failed: %s", rec.job_id, rec.reason)
             self.save(rec)
             return
-        rec.state, rec.prepared, rec.progress_r = "queued", True, 0.0
+        rec.state, rec.prepared, rec.progress_r = PrintJob.QUEUED, True, 0.0
         rec.stage = "prepared: waiting for the station"
         self.save(rec)
 
     # Stages -------------------------------------------------------------------------------
 
-    def _stage(self, rec: s.JobRecord, state: str, progress_r: float, run: Callable[[], None]) -> None:
-        rec.state, rec.stage, rec.progress_r = state, state, progress_r
+    def _stage(self, rec: s.JobRecord, state: PrintJob, progress_r: float, run: Callable[[], None]) -> None:
+        rec.state, rec.stage, rec.progress_r = state, state.value, progress_r
         self.save(rec)
         deadline = time.monotonic() + self.budget_s
         for attempt in itertools.count():

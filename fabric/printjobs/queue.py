@@ -10,11 +10,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from fabric import schemas as s
+from fabric.schemas.states import FREE_STATION_STATES, WAITING_JOB_STATES
 
 __all__ = ["WAITING_STATES", "STATION_FREE", "WAITING_TEXT", "PREPARER_FIELDS", "LoadDecision", "next_to_load"]
 
-WAITING_STATES = ("queued", "slicing", "planning", "checking")    # in the queue, reorderable
-STATION_FREE = ("idle", "ready", "stopped", "fault")              # station states a job may be loaded in
+WAITING_STATES = WAITING_JOB_STATES                               # in the queue, reorderable
+STATION_FREE = tuple(x.value for x in FREE_STATION_STATES)       # station states a job may be loaded in
 WAITING_TEXT = {"plate": "prepared: confirm the plate is clear (job next)",
                 "station": "prepared: waiting for the station to be free",
                 "queue": "prepared: waiting behind the jobs ahead of it"}

@@ -16,7 +16,6 @@ import inspect
 import io
 import textwrap
 import tokenize
-import typing
 from dataclasses import dataclass
 from enum import Enum
 from functools import cache
@@ -83,9 +82,9 @@ def json_default(value: Any) -> Any:
 
 def field_docs(cls: type) -> list[FieldDoc]:
     """Every field of schema ``cls``, in declaration order."""
-    hints = typing.get_type_hints(cls)
     comments = _comments(cls)
-    return [FieldDoc(name, hints[name], spec, comments.get(name, ""), unit_of(name), default_of(cls, name))
+    # the type as the wire carries it (a state field's enum is a str with its values as choices)
+    return [FieldDoc(name, spec.tp, spec, comments.get(name, ""), unit_of(name), default_of(cls, name))
             for name, spec in cls.SPECS.items()]  # type: ignore[attr-defined]
 
 

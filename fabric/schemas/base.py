@@ -71,6 +71,32 @@ class FieldSpec:
     max_len: int | None = None
     min_len: int | None = None
     pattern: str | None = None
+    enum: type[Enum] | None = None     # a state field (``fabric.schemas.states``): its strings become members
+
+
+def _enum_field(tp: Any) -> tuple[Any, type[Enum] | None]:
+    """A field annotated with a ``str`` enum (or a list of one) as the wire and the documents see it: ``str``
+    (``list[str]``) with that enum's values as its choices; and the enum."""
+    item = typing.get_args(tp)[0] if typing.get_origin(tp) is list else tp
+    if not (isinstance(item, type) and issubclass(item, Enum) and issubclass(item, str)):
+        return tp, None
+    return (list[str] if item is not tp else str), item
+
+
+def _enum_setattr(enums: dict[str, type[Enum]]) -> Callable[[Any, str, Any], None]:
+    """A ``__setattr__`` that turns a plain string set on a state field, when the message is built or later, into
+    its enum member (``JobRecord(state="queued").state.waiting``): the field holds a member whatever the code
+    that set it; a string that is no member is a ValidationError."""
+    def setattr_(self: Any, name: str, value: Any) -> None:
+        enum = enums.get(name)
+        if enum is not None:
+            try:
+                value = [enum(v) for v in value] if isinstance(value, list) else enum(value)
+            except ValueError:
+                raise ValidationError(f"field '{name}': '{value}' is not one of {[m.value for m in enum]}",
+                                      field=name, schema=type(self).TYPE) from None
+        object.__setattr__(self, name, value)
+    return setattr_
 
 
 @dataclass_transform(field_specifiers=(f,))
@@ -78,12 +104,20 @@ def schema(type_name: str, version: int = 1) -> Callable[[type[T]], type[T]]:
     """Class decorator: make a dataclass message registered under ``type_name``."""
 
     def wrap(cls: type[T]) -> type[T]:
+        hints = typing.get_type_hints(cls)
+        enums = {name: enum for name, (_tp, enum) in ((n, _enum_field(t)) for n, t in hints.items()) if enum}
+        if enums:
+            cls.__setattr__ = _enum_setattr(enums)             # type: ignore[method-assign]
         dc = dataclasses.dataclass(cls)
-        hints = typing.get_type_hints(dc)
         specs = {}
         for fld in dataclasses.fields(dc):  # type: ignore[arg-type]  # typeshed: dataclass() returns type[T]
             required = fld.default is _MISSING and fld.default_factory is _MISSING
-            specs[fld.name] = FieldSpec(fld.name, hints[fld.name], required, **dict(fld.metadata))
+            meta = dict(fld.metadata)
+            tp, enum = _enum_field(hints[fld.name])
+            if enum is not None:
+                meta["choices"] = tuple(m.value for m in enum)
+                meta["enum"] = enum
+            specs[fld.name] = FieldSpec(fld.name, tp, required, **meta)
         dc.TYPE, dc.VERSION, dc.SPECS = type_name, version, specs  # type: ignore[attr-defined]
         if type_name in REGISTRY:
             raise RuntimeError(f"schema {type_name} declared twice")
@@ -161,6 +195,8 @@ def _check(tp: Any, value: Any, fpath: str, spec: FieldSpec | None) -> Any:
             raise _fail(fpath, f"expected a string, got {type(value).__name__}")
         if spec and spec.choices is not None and value not in spec.choices:
             raise _fail(fpath, f"'{value}' is not one of {list(spec.choices)}")
+        if spec and spec.enum is not None:
+            return spec.enum(value)
         return _text(value, fpath, spec)
     if tp is bytes:
         if not isinstance(value, (bytes, bytearray)):
@@ -177,7 +213,8 @@ def _check(tp: Any, value: Any, fpath: str, spec: FieldSpec | None) -> Any:
         if spec and spec.shape and len(spec.shape) == 1 and spec.shape[0] is not None and len(value) != spec.shape[0]:
             raise _fail(fpath, f"expected {spec.shape[0]} items, got {len(value)}")
         (item,) = typing.get_args(tp)
-        sub = FieldSpec(fpath, item, True, ge=spec.ge, le=spec.le, choices=spec.choices) if spec else None
+        sub = FieldSpec(fpath, item, True, ge=spec.ge, le=spec.le, choices=spec.choices, enum=spec.enum) \
+            if spec else None
         return [_check(item, v, f"{fpath}[{i}]", sub) for i, v in enumerate(value)]
     if origin is dict:
         if not isinstance(value, dict):

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from fabric.schemas import states
 from fabric.schemas.base import f, schema
-from fabric.schemas.states import HEALTH_STATES, JOB_STATES
 
 
 @schema("common.Empty")
@@ -55,7 +55,7 @@ class JobStatus:
     A service keeps the statuses of its last 200 jobs in memory (a restarted service knows none of them)."""
     job_id: str                     # the job's id
     kind: str                       # ``slice`` or ``plan``
-    state: str = f(choices=JOB_STATES)          # queued -> running -> done | failed
+    state: states.Job                           # queued -> running -> done | failed
     progress_r: float = f(default=0.0, ge=0.0, le=1.0)   # share of the work done (1 when done)
     stage: str = ""                 # what it is doing now, in words
     message: str = ""               # a remark on the result (may be empty)
@@ -103,6 +103,6 @@ class Health:
     each ``source: reason`` (``handler:load: KeyError ...``, ``clock: ...``), since ``since_s`` (wall-clock
     epoch seconds of the oldest reason; 0 when ok)."""
     service: str                    # the service answering: station, slicer, planner, collision or supervisor
-    state: str = f(default="ok", choices=HEALTH_STATES)  # ``ok``, or ``degraded``: it serves, but something failed
+    state: states.Health = f(default=states.Health.OK)   # ``ok``, or ``degraded``: it serves, but something failed
     reasons: list[str] = f(factory=list)    # each ``source: reason``, oldest first (empty when ok)
     since_s: float = 0.0            # degraded since (wall clock, epoch seconds; 0 when ok)

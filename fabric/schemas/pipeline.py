@@ -5,10 +5,10 @@ from typing import Any
 
 import numpy as np
 
+from fabric.schemas import states as st
 from fabric.schemas.base import f, schema
 from fabric.schemas.common import ErrorReply
 from fabric.schemas.ids import FILE_ID_OR_NONE, UPLOAD_ID_OR_NONE
-from fabric.schemas.states import PRINT_JOB_STATES
 from fabric.schemas.station import CellInfo
 from fabric.schemas.upload import MAX_GCODE_BYTES, MAX_MODEL_BYTES, MAX_SUBMIT_BYTES
 from fabric.wire.errors import COLD_EXTRUSION_REASONS, UNREACHABLE_REASONS, ValidationError
@@ -384,7 +384,7 @@ class JobRecord:
     layers: str = f(default="planar", choices=LAYER_MODES)     # planar or curved layers (a model; version 5)
     start: bool = False                         # start printing once loaded (as submitted; job next keeps it)
     rtf: float = f(default=1.0, ge=0.0, le=1e6)     # the real-time factor its print runs at
-    state: str = f(default="queued", choices=PRINT_JOB_STATES)     # see "Print jobs" in docs/protocol.md
+    state: st.PrintJob = f(default=st.PrintJob.QUEUED)     # see "Print jobs" in docs/protocol.md
     prepared: bool = False                      # sliced, planned and checked: can be loaded
     waiting_for: str = f(default="", choices=WAITING_FOR)   # why a prepared job is not loaded yet ("": it will be)
     reason: str = ""                            # why it is in its state (a failure, an interruption, a stop)
@@ -489,7 +489,7 @@ class JobsQuery:
     ``limit`` jobs from the ``offset``-th (0-based), of ``states`` only when given."""
     offset: int = f(default=0, ge=0, le=1_000_000_000)      # skip this many matching jobs
     limit: int = f(default=100, ge=0, le=MAX_JOBS_PAGE)     # the most jobs in the reply
-    states: list[str] = f(factory=list, choices=PRINT_JOB_STATES)  # only jobs in these states (empty: all)
+    states: list[st.PrintJob] = f(factory=list)  # only jobs in these states (empty: all)
 
 
 @schema("supervisor.JobList", version=4)

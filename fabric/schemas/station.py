@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from fabric.schemas import states
 from fabric.schemas.base import f, schema
 from fabric.schemas.states import STATION_STATES
 
@@ -68,7 +69,7 @@ class StationState:
     for a stopped print, 1 when finished). ``plate_clear`` is false from the first
     bead of a print until the operator says the part is off the plate (``clear_plate``); ``plate_mm3``
     and ``plate_job_id`` say what is on it."""
-    state: str = f(choices=STATES)     # see "Station states" in docs/protocol.md
+    state: states.Station                # see "Station states" in docs/protocol.md
     reason: str = ""                   # why it is in that state, in words (``finished`` after a finished print)
     program_id: str = ""               # the program loaded ("" when none)
     job_id: str = ""                   # the print job it belongs to ("" when loaded by hand)

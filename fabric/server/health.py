@@ -14,6 +14,7 @@ import time
 from dataclasses import dataclass
 
 from fabric import schemas as s
+from fabric.schemas import states
 
 __all__ = ["Health", "Backoff"]
 
@@ -44,7 +45,7 @@ class Health:
     def report(self) -> s.Health:
         with self._lock:
             reasons = sorted(self._reasons.items(), key=lambda kv: kv[1][1])
-        return s.Health(service=self.service, state="degraded" if reasons else "ok",
+        return s.Health(service=self.service, state=states.Health.DEGRADED if reasons else states.Health.OK,
                         reasons=[f"{src}: {why}" for src, (why, _) in reasons],
                         since_s=reasons[0][1][1] if reasons else 0.0)
 

@@ -17,7 +17,7 @@ import uuid
 from collections.abc import Callable
 from pathlib import Path
 
-from fabric.schemas import ErrorReply, JobStatus
+from fabric.schemas import ErrorReply, JobStatus, states
 from fabric.server.disk import disk_full_of
 from fabric.server.service import Publisher
 from fabric.wire.errors import FabricError, InternalError, NotFound
@@ -66,7 +66,7 @@ class JobRunner:
 
     def submit(self, kind: str, fn: Callable[[Job], str]) -> JobStatus:
         now = time.time()
-        st = JobStatus(job_id=uuid.uuid4().hex[:12], kind=kind, state="queued", created_s=now, updated_s=now)
+        st = JobStatus(job_id=uuid.uuid4().hex[:12], kind=kind, state=states.Job.QUEUED, created_s=now, updated_s=now)
         with self._lock:
             self._jobs[st.job_id] = st
             while len(self._jobs) > self._keep:
@@ -101,11 +101,11 @@ class JobRunner:
             if item is None:
                 return
             st, fn = item
-            st.state = "running"
+            st.state = states.Job.RUNNING
             self.publish(st)
             try:
                 st.result_id = fn(Job(self, st))
-                st.state, st.progress_r = "done", 1.0
+                st.state, st.progress_r = states.Job.DONE, 1.0
             except FabricError as err:
                 _fail(st, err)
             except Exception as exc:  # noqa: BLE001 - a full disk, or a bug (traced): fail the job, keep running
@@ -121,5 +121,5 @@ class JobRunner:
 
 def _fail(st: JobStatus, err: FabricError) -> None:
     """Mark the job failed with the error a caller gets back (``Client.wait_job`` raises it)."""
-    st.state, st.message = "failed", err.message
+    st.state, st.message = states.Job.FAILED, err.message
     st.error = ErrorReply(code=err.code, message=err.message, details=err.to_wire()["details"])

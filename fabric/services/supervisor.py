@@ -42,8 +42,9 @@ from fabric.printjobs.events import apply_event, job_id_of_event
 from fabric.printjobs.follower import EventFollower
 from fabric.printjobs.live import LIVE_PERIOD_S, apply_live
 from fabric.printjobs.prepare import PrepareCancelled, Preparer
-from fabric.printjobs.queue import PREPARER_FIELDS, STATION_FREE, WAITING_STATES, WAITING_TEXT, next_to_load
+from fabric.printjobs.queue import PREPARER_FIELDS, WAITING_STATES, WAITING_TEXT, next_to_load
 from fabric.programs import content_id
+from fabric.schemas.states import PrintJob
 from fabric.server.service import Service
 from fabric.server.writer import Owned, Writer
 from fabric.services.supervisor_files import LibraryCommands
@@ -151,7 +152,7 @@ class SupervisorService(Service):
                 rec = self.store.get(prepared.job_id)
             except NotFound:
                 raise PrepareCancelled(prepared.job_id) from None
-            if rec.state not in WAITING_STATES or rec.prepared:
+            if not rec.state.waiting or rec.prepared:
                 raise PrepareCancelled(prepared.job_id)
             for name in PREPARER_FIELDS:
                 setattr(rec, name, getattr(prepared, name))
@@ -162,7 +163,7 @@ class SupervisorService(Service):
         """Jobs this supervisor was preparing when it stopped are prepared again from the start (before
         the writer runs: nothing else touches the store yet)."""
         for rec in self.store.in_states(("slicing", "planning", "checking")):
-            rec.state, rec.prepared = "queued", False
+            rec.state, rec.prepared = PrintJob.QUEUED, False
             rec.stage = "queued again: the supervisor restarted while preparing it"
             self.log.info("job %s: %s", rec.job_id, rec.stage)
             self.store.save(rec)
@@ -217,7 +218,7 @@ class SupervisorService(Service):
         now = time.time()
         rec = s.JobRecord(job_id=job_id, filename=sub.filename, source=source, profile=req.profile,
                           backend=req.backend, model_id=model_id, overrides=dict(req.overrides), layers=req.layers,
-                          start=req.start, rtf=req.rtf, state="queued", stage="queued", created_s=now,
+                          start=req.start, rtf=req.rtf, state=PrintJob.QUEUED, stage="queued", created_s=now,
                           updated_s=now, filament_diameter_mm=req.filament_diameter_mm)
 
         def step() -> None:
@@ -236,8 +237,8 @@ class SupervisorService(Service):
     def on_job_remove(self, req: s.JobQuery) -> s.Ack:
         def step() -> s.JobRecord:
             rec = self.store.get(req.job_id)
-            if rec.state in s.ON_STATION_JOB_STATES or rec.job_id == self._loading:
-                state = rec.state if rec.state in s.ON_STATION_JOB_STATES else "loading"
+            if rec.state.on_station or rec.job_id == self._loading:
+                state = rec.state if rec.state.on_station else "loading"
                 raise StateError(f"job {rec.job_id} is {state} on the station: stop it first",
                                  state=state, command="job remove")
             self.store.remove(rec.job_id)
@@ -264,7 +265,7 @@ class SupervisorService(Service):
 
         def step() -> s.JobRecord | None:
             busy = self._on_station()
-            if busy is not None and busy.state != "loaded":
+            if busy is not None and busy.state != PrintJob.LOADED:
                 raise StateError(f"job {busy.job_id} is {busy.state} on the station", state=busy.state,
                                  command="job next")
             self.store.set_plate_clear(True)
@@ -287,7 +288,8 @@ class SupervisorService(Service):
             return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} was removed meanwhile",
                          state="")
         hint = "" if head.start else " (submitted without start: start it with fabric-cli start once loaded)"
-        now = "loaded and started" if head.start and head.state == "loaded" else head.state   # its start was sent
+        started = head.start and head.state == PrintJob.LOADED           # its start was sent
+        now = "loaded and started" if started else head.state
         return s.Ack(ok=True, message=f"plate marked clear; job {head.job_id} ({head.filename}) {now}{hint}",
                      state=head.state)
 
@@ -299,7 +301,7 @@ class SupervisorService(Service):
             self.wake.clear()
             try:
                 while not self.closed.is_set():
-                    todo = next((r for r in self._waiting() if r.state == "queued" and not r.prepared), None)
+                    todo = next((r for r in self._waiting() if r.state == PrintJob.QUEUED and not r.prepared), None)
                     if todo is None:
                         break
                     try:
@@ -342,7 +344,7 @@ class SupervisorService(Service):
                     self._wait_for(self.store.get(head.job_id), "plate")
                 self._step(plate_taken)
                 return True
-            if station.state not in STATION_FREE:
+            if not station.state.free:
                 self.log.info("job %s waits: the station is %s", head.job_id, station.state)
                 self._step(lambda: self._wait_for(self.store.get(head.job_id), "station"))
                 return True
@@ -388,7 +390,7 @@ class SupervisorService(Service):
     def _loaded(self, job_id: str) -> tuple[bool, float]:
         """(Writer) The station took the job: record it, and whether to start it now (as the record says now)."""
         rec = self.store.get(job_id)
-        rec.state, rec.stage, rec.waiting_for = "loaded", "loaded on the station", ""
+        rec.state, rec.stage, rec.waiting_for = PrintJob.LOADED, "loaded on the station", ""
         self._save(rec)
         if rec.start:
             self.store.set_plate_clear(False)
@@ -398,7 +400,8 @@ class SupervisorService(Service):
         """(Writer) The job failed with a typed error (its code and message are its reason)."""
         rec = self.store.get(job_id)
         wire = err.to_wire()
-        rec.state, rec.reason, rec.stage, rec.ended_s = "failed", f"{err.code}: {err.message}", "failed", time.time()
+        rec.state, rec.reason, rec.stage, rec.ended_s = PrintJob.FAILED, f"{err.code}: {err.message}", "failed", \
+            time.time()
         rec.error = s.ErrorReply(code=wire["code"], message=wire["message"], details=wire["details"])
         self._save(rec)
 
@@ -433,7 +436,7 @@ class SupervisorService(Service):
             now = self.store.get(rec.job_id)
         except NotFound:
             return
-        if now.state in s.FINAL_JOB_STATES:
+        if now.state.ended:
             self._release(now)
 
     # --- following the station ------------------------------------------------------
@@ -470,7 +473,7 @@ class SupervisorService(Service):
                 self._seen_saved_s = time.monotonic()
                 if ev.kind == "started":
                     self.store.set_plate_clear(False)
-                if rec.state in s.FINAL_JOB_STATES:
+                if rec.state.ended:
                     ended.append(rec)
             elif time.monotonic() - self._seen_saved_s > 1.0:
                 self.store.save(last_event_seq=ev.seq)
@@ -488,7 +491,7 @@ class SupervisorService(Service):
                 st = codec.decode(data, s.StationState)
             except FabricError:
                 continue
-            if st.state != "printing" or not st.job_id:
+            if not st.state.printing or not st.job_id:
                 continue
 
             def step(st: s.StationState = st) -> None:
