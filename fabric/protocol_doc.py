@@ -39,7 +39,7 @@ from fabric.wire.keys import ARTIFACT_SOURCES, ARTIFACT_TIMEOUT_S, CELL_PATTERN,
 __all__ = ["render", "render_json", "description", "facts", "inputs", "LOSSLESS"]
 
 LOSSLESS = {("station", "state"), ("station", "events"), ("slicer", "progress"), ("planner", "progress"),
-            ("supervisor", "jobs")}
+            ("supervisor", "jobs"), ("supervisor", "queue")}
 """The topics published with congestion control BLOCK (every other is DROP); the contract test checks them."""
 
 
@@ -127,6 +127,8 @@ def _topic_when(svc: str, topic: str, f: dict[str, Any]) -> str:
         ("planner", "progress"): f"on every change of a job's state or stage, else every "
                                  f"{f['progress_period_s']:g} s while it runs",
         ("supervisor", "jobs"): "the whole record of a print job on every change of it",
+        ("supervisor", "queue"): "when a job is submitted, removed or moved in the queue (a removal has no record "
+                                 "to publish on `jobs`)",
     }[(svc, topic)]
 
 

@@ -194,5 +194,6 @@ TOPIC_EXAMPLES: dict[tuple[str, str], Any] = {
                                          stage="inverse kinematics", created_s=1764031710.1,
                                          updated_s=1764031712.3),
     ("supervisor", "jobs"): RECORD,
+    ("supervisor", "queue"): s.QueueChange(kind="removed", job_id="3c1b7f0e9a2d", waiting=[QUEUED.job_id]),
 }
 """(service, topic) -> a message as published."""

@@ -480,6 +480,19 @@ def source_of(filename: str, source: str = "") -> str:
 
 
 MAX_JOBS_PAGE = 10_000              # the most records one supervisor/jobs reply carries
+QUEUE_CHANGES = ("submitted", "removed", "moved")
+
+
+@schema("supervisor.QueueChange")
+class QueueChange:
+    """The print-job queue changed, published on ``supervisor/queue`` once the change is on disk: a job was
+    submitted, removed (the supervisor keeps no record of it any more: ``job`` finds it no more, and no
+    ``jobs`` record announces it) or moved. A console or monitor keeps its list by it without asking again;
+    ``waiting`` is then the whole waiting queue in order."""
+    kind: str = f(choices=QUEUE_CHANGES)     # submitted, removed or moved
+    job_id: str                              # the job submitted, removed or moved
+    waiting: list[str] = f(factory=list)     # the waiting jobs' ids (queued, slicing, planning, checking), in
+                                             # queue order, after the change
 
 
 @schema("supervisor.JobsQuery")

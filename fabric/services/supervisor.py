@@ -76,6 +76,7 @@ class SupervisorService(Service):
         self.store = JobStore(self.data_dir / "jobs.sqlite", self.writer)
         self.wake = threading.Event()                     # something to prepare or to load
         self.pub_jobs = self.publisher("jobs", lossless=True)
+        self.pub_queue = self.publisher("queue", lossless=True)
         self.preparer = Preparer(self.client, self.artifacts, self._save_prepared, self.closed)
         self._loading = ""
         self._plate_epoch = 0
@@ -168,6 +169,10 @@ class SupervisorService(Service):
             self.log.info("job %s: %s", rec.job_id, rec.stage)
             self.store.save(rec)
 
+    def _queue_changed(self, kind: str, job_id: str) -> None:
+        """(Writer) Say on ``supervisor/queue`` that the queue changed, with the waiting queue as it is now."""
+        self.pub_queue.send(s.QueueChange(kind=kind, job_id=job_id, waiting=[r.job_id for r in self._waiting()]))
+
     def _waiting(self) -> list[s.JobRecord]:
         return self.store.in_states(WAITING_STATES)
 
@@ -224,6 +229,7 @@ class SupervisorService(Service):
         def step() -> None:
             self.store.add(rec)
             self.pub_jobs.send(rec)
+            self._queue_changed("submitted", job_id)
             self.library.job_made(sub.file_id, rec)
         self._step(step)
         self.log.info("job %s queued: %s (%s, library file %s)", job_id, sub.filename, source, sub.file_id)
@@ -242,6 +248,7 @@ class SupervisorService(Service):
                 raise StateError(f"job {rec.job_id} is {state} on the station: stop it first",
                                  state=state, command="job remove")
             self.store.remove(rec.job_id)
+            self._queue_changed("removed", rec.job_id)
             return rec
         rec = self._step(step)
         self._release(rec)
@@ -251,6 +258,7 @@ class SupervisorService(Service):
         def step() -> None:
             self.store.get(req.job_id)
             self.store.move(req.job_id, req.position, [r.job_id for r in self._waiting()])
+            self._queue_changed("moved", req.job_id)
         self._step(step)
         self.wake.set()
         jobs, total = self.store.page(0, 100)

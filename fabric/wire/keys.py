@@ -37,6 +37,7 @@ TOPICS: dict[tuple[str, str], type[Any]] = {
     ("slicer", "progress"): s.JobStatus,
     ("planner", "progress"): s.JobStatus,
     ("supervisor", "jobs"): s.JobRecord,
+    ("supervisor", "queue"): s.QueueChange,
 }
 
 
