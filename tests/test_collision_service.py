@@ -134,31 +134,55 @@ def test_a_restart_whose_descent_goes_through_the_part_is_refused_and_changes_no
     after = client.state()
     assert (after.state, after.program_id, after.job_id) == (before.state, before.program_id, before.job_id)
     assert client.events(0).last_seq == last_seq and client.position().q_deg == where
-    # the top layer: the tip lands on layer 11's beads and lays layer 12 again, as the print does: certified
+    # the top layer again: nothing is left of it to print; the layer under it: no move hits on its way up
+    # the part (the tip runs over its old beads' top), but every bead of it would go into the part
+    with pytest.raises(ValidationError, match="layer 12 is printed to its end and no layer follows it"):
+        client.start(rtf=0, from_layer=11)
+    station_row = station.commands.read(lambda: station.twin.restart_row(10))
+    report = client.check(s.CollisionRequest(program_id=pid, from_row=station_row, beads="station",
+                                             q_start_deg=deg(path.q_down_rad)))
+    hit = report.first_hit
+    assert hit is not None and hit.kind == "deposit" and hit.body_a == "bead" and hit.layer == 11
+    assert hit.bead_layer == 11 and "its bead would go into the part on the plate (a bead of layer 12" in hit.message
+    after = client.state()
+    assert (after.state, after.deposited_mm3) == (before.state, before.deposited_mm3)
+    assert client.events(0).last_seq == last_seq
+
+
+def stop_tower_in_layer(client, layer: int) -> None:
+    """Print the tower and stop it once it has begun ``layer`` (0-based): the part's top is that layer."""
     events = client.subscribe("station", "events")
     try:
-        assert "from layer 12" in client.start(rtf=0, from_layer=11).message
-        assert wait_event(events, ("at_layer", "fault")).kind == "at_layer"
-        assert wait_event(events, ("finished", "fault")).kind == "finished"
+        client.start(rtf=20.0)
+        while True:
+            ev = events.get(timeout=60.0)
+            if ev.kind == "layer" and ev.layer >= layer:
+                break
+            assert ev.kind not in ("finished", "fault"), ev
+        client.stop()
+        assert wait_event(events, ("stopped", "fault")).kind == "stopped"
     finally:
         events.close()
 
 
 def test_a_recovery_at_a_layer_under_the_part_is_refused_by_its_descent(fabric):
-    """Interrupted on the top layer, recovered at layer 10: the descent is checked like a restart's."""
+    """Stopped near the top, restarted where the part ends and interrupted there, recovered two layers under
+    its top: the descent is checked like a restart's; back to the interrupted spot, the print finishes."""
     client, station, _, pid, _ = fabric
     client.load(pid)
-    print_tower(client)
+    stop_tower_in_layer(client, 10)
+    top = station.commands.read(station.plate.top_layer)
+    assert top >= 9
     events = client.subscribe("station", "events")
     try:
-        client.start(rtf=0.5, from_layer=11)                 # the top layer again, slowly
+        client.start(rtf=0.5, from_layer=top)                # where the part ends, slowly
         assert wait_event(events, ("at_layer", "fault")).kind == "at_layer"
         station.commands.change(lambda: station.twin.interrupt("killed by the test"))   # it dies where it is
         assert client.state().state == "interrupted"
         with pytest.raises(CollisionError) as err:
-            client.recover(rtf=0, from_layer=9)
-        assert err.value.details["kind"] == "descent" and err.value.details["bead_layer"] in (10, 11)
-        assert "the move back to layer 10 would collide: the descent move" in err.value.message
+            client.recover(rtf=0, from_layer=top - 2)
+        assert err.value.details["kind"] == "descent" and err.value.details["bead_layer"] in (top - 1, top)
+        assert f"the move back to layer {top - 1} would collide: the descent move" in err.value.message
         assert client.state().state == "interrupted"
         client.recover(rtf=0)                                # back to the interrupted spot, and on
         assert wait_event(events, ("finished", "fault")).kind == "finished"

@@ -12,7 +12,7 @@ from fabric.robot.cell import Cell
 from fabric.services.collision import CollisionService
 from fabric.services.planner import PlannerService
 from fabric.services.station import StationService
-from fabric.wire.errors import StateError
+from fabric.wire.errors import CollisionError, StateError, ValidationError
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -55,11 +55,18 @@ def test_the_part_on_the_plate_blocks_a_reprint_until_cleared_and_survives_a_res
             assert after.state == st.state and after.deposited_mm3 == st.deposited_mm3   # nothing changed
             assert not client.ready().ready
             assert next(c for c in client.ready().checks if c.name == "plate clear").ok is False
-            # going on at a layer of this part is what a restart at a layer is for
-            assert _print_to_end(client, from_layer=2).kind == "finished"
+            # the part is finished: nothing is left to print at its last layer, and a layer under it would be
+            # printed into the part
+            with pytest.raises(ValidationError, match="layer 3 is printed to its end and no layer follows it"):
+                client.start(rtf=0, from_layer=2)
+            with pytest.raises(CollisionError, match=r"the move to layer 2 would collide: .* hits the part") as err:
+                client.start(rtf=0, from_layer=1)
+            assert err.value.message.endswith("the part is printed to its last layer (3): take it off and say so "
+                                              "(fabric-cli plate-clear) to print it again")
             with pytest.raises(StateError):
                 client.start(rtf=0)
             mm3 = client.state().plate_mm3
+            assert mm3 == pytest.approx(st.plate_mm3)                  # nothing was printed twice
 
         station.close()                                             # the station restarts: the part stays
         station = StationService(session, settings.cell, cell, data_dir=tmp_path / "station")

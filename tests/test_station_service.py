@@ -235,19 +235,19 @@ def _stopped_in_the_first_layer(client, events) -> None:
 
 def test_going_on_above_the_part_and_the_next_layer_is_refused(fabric):
     """Stopped in layer 1, ``start --layer 3`` would lay layer 3 on nothing (a typo, and the print goes on in
-    the air): refused, naming the part's top, and nothing changes; layer 2 (and layer 1, to finish it) go on.
+    the air): refused, naming the part's top, and nothing changes; layer 2 (and layer 1, where it ends) go on.
     A recovery at a layer is held to the same rule."""
     client, station, pid, _ = fabric
     client.load(pid)
     events = client.subscribe("station", "events")
     try:
         _stopped_in_the_first_layer(client, events)
-        with pytest.raises(StateError, match=r"go on at a layer of it \(start --layer 2; it is printed up to "
-                                             r"layer 1\)"):
+        with pytest.raises(StateError, match=r"go on at a layer of it \(start --layer 1: it goes on where the part "
+                                             r"ends, in layer 1\)"):
             client.start(rtf=0)                              # not again from the beginning: which layer, said
         before, seq = client.state(), client.events(0).last_seq
         with pytest.raises(StateError, match=r"printed up to layer 1, so layer 3 would be laid 1 layer\(s\) above "
-                                             r"it, in the air; go on at layer 1 \(to finish it\) or 2") as err:
+                                             r"it, in the air; go on at layer 1 \(where it ends\) or 2") as err:
             client.start(rtf=0, from_layer=2)
         assert err.value.details["top_layer"] == 1 and err.value.details["from_layer"] == 3
         after = client.state()

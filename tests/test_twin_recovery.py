@@ -166,18 +166,24 @@ def test_restart_at_a_layer_after_a_stop_heats_and_prints_the_rest(cell: Cell, p
     np.testing.assert_allclose(got["end_mm"][stopped_beads:], want, atol=1e-9)   # layer 3 printed as planned
 
 
-def test_recover_at_a_layer_records_the_cut_row_and_goes_on_from_there(cell: Cell, prog: Program,
-                                                                       reference: Twin) -> None:
+def test_recover_at_a_layer_records_the_cut_row_and_never_prints_into_the_part(cell: Cell, prog: Program) -> None:
+    """Interrupted inside layer 2, recovered at layer 2's start (forced: the station would refuse it): the row
+    cut short is a partial bead, and the twin's last guard faults before the first bead laid along layer 2's
+    beads again."""
     twin = Twin(cell)
     twin.load(prog)
     twin.start()
     twin.advance(MID_FIRST_LAYER_S + 2.5)                               # inside layer 2
     twin.interrupt("station restarted")
     at = twin.recovery_move(from_layer=1)
+    at_row = twin.resume_row
     assert at is not None and not np.allclose(at[0], at[1])
-    twin.recover(from_layer=1)                                         # redo layer 2 from its start
+    partial = twin.beads.to_arrays()["row"]
+    twin.recover(from_layer=1)                                         # redo layer 2 from its start: into itself
     finish(twin)
+    assert twin.state == "fault" and twin.reason.startswith("deposit guard: ")   # the twin's last guard
+    assert "(layer 2) would lay its bead into the part" in twin.reason
     layers = twin.beads.to_arrays()["layer"]
-    reference_layers = reference.beads.to_arrays()["layer"]
-    assert list(np.unique(layers)) == [0, 1, 2]
-    assert (layers == 1).sum() > (reference_layers == 1).sum()          # layer 2 printed again
+    assert list(np.unique(layers)) == [0, 1]
+    cut = np.setdiff1d(twin.beads.to_arrays()["row"], partial)
+    assert len(cut) == 1 and cut[0] == at_row                          # the row cut short, as a partial bead

@@ -145,6 +145,14 @@ class BeadSolids:
         return cls(centre, np.stack([along, side, up], axis=2), half, np.asarray(layer, dtype=np.int64).reshape(n),
                    np.asarray(row, dtype=np.int64).reshape(n), np.asarray(gcode_line, dtype=np.int64).reshape(n))
 
+    def laid_before(self) -> BeadSolids:
+        """These beads as on the plate before a sweep's first row (row -1: obstacles from its start), keeping
+        their coal objects and layers (the tip's exemption judges them by their layers, as any bead)."""
+        out = BeadSolids(self.centre, self.axes, self.half, self.layer, np.full(len(self), -1, np.int64),
+                         self.gcode_line)
+        out._objects = self._objects
+        return out
+
     def extend(self, more: BeadSolids) -> BeadSolids:
         """These beads followed by ``more`` (the coal objects made so far are kept)."""
         out = BeadSolids(*(np.concatenate([getattr(self, k), getattr(more, k)])

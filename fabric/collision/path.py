@@ -46,7 +46,8 @@ JOINT_PIECE_RAD = 0.05      # a joint move is cut into pieces of at most this mu
 LIVE_ROW = 1 << 62          # the row of a live move: after every bead the twin has laid
 NO_LAYER = -1               # a tip layer: the tip may touch nothing
 START_LAYER = -100          # a live move's tip layer: the beads the tip rests on where it starts (relabelled so)
-MOVE_KINDS = ("print", "travel", "approach", "retract", "home", "joint", "recover", "restart", "descent", "jog")
+MOVE_KINDS = ("print", "travel", "approach", "retract", "home", "joint", "recover", "restart", "descent", "jog",
+              "deposit")   # the last: not a move, a bead laid into the part (fabric.sim.material)
 
 
 @dataclass

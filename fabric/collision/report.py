@@ -3,6 +3,7 @@ when, the bead touched) and where the clearance is smallest."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -12,8 +13,9 @@ from fabric.collision.certify import Certifier, SweepResult
 from fabric.collision.path import MOVE_KINDS
 from fabric.motion.program import Program
 from fabric.robot.frames import inv_T
+from fabric.sim.material import NewBeads, Overlap
 
-__all__ = ["collision_report", "hit_message"]
+__all__ = ["collision_report", "deposit_report", "hit_message"]
 
 
 def collision_report(res: SweepResult, cert: Certifier, beads: BeadSolids, wobj: np.ndarray,
@@ -56,6 +58,24 @@ def collision_report(res: SweepResult, cert: Certifier, beads: BeadSolids, wobj:
                              tolerance_mm=cert.tol)
 
 
+def deposit_report(program: Program, new: NewBeads, into: Overlap, plate: Any, cert: Certifier,
+                   elapsed_s: float) -> s.CollisionReport:
+    """The report of a program whose bead ``new[into.new]`` would go into the part on the plate (``plate``:
+    its ``material()`` and ``gcode_lines()``; the bead ``into.existing``): kind ``deposit``, body_a ``bead``."""
+    row = int(new.row[into.new])
+    material = plate.material()
+    lines = plate.gcode_lines()
+    hit = s.CollisionHit(body_a="bead", body_b="part", row=row, gcode_line=int(program.gcode_line[row]),
+                         layer=int(program.layer[row]), kind="deposit",
+                         xyz_mm=[float(v) for v in new.start_mm[into.new]], distance_mm=-float(into.length_mm),
+                         bead=into.existing, bead_layer=int(material.layer[into.existing]),
+                         bead_gcode_line=int(lines[into.existing]) if len(lines) > into.existing else -1)
+    hit.message = hit_message(hit)
+    return s.CollisionReport(collision_free=False, checked_configs=0, min_distance_mm=0.0, first_hit=hit,
+                             elapsed_s=elapsed_s, beads=len(material), exemption=cert.exemption,
+                             tolerance_mm=cert.tol)
+
+
 def hit_message(hit: s.CollisionHit) -> str:
     """``G-code line 1234 (travel, layer 34): tool_nozzle hits the part (a bead of layer 33 laid by G-code
     line 1200) at (125.0, 80.0, 8.0) mm, t = 312.4 s``."""
@@ -66,6 +86,11 @@ def hit_message(hit: s.CollisionHit) -> str:
     if hit.layer >= 0:
         what += f", layer {hit.layer + 1}"
     head = f"{' '.join(where)} ({what})" if where else f"the {what} move"
+    if hit.kind == "deposit":                      # not a move: a bead laid into the part on the plate
+        into = f"a bead of layer {hit.bead_layer + 1}" + (
+            f" laid by G-code line {hit.bead_gcode_line}" if hit.bead_gcode_line >= 0 else "")
+        return (f"{head}: its bead would go into the part on the plate ({into}), {-hit.distance_mm:.1f} mm along "
+                f"it")
     other = {"part": "the part", "plate": "the plate", "table": "the table"}.get(hit.body_b, hit.body_b)
     if hit.body_b == "part" and hit.bead_layer >= 0:
         other += f" (a bead of layer {hit.bead_layer + 1}" + (

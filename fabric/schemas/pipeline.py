@@ -213,16 +213,19 @@ class ExportRequest:
 
 COLLISION_BEADS = ("none", "station")             # a single move: no part, or the part the twin has laid
 MOVE_KINDS = ("print", "travel", "approach", "retract", "home", "joint", "recover", "restart", "descent",
-              "jog")
+              "jog", "deposit")
 MAX_BEADS_PAGE = 65536                            # beads per station/beads reply (about 4.5 MB)
 
 
-@schema("collision.CheckRequest", version=3)
+@schema("collision.CheckRequest", version=4)
 class CollisionRequest:
     """Certify a program (by id) or a single joint move (``q_from_deg`` -> ``q_to_deg``), with the straight
     descent that follows it when a print restarts at a layer (``q_down_deg``, version 3): every robot body,
     the tool and the nozzle against the table, the plate, the part as printed and the robot itself, with
-    nothing missed between checked configurations (see fabric.collision.certify)."""
+    nothing missed between checked configurations (see fabric.collision.certify). Version 4: ``from_row``,
+    the rest of a program on the part on the plate (a restart at a layer, a recovery): its moves from that
+    row to the return home against the station's beads (``beads`` "station") and those it lays itself, and
+    none of its beads laid into the part (a hit of kind ``deposit``)."""
     program_id: str = ""                # the planner's program to sweep ("" for a single move)
     q_from_deg: list[float] | None = None   # a single move's start joints
     q_to_deg: list[float] | None = None     # and its end joints
@@ -242,6 +245,11 @@ class CollisionRequest:
                                         # "descent" in a hit): a restart's way onto the part (nil: none)
     down_layer: int = f(default=-1, ge=-1)  # the layer that descent goes on printing: the nozzle tip may touch
                                         # its beads and those of the layers it rests on, as when printing it (-1: none)
+    from_row: int = f(default=-1, ge=-1)    # a program: only its rows from this one on, starting at
+                                        # ``q_start_deg``, on the beads ``beads`` names, and none of the beads
+                                        # of the rows after it into them (that row may be one cut short, its
+                                        # bead laid in part: it goes on along it) (-1: the whole program
+                                        # from the cell's home, on an empty plate)
 
 
 @schema("collision.Hit", version=2)
@@ -257,7 +265,8 @@ class CollisionHit:
     kind: str = f(default="", choices=("",) + MOVE_KINDS)   # the move: print, travel, approach, retract, home,
                                                # joint (a program's joint move, or a station move), recover,
                                                # restart, descent (a restart's straight way down onto the part),
-                                               # jog (an operator's straight move by hand)
+                                               # jog (an operator's straight move by hand), deposit (a bead the
+                                               # program would lay into the part on the plate: body_a "bead")
     xyz_mm: list[float] | None = f(default=None, shape=(3,))   # the nozzle tip there (plate frame)
     distance_mm: float = 0.0                   # the distance found there (<= the tolerance; < 0: overlapping)
     bead: int = -1                             # the bead touched, in print order (-1: not a bead)

@@ -10,6 +10,13 @@ beads cross the fabric once per part and each later check asks only for the
 beads laid since. The alternative, the station sending its beads with every
 request, would move tens of MB per ``home``.
 
+The rest of a program (``from_row``: a restart at a layer, a recovery) is
+certified on the part on the plate: its moves from that row on against the
+station's beads, every one an obstacle from the start, and the beads it lays
+itself (the tip's exemption as in any print); and none of its beads may go
+into the part (:mod:`fabric.sim.material`: printing a layer the part already
+has is such a case, which no sweep sees: the tip runs over the old beads' top).
+
 ``sweep_program`` is version 1's sampled sweep (joint configurations every few
 degrees against one box per layer), kept for comparison (tools/bench/collision_bench.py).
 """
@@ -27,13 +34,14 @@ from fabric import schemas as s
 from fabric.client import Client
 from fabric.collision.beads import BeadSolids
 from fabric.collision.certify import Certifier
-from fabric.collision.report import collision_report
+from fabric.collision.report import collision_report, deposit_report
 from fabric.collision.sweep import CollisionChecker, layer_boxes
 from fabric.motion.program import Program
 from fabric.motion.timing import time_program
 from fabric.programs import program_from_artifact
 from fabric.robot.cell import Cell
 from fabric.server.service import Service
+from fabric.sim.material import PlateMaterial, program_beads
 from fabric.wire.config import add_cell_argument, service_data_dir
 from fabric.wire.errors import BadRequest
 
@@ -71,12 +79,13 @@ class StationBeads:
         self.part_id = ""
         self.solids = BeadSolids.empty()
         self.wobj = np.eye(4)
+        self.arrays: dict[str, list[np.ndarray]] = {}       # the pages as they came (for PlateMaterial)
 
     def current(self) -> BeadSolids:
         """Every bead laid so far: the ones kept, and those laid since (all of them for another part)."""
         page = self._page(len(self.solids))
         if page.part_id != self.part_id or page.total < len(self.solids) or page.first != len(self.solids):
-            self.part_id, self.solids = page.part_id, BeadSolids.empty()
+            self.part_id, self.solids, self.arrays = page.part_id, BeadSolids.empty(), {}
             page = self._page(0) if page.first != 0 else page
         self.wobj = np.asarray(page.wobj, dtype=float)
         while True:
@@ -84,9 +93,22 @@ class StationBeads:
                 arrays = {"start_mm": page.start_mm, "end_mm": page.end_mm, "width_mm": page.width_mm,
                           "height_mm": page.height_mm, "layer": page.layer, "row": page.row, "axis": page.axis}
                 self.solids = self.solids.extend(BeadSolids.from_arrays(arrays, self.wobj, page.gcode_line))
+                for k, v in {**arrays, "gcode_line": page.gcode_line}.items():
+                    self.arrays.setdefault(k, []).append(np.asarray(v))
             if len(self.solids) >= page.total or not len(page.row):
                 return self.solids
             page = self._page(len(self.solids))
+
+    def material(self) -> PlateMaterial:
+        """The beads kept (call :meth:`current` first) as the material on the plate."""
+        cols = {k: np.concatenate(v) for k, v in self.arrays.items()}
+        if not cols:
+            return PlateMaterial(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0))
+        return PlateMaterial(cols["start_mm"], cols["end_mm"], cols["width_mm"], cols["height_mm"], cols["layer"])
+
+    def gcode_lines(self) -> np.ndarray:
+        """The G-code line that laid each bead kept (-1: not known)."""
+        return np.concatenate(self.arrays["gcode_line"]) if self.arrays else np.zeros(0, np.int64)
 
     def _page(self, first: int) -> s.Beads:
         return self.client.call("station", "beads", s.BeadsQuery(first=first, limit=s.pipeline.MAX_BEADS_PAGE))
@@ -137,12 +159,37 @@ class CollisionService(Service):
             return self._check_move(req, cert)
 
     def _check_program(self, req: s.CollisionRequest, cert: Certifier) -> s.CollisionReport:
+        if req.from_row >= 0:
+            return self._check_rest(req, cert)
         program, solids = self._program(req.program_id)
         q0 = self._joints("q_start_deg", req.q_start_deg) if req.q_start_deg is not None else None
         beads = solids if req.include_part else BeadSolids.empty()
         res = cert.sweep_program(program, q0, beads)
         return collision_report(res, cert, beads, program.wobj, program,
                                 lambda: self._row_times(req.program_id, program))
+
+    def _check_rest(self, req: s.CollisionRequest, cert: Certifier) -> s.CollisionReport:
+        """The program from ``from_row`` on the part on the plate (module docstring): its beads first (none
+        into the part), then its moves."""
+        t0 = time.perf_counter()
+        program, _ = self._program(req.program_id)
+        if req.from_row >= len(program):
+            raise BadRequest(f"from_row {req.from_row} is past the program's last row ({len(program) - 1})",
+                             field="from_row")
+        plate, wobj = BeadSolids.empty(), program.wobj
+        if req.beads == "station":
+            plate, wobj = self.station_beads.current(), self.station_beads.wobj
+            new = program_beads(program, req.from_row + 1)    # from_row may be one cut short: it goes on
+            into = self.station_beads.material().first_overlap(new)
+            if into is not None:
+                return deposit_report(program, new, into, self.station_beads, cert, time.perf_counter() - t0)
+        q0 = self._joints("q_start_deg", req.q_start_deg) if req.q_start_deg is not None else None
+        rest = program.slice(req.from_row)
+        beads = plate.laid_before().extend(BeadSolids.from_program(rest))
+        report = collision_report(cert.sweep_program(rest, q0, beads), cert, beads, wobj, rest)
+        if report.first_hit is not None:
+            report.first_hit.row += req.from_row
+        return report
 
     def _check_move(self, req: s.CollisionRequest, cert: Certifier) -> s.CollisionReport:
         if req.q_from_deg is None or req.q_to_deg is None:

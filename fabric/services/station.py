@@ -57,7 +57,7 @@ from fabric.server.health import Backoff
 from fabric.server.service import Service
 from fabric.server.writer import Owned, Writer
 from fabric.services.readiness import ReadyFacts, print_temp_c, ready_report
-from fabric.services.station_commands import CommandRunner, Move, Planned
+from fabric.services.station_commands import Check, CommandRunner, Move, Planned, RestOfProgram
 from fabric.services.station_manual import ManualCommands
 from fabric.services.station_messages import StationMessages
 from fabric.services.station_plate import PlateGuard
@@ -174,12 +174,18 @@ class StationService(Service):
         """A command's acknowledgement, with the state it left the station in (on the writer)."""
         return s.Ack(ok=True, message=message, state=self.twin.state)
 
-    def certify(self, move: Move) -> None:
-        """A move the station is about to make, certified by the collision service against the beads the twin
-        has actually laid (it asks ``station/beads`` for them, and keeps them between checks: a million
-        beads cross once, not with every move). The nozzle tip may touch the last bead's layer and the one
-        under it (where an interrupted print left it); on a ``descent`` the layer it goes down onto and the
-        one under, as when printing it. Raises CollisionError on a hit. Runs outside the writer."""
+    def certify(self, check: Check) -> None:
+        """What the station is about to make the robot do, certified by the collision service against the beads
+        the twin has actually laid (it asks ``station/beads`` for them, and keeps them between checks: a
+        million beads cross once, not with every move). A move: the nozzle tip may touch the last bead's layer
+        and the one under it (where an interrupted print left it); on a ``descent`` the layer it goes down onto
+        and the one under, as when printing it. The rest of a program (a restart, a recovery): every move to
+        its return home, and none of its beads into the part. Raises CollisionError on a hit, naming it and
+        what would be accepted. Runs outside the writer."""
+        if isinstance(check, RestOfProgram):
+            self._certify_rest(check)
+            return
+        move = check
         q_down, down_layer = move.descent if move.descent is not None else (None, -1)
         report = self.client.check(s.CollisionRequest(
             q_from_deg=np.degrees(move.q_from_rad).tolist(), q_to_deg=np.degrees(move.q_to_rad).tolist(),
@@ -187,14 +193,30 @@ class StationService(Service):
             q_down_deg=np.degrees(q_down).tolist() if q_down is not None else None, down_layer=down_layer))
         hit = report.first_hit
         if hit is not None:
-            raise CollisionError(f"{move.what} would collide: {hit.message or f'{hit.body_a} <-> {hit.body_b}'}",
-                                 **{k: v for k, v in s.to_plain(hit).items() if k != "message"})
+            then = f"; {move.accepted}" if move.accepted else ""
+            raise CollisionError(f"{move.what} would collide: {hit.message or f'{hit.body_a} <-> {hit.body_b}'}{then}",
+                                 accepted=move.accepted, **{k: v for k, v in s.to_plain(hit).items() if k != "message"})
+
+    def _certify_rest(self, rest: RestOfProgram) -> None:
+        report = self.client.check(s.CollisionRequest(
+            program_id=rest.program_id, from_row=rest.from_row, beads="station",
+            q_start_deg=np.degrees(rest.q_start_rad).tolist()))
+        hit = report.first_hit
+        if hit is not None:
+            then = f"; {rest.accepted}" if rest.accepted else ""
+            raise CollisionError(f"{rest.what} would collide: {hit.message or f'{hit.body_a} <-> {hit.body_b}'}{then}",
+                                 accepted=rest.accepted, **{k: v for k, v in s.to_plain(hit).items() if k != "message"})
+
+    def rest_of_program(self, from_row: int, q_start_rad: np.ndarray, what: str) -> RestOfProgram:
+        """The loaded program from ``from_row``, for a checked command's plan (on the writer)."""
+        return RestOfProgram(self.meta.program_id, int(from_row), np.asarray(q_start_rad, dtype=float), what,
+                             self.plate.going_on())
 
     def move(self, q_from_rad: np.ndarray, q_to_rad: np.ndarray, what: str, kind: str,
-             descent: tuple[np.ndarray, int] | None = None) -> Move:
+             descent: tuple[np.ndarray, int] | None = None, accepted: str = "") -> Move:
         """A joint move at the twin's home speed, for a checked command's plan (on the writer)."""
         return Move(np.asarray(q_from_rad, dtype=float), np.asarray(q_to_rad, dtype=float), what, kind,
-                    float(self.twin.config.home_vel_r), descent)
+                    float(self.twin.config.home_vel_r), descent, accepted)
 
     def _stamp(self) -> tuple:
         """What a checked command's act compares with its plan's (besides the change counter): the same state,
@@ -339,8 +361,11 @@ class StationService(Service):
                 return Planned([], None)
             path = self._restart_path(layer, "start")
             what = f"the move to layer {layer + 1}"
+            row = self.twin.restart_row(layer)
             return Planned([self.move(path.q_from_rad, path.q_above_rad, what, "restart",
-                                      descent=(path.q_down_rad, layer))], None, what)
+                                      descent=(path.q_down_rad, layer), accepted=self.plate.going_on()),
+                            self.rest_of_program(row, path.q_down_rad, f"the print from layer {layer + 1}")],
+                           None, what)
 
         def act(_: Planned[None]) -> s.Ack:
             self.plate.refuse_start("start", layer)
@@ -355,8 +380,7 @@ class StationService(Service):
         nothing is loaded or the program has no such layer."""
         if self.twin.program is None:
             raise StateError("no program loaded", state=self.twin.state, command=command)
-        moves = self.twin.moves
-        return moves.restart_path(moves.layer_start_row(layer))
+        return self.twin.moves.restart_path(self.twin.restart_row(layer))
 
     def _set_rtf(self, rtf: float | None) -> None:
         """Take the request's real-time factor, if it gives one (nil keeps the current one)."""
@@ -389,12 +413,19 @@ class StationService(Service):
             if move is None:
                 raise StateError(f"nothing to recover while {self.twin.state}", state=self.twin.state,
                                  command="recover")
-            if layer is None:                          # back to the interrupted spot: one move
-                return Planned([self.move(*move, what, "recover")], None, what)
+            if layer is None:                          # back to the interrupted spot, then the rest from there
+                row = self.twin.resume_row
+                assert row is not None, "recovery_move answers only when a spot is kept"
+                return Planned([self.move(*move, what, "recover"),
+                                self.rest_of_program(row, move[1], "the print from the interrupted spot")],
+                               None, what)
             self.plate.refuse_in_the_air("recover", layer)
             path = self._restart_path(layer, "recover")    # from a layer: the move above it, then down
+            row = self.twin.restart_row(layer)
             return Planned([self.move(path.q_from_rad, path.q_above_rad, what, "recover",
-                                      descent=(path.q_down_rad, layer))], None, what)
+                                      descent=(path.q_down_rad, layer), accepted="or recover at the interrupted spot"),
+                            self.rest_of_program(row, path.q_down_rad, f"the print from layer {layer + 1}")],
+                           None, what)
 
         def act(_: Planned[None]) -> s.Ack:
             self.twin.recover(from_layer=layer)

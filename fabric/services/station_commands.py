@@ -8,10 +8,13 @@ checked change is a motion the collision service certifies first, in four
 parts that no command can skip or reorder:
 
 1. **plan**, a step: read the twin, refuse what the state forbids, and say
-   which moves the command will make (:class:`Move`), with a stamp of the
-   twin as it is (the change counter, its state, the robot's joints);
-2. **certify**, in the handler's thread, outside the writer: every move
-   against the beads on the plate (``StationService.certify``);
+   what the command will make the robot do (:class:`Move` for a joint move,
+   :class:`RestOfProgram` for the print a restart or a recovery runs on the
+   part), with a stamp of the twin as it is (the change counter, its state,
+   the robot's joints);
+2. **certify**, in the handler's thread, outside the writer: every move, and
+   all of the print that follows, against the beads on the plate
+   (``StationService.certify``);
 3. **act**, a step: only if the stamp is unchanged (compare-and-set; else
    :class:`~fabric.server.writer.Stale`, nothing done), make the change;
 4. **checkpoint and acknowledge**: the runner's, after ``act`` returns.
@@ -32,7 +35,7 @@ from fabric import schemas as s
 from fabric.server.writer import Owned, Stale, Writer
 from fabric.sim.twin import Twin
 
-__all__ = ["Move", "Planned", "CommandRunner", "StationSurface", "STEP_TIMEOUT_S"]
+__all__ = ["Move", "RestOfProgram", "Check", "Planned", "CommandRunner", "StationSurface", "STEP_TIMEOUT_S"]
 
 STEP_TIMEOUT_S = 4.0          # a command's step not begun by then is dropped (under the 5 s a caller waits)
 P = TypeVar("P")
@@ -53,6 +56,24 @@ class Move:
     kind: str                        # the collision service's kind: home, recover, restart, jog
     vel_r: float                     # the move's share of the joints' top speeds
     descent: tuple[np.ndarray, int] | None = None
+    accepted: str = ""               # what would be taken instead, for a refusal ("go on at layer 26")
+
+
+@dataclass(frozen=True)
+class RestOfProgram:
+    """The loaded program from ``from_row`` to its return home, started from ``q_start_rad``: what a restart at a
+    layer or a recovery prints on the part already on the plate, certified whole before it runs (its moves
+    against the part and the beads it lays, none of its beads into the part). ``what`` names it in a refusal,
+    ``accepted`` says what would be taken instead ("go on at layer 26")."""
+
+    program_id: str
+    from_row: int
+    q_start_rad: np.ndarray
+    what: str
+    accepted: str = ""
+
+
+Check = Move | RestOfProgram
 
 
 @dataclass
@@ -60,7 +81,7 @@ class Planned(Generic[P]):
     """What a checked command's plan found: the moves to certify, what ``act`` needs, and ``what`` to name
     in a stale refusal ("the station changed while the move home was being checked")."""
 
-    moves: list[Move]
+    moves: list[Check]
     data: P
     what: str = "the move"
     stamp: tuple = field(default=(), repr=False)      # set by the runner
@@ -76,7 +97,7 @@ class CommandRunner:
     generation: Owned[int] = Owned()          # counts the changes (a checked command's stamp compares it)
 
     def __init__(self, writer: Writer, stamp: Callable[[], tuple], checkpoint: Callable[[], None],
-                 certify: Callable[[Move], None], state: Callable[[], str]) -> None:
+                 certify: Callable[[Check], None], state: Callable[[], str]) -> None:
         self.writer = writer
         self._stamp_of, self._checkpoint, self._certify, self._state = stamp, checkpoint, certify, state
         self.generation = 0
@@ -146,7 +167,7 @@ class StationSurface(Protocol):
         ...
 
     def move(self, q_from_rad: np.ndarray, q_to_rad: np.ndarray, what: str, kind: str,
-             descent: tuple[np.ndarray, int] | None = None) -> Move:
+             descent: tuple[np.ndarray, int] | None = None, accepted: str = "") -> Move:
         """A joint move at the twin's home speed, for a checked command's plan (in a step)."""
         ...
 

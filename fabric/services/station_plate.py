@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from fabric.sim.twin import Twin
 from fabric.store.journal import StationMeta
-from fabric.wire.errors import StateError
+from fabric.wire.errors import StateError, ValidationError
 
 __all__ = ["PlateGuard"]
 
@@ -66,11 +66,24 @@ class PlateGuard:
             self.refuse_in_the_air(command, from_layer)
 
     def _layer_hint(self) -> str:
-        """Which ``start --layer`` goes on with the part on the plate: its top layer, or the one after it."""
+        """Which ``start --layer`` goes on with the part on the plate: its top layer (where it ends)."""
         top = self.top_layer()
         if top < 0 or self.meta.plate_program_id != self.meta.program_id:
             return "start --layer N"
-        return f"start --layer {top + 2}; it is printed up to layer {top + 1}"
+        return f"start --layer {top + 1}: it goes on where the part ends, in layer {top + 1}"
+
+    def going_on(self) -> str:
+        """What a restart on the part on the plate may do, in words: go on where it ends (at its top layer: a
+        layer under it would be printed into the part), or nothing is left to print."""
+        top = self.top_layer()
+        if top < 0:
+            return "start from the beginning: the plate holds none of it"
+        try:
+            self.twin.restart_row(top)
+        except ValidationError:
+            return (f"the part is printed to its last layer ({top + 1}): take it off and say so (fabric-cli "
+                    f"plate-clear) to print it again")
+        return f"go on where the part ends: start --layer {top + 1}"
 
     def top_layer(self) -> int:
         """The highest layer (0-based) with a bead of the part on the plate; -1 when there is none."""
@@ -90,7 +103,7 @@ class PlateGuard:
             return
         raise StateError(f"cannot {command} at layer {from_layer + 1}: the part on the plate is printed up to "
                          f"layer {top + 1}, so layer {from_layer + 1} would be laid {from_layer - top - 1} "
-                         f"layer(s) above it, in the air; go on at layer {top + 1} (to finish it) or {top + 2}",
+                         f"layer(s) above it, in the air; go on at layer {top + 1} (where it ends) or {top + 2}",
                          state=self.twin.state, command=command, from_layer=from_layer + 1, top_layer=top + 1)
 
     def clear(self) -> str:

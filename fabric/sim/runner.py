@@ -26,10 +26,13 @@ from fabric.schemas.states import Station
 from fabric.sim.builder import LegBuilder
 from fabric.sim.deposition import nozzle_axes
 from fabric.sim.legs import Leg
+from fabric.sim.material import DepositGuard
 from fabric.sim.state import TwinState
 from fabric.sim.types import Event
 
-__all__ = ["DEFAULT_MIN_EXTRUDE_C", "Interlock", "LegRunner"]
+__all__ = ["DEFAULT_MIN_EXTRUDE_C", "Interlock", "DepositTrip", "LegRunner"]
+
+PARTIAL_MIN_MM3 = 1e-9       # a partial bead of less is none (a row cut where it began)
 
 
 @dataclass
@@ -49,15 +52,39 @@ class Interlock:
                 f"minimum extrusion temperature {self.min_c:.0f} C")
 
 
+@dataclass(frozen=True)
+class DepositTrip:
+    """The twin's last guard: row ``row`` (local row ``j`` of the running leg) would lay its bead into the part
+    on the plate (its layer ``existing_layer``, ``length_mm`` inside) at ``t_s``; G-code line ``gcode_line``,
+    layer ``layer``."""
+
+    t_s: float
+    row: int
+    j: int
+    gcode_line: int
+    layer: int
+    existing_layer: int
+    length_mm: float
+
+    @property
+    def reason(self) -> str:
+        return (f"deposit guard: G-code line {self.gcode_line} (layer {self.layer + 1}) would lay its bead into the "
+                f"part on the plate, along its layer {self.existing_layer + 1} for {self.length_mm:.1f} mm: the "
+                f"print stops before it")
+
+
 class LegRunner:
     """Owns no state: walks the legs of ``state`` and records what happens in it. A program row that
     would start extruding with the nozzle below the material's minimum temperature is not started:
-    the walk stops before it and ``tripped`` says why (the twin pauses the print there)."""
+    the walk stops before it and ``tripped`` says why (the twin pauses the print there). Nor is a row
+    whose bead would go into the material on the plate when the run began (``guard``, set by the twin
+    for a run on a part: a restart, a recovery): ``tripped`` says so (the twin faults there)."""
 
     def __init__(self, state: TwinState, builder: LegBuilder) -> None:
         self.state = state
         self.builder = builder
-        self.tripped: Interlock | None = None
+        self.tripped: Interlock | DepositTrip | None = None
+        self.guard: DepositGuard | None = None
         self._min_c: tuple[int, float | None] | None = None
         self._layer_z: tuple[int, dict[int, float]] | None = None
 
@@ -80,6 +107,8 @@ class LegRunner:
         ns, nd = leg.cursor(tau, final)
         if ns == leg.started and nd == leg.done:
             return
+        if leg.main and self.guard is not None and ns > leg.started:
+            ns, nd = self._guarded(leg, ns, nd)
         job = self.state.job
         it = leg.interesting
         for j in it[np.searchsorted(it, leg.done):np.searchsorted(it, ns)].tolist():
@@ -97,6 +126,21 @@ class LegRunner:
             if ns > 0:
                 job.row = leg.timeline.start_row + ns - 1
         leg.started, leg.done = ns, nd
+
+    def _guarded(self, leg: Leg, ns: int, nd: int) -> tuple[int, int]:
+        """Rows ``leg.started .. ns-1`` would start now: stop before the first whose bead goes into the part on
+        the plate, and trip (the twin faults there)."""
+        assert self.guard is not None
+        tl = leg.timeline
+        k = self.guard.first_in(tl.start_row + leg.started, tl.start_row + ns)
+        if k is None:
+            return ns, nd
+        r = int(self.guard.rows[k])
+        j = r - tl.start_row
+        p = tl.program
+        self.tripped = DepositTrip(leg.t0 + float(tl.t_start_s[j]), r, j, int(p.gcode_line[r]), int(p.layer[r]),
+                                   int(self.guard.existing_layer[k]), float(self.guard.length_mm[k]))
+        return j, min(nd, j)
 
     def min_extrude_c(self) -> float | None:
         """The loaded material's minimum extrusion temperature: the program's ``min_extrude_temp_c``;
@@ -268,7 +312,7 @@ class LegRunner:
             else:
                 end = (inv_T(p.wobj) @ st.rest_T)[:3, 3]
             start = p.xyz_mm[r - 1] if r > 0 else end
-            if vol > 0:
+            if vol > PARTIAL_MIN_MM3:                 # a cut at a row's very start lays nothing
                 st.beads.add(np.array([r]), p.layer[r:r + 1], start[None], np.asarray(end)[None], np.array([vol]),
                              p.flow_mm3_mm[r:r + 1], _bead_axes(p, np.array([r])))
         job.carry_mm3.clear()

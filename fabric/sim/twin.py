@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from fabric.motion.program import Program
+from fabric.motion.program import MOVEL, Program
 from fabric.motion.thermal import Thermal
 from fabric.motion.validate import validate_program
 from fabric.robot.frames import make_T, rot_x
@@ -36,9 +36,10 @@ from fabric.sim.calibration import CalibrationResult, calibrate_plate
 from fabric.sim.config import TwinConfig
 from fabric.sim.deposition import Deposition
 from fabric.sim.legs import Leg, ProgramLegSpec
+from fabric.sim.material import DepositGuard, PlateMaterial
 from fabric.sim.moves import MotionPlanner
 from fabric.sim.readout import Readout
-from fabric.sim.runner import LegRunner
+from fabric.sim.runner import DepositTrip, Interlock, LegRunner
 from fabric.sim.state import JobState, TwinState
 from fabric.sim.types import EVENT_KINDS, IK_ACCEPT, STATES, Event, ExtrusionState, Pose, Temps, TimeInfo
 from fabric.wire.errors import CollisionError, FabricError, StateError, UnreachableError, ValidationError
@@ -221,11 +222,12 @@ class Twin:
         if st.program is None:
             raise StateError(f"cannot start while {st.state}: no program loaded", state=st.state, command="start")
         self._busy("start")
-        row = self.moves.layer_start_row(from_layer) if from_layer is not None else 0
+        row = self.restart_row(from_layer) if from_layer is not None else 0
         if not collision_ok:
             raise CollisionError("the move to the layer was refused by the collision check", command="start")
         if row == 0:
             self._new_job(st.program)
+            self.runner.guard = None
             leg = Leg(ProgramLegSpec(0), True, ["finished"])
             self.runner.enqueue(leg)
             st.estimate_s = leg.timeline.total_s
@@ -233,6 +235,7 @@ class Twin:
         else:
             st.job.resume_at = None
             st.job.carry_mm3.clear()
+            self._guard_run(row)
             self.moves.restart_at(row, "at_layer")
             st.estimate_s = self.moves.remaining_s()
             reason = f"restarted at layer {from_layer + 1}" if from_layer is not None else "restarted"
@@ -242,12 +245,32 @@ class Twin:
                 "from_layer": from_layer if from_layer is not None else 0}
         self.runner.emit(st.pending, st.t_sim_s, "started", data)
 
+    def restart_row(self, layer: int) -> int:
+        """The row a restart at ``layer`` (0-based) goes on from: the layer's first row; or, where the part on
+        the plate has beads of that layer already (a print stopped in it), the row after its last one: the
+        restart goes on where the part ends, not through the layer's first part again. Refused (ValidationError)
+        for a layer with nothing left to print (the part has it all)."""
+        p = self.s.program
+        if p is None:
+            raise StateError("no program loaded", state=self.state, command="start")
+        row = self.moves.layer_start_row(layer)
+        beads = self.s.beads
+        laid = beads.row[beads.layer == layer] if len(beads) else beads.row[:0]
+        if not len(laid):
+            return row
+        after = int(laid.max()) + 1
+        extruding = np.flatnonzero((p.op == MOVEL) & (p.flow_mm3_mm > 0) & (p.layer >= layer))
+        if not len(extruding) or extruding[-1] < after:
+            raise ValidationError(f"layer {layer + 1} is printed to its end and no layer follows it: nothing is left "
+                                  f"to print", field="from_layer", from_layer=layer + 1)
+        return max(row, after)
+
     def layer_move(self, from_layer: int) -> tuple[np.ndarray, np.ndarray]:
         """Joints where the robot rests and joints above the first point of ``from_layer`` (for a
         collision check of a restart there)."""
         if self.s.program is None:
             raise StateError("no program loaded", state=self.s.state, command="start")
-        return self.moves.restart_move(self.moves.layer_start_row(from_layer))
+        return self.moves.restart_move(self.restart_row(from_layer))
 
     def pause(self) -> None:
         """Controlled stop, extruder off, retract, lift; ``paused`` event once the robot is clear."""
@@ -363,16 +386,25 @@ class Twin:
         bead). ``collision_ok``: the collision service's verdict on the move back."""
         st = self.s
         self._refuse("recover", (Station.INTERRUPTED,))
-        row = self.moves.layer_start_row(from_layer) if from_layer is not None else None
+        row = self.restart_row(from_layer) if from_layer is not None else None
         if not collision_ok:
             raise CollisionError("the move back to the interrupted spot was refused by the collision check",
                                  command="recover")
         st.state, st.reason = Station.PRINTING, "recovering"
         if row is None:
+            at = st.job.resume_at
+            self._guard_run(at.row + 1 if at is not None else 0)       # the row cut short goes on where it was
             self._command(lambda: self.moves.resume("recovered"))
             return
         self.runner.record_partial()
+        self._guard_run(row)
         self._command(lambda: self.moves.restart_at(row, "recovered"))
+
+    @property
+    def resume_row(self) -> int | None:
+        """The row an interrupted (or paused) print goes on from, cut short where it stopped; None: none kept."""
+        at = self.s.job.resume_at
+        return None if at is None else int(at.row)
 
     def recovery_move(self, from_layer: int | None = None) -> tuple[np.ndarray, np.ndarray] | None:
         """Joints where the robot rests and joints it goes to first to recover (the interrupted spot, or
@@ -468,6 +500,9 @@ class Twin:
                 final = t_target >= end
                 t_here = end if final else t_target
                 self.runner.run_leg(leg, leg.t_cut if final else t_target - leg.t0, final, events)
+                if isinstance(self.runner.tripped, DepositTrip):
+                    self._deposit_guarded(events)
+                    continue                       # faulted before the row: nothing runs on
                 if self.runner.tripped is not None:
                     self._interlocked(events)
                     continue                       # the leg now ends where the cold row would start
@@ -485,11 +520,28 @@ class Twin:
     def _interlocked(self, events: list[Event]) -> None:
         """The runner refused to start extruding cold: pause there (a clear reason, an event)."""
         trip, self.runner.tripped = self.runner.tripped, None
-        assert trip is not None, "called only when the runner tripped"
+        assert isinstance(trip, Interlock), "called only when the interlock tripped"
         self.moves.interlock_pause(trip.j, trip.reason)
         self.runner.emit(events, trip.t_s, "interlock", {"reason": trip.reason, "nozzle_c": trip.nozzle_c,
                                                          "min_c": trip.min_c, "row": trip.row})
         self.readout.forget()
+
+    def _deposit_guarded(self, events: list[Event]) -> None:
+        """The last guard saw the next row lay its bead into the part on the plate: fault there, before it."""
+        trip, self.runner.tripped = self.runner.tripped, None
+        assert isinstance(trip, DepositTrip), "called only when the guard tripped"
+        self.runner.guard = None                   # the run ends here
+        self._fault(trip.reason, events, trip.t_s)
+        self.runner.tripped = None
+
+    def _guard_run(self, first_row: int) -> None:
+        """Arm the last guard for a run of the loaded program from ``first_row`` on the beads now on the plate
+        (a restart at a layer, a recovery); a run with the plate clear needs none."""
+        st = self.s
+        self.runner.guard = None
+        if st.program is not None and len(st.beads):
+            material = PlateMaterial.from_arrays(st.beads.to_arrays(0))
+            self.runner.guard = DepositGuard.of(st.program, first_row, material, st.beads)
 
     def _fault(self, reason: str, events: list[Event], t: float | None = None) -> None:
         """Instant stop at ``t`` (default now), extruder and heaters off, state ``fault``."""
