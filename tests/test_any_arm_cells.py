@@ -25,7 +25,7 @@ from fabric.client.follow import follow_print
 from fabric.demo import sample_model
 from fabric.robot.cell import Cell
 
-from conftest import make_settings
+from support.loopback import make_settings
 
 pytestmark = pytest.mark.timeout(300)
 

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from support.kernels import ENV, older_kernel_masks
 
 TESTS = Path(__file__).resolve().parent

@@ -58,6 +58,7 @@ def test_fk_is_pinocchios(bent: RobotModel) -> None:
     np.testing.assert_allclose(r.fk(q), r.frame_poses(q, r.tcp_frame_id), atol=1e-9)
 
 
+@pytest.mark.slow                         # 2.3 s (not the fast tier)
 def test_round_trip_on_random_configurations(panda: Cell, bent: RobotModel) -> None:
     r = bent
     q = np.random.default_rng(11).uniform(r.lower_rad, r.upper_rad, (2000, 7))

@@ -169,6 +169,7 @@ def test_plate_and_200_mm_above_are_reachable_with_a_vertical_nozzle(name: str) 
     assert np.all(corners >= lo) and np.all(corners <= hi)
 
 
+@pytest.mark.slow                         # 1.5 s (not the fast tier)
 def test_load_or_builtin_reads_the_cell_config_option(irb: Cell, tmp_path: Path) -> None:
     assert Cell.load_or_builtin(None).source_path == irb.source_path          # no option: the built-in IRB 140
     assert Cell.load_or_builtin("").robot.name == "irb140"
@@ -188,6 +189,7 @@ def test_load_or_builtin_reads_the_cell_config_option(irb: Cell, tmp_path: Path)
     assert Cell.load_or_builtin(tmp_path / "ur5").robot.name == "irb140"      # an existing file wins
 
 
+@pytest.mark.slow                         # 2.4 s (not the fast tier)
 def test_cell_list_prints_the_builtin_cells(capsys: pytest.CaptureFixture[str]) -> None:
     from fabric.cli.main import main
     assert main(["cell", "list", "--json"]) == 0

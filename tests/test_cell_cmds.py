@@ -19,7 +19,7 @@ from fabric.robot.cell import Cell
 from fabric.services.station import StationService
 from fabric.wire.errors import NotFound
 
-from conftest import free_port
+from support.loopback import free_port
 
 pytestmark = pytest.mark.timeout(180)
 

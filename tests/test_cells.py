@@ -17,7 +17,7 @@ from fabric.wire import codec
 from fabric.wire.config import zenoh_config
 from fabric.wire.keys import Keys, parse_alive
 
-from conftest import make_settings
+from support.loopback import make_settings
 
 pytestmark = pytest.mark.timeout(180)
 CELLS = 10

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from certify_cells import plan_reachable
 
 from fabric.collision.beads import BeadSolids
 from fabric.collision.certify import Certifier
@@ -15,6 +14,8 @@ from fabric.motion.testprog import square_program
 from fabric.planning import PlanOptions, plan_gcode
 from fabric.robot.cell import Cell
 from fabric.services.collision import sweep_program
+
+from support.certify_cells import plan_reachable
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -228,6 +229,7 @@ def test_joint_moves_follow_the_twins_path_and_turn_each_joint_monotonically(cel
     assert np.allclose(path.q1[:-1], path.q0[1:])                       # one continuous path
 
 
+@pytest.mark.slow                         # 3 s (not the fast tier)
 def test_the_ur5_cell_prints_the_sample_part_collision_free():
     from fabric.demo import sample_model
     from fabric.slicing import load_profile, slice_model

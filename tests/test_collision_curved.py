@@ -8,7 +8,6 @@ from __future__ import annotations
 import coal
 import numpy as np
 import pytest
-from certify_cells import plan_reachable
 
 from fabric.collision import trees as trees_module
 from fabric.collision.advance import Item
@@ -18,6 +17,8 @@ from fabric.collision.certify import Certifier
 from fabric.collision.path import MOVE_KINDS
 from fabric.collision.trees import PartTrees
 from fabric.robot.cell import CELLS_DIR, Cell
+
+from support.certify_cells import plan_reachable
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -87,6 +88,7 @@ def sampled(cert: Certifier, names=(TIP, "tool_nozzle"), fractions=(0.0, 0.5), u
     return best
 
 
+@pytest.mark.slow                         # 7 s (not the fast tier)
 def test_a_tilted_tip_on_its_own_two_layers_is_not_reported_and_the_clearance_holds(cell, cert):
     program = plan(cell, ridge_gcode())
     res = cert.sweep_program(program)
@@ -102,6 +104,7 @@ def test_a_tilted_tip_on_its_own_two_layers_is_not_reported_and_the_clearance_ho
     assert 0.5 * LAYER_MM < res.clearance_mm < LAYER_MM
 
 
+@pytest.mark.slow                         # 4 s (not the fast tier)
 def test_a_travel_through_a_curved_layer_is_reported_with_its_line(cell, cert):
     xc, yc = CENTRE
     gcode = ridge_gcode(tail=("G0 Z12 I0 J0 K1", f"G0 X{xc - 8:.1f} Y{yc:.1f} I0.3 J0 K0.954",

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from certify_cells import plan_reachable
 
 from fabric.collision.beads import BeadSolids
 from fabric.collision.support import resting_layers
 from fabric.robot.cell import Cell
+
+from support.certify_cells import plan_reachable
 
 pytestmark = pytest.mark.timeout(300)
 

@@ -13,7 +13,7 @@ import pytest
 
 from fabric.cli.up import CellProcesses
 
-from conftest import make_settings
+from support.loopback import make_settings
 
 pytestmark = pytest.mark.timeout(400)
 

@@ -21,7 +21,7 @@ from fabric.client import Client
 from fabric.client.follow import follow_print
 from fabric.slicing.curved.shapes import dome
 
-from conftest import make_settings
+from support.loopback import make_settings
 
 pytestmark = pytest.mark.timeout(420)
 

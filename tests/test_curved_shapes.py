@@ -12,7 +12,7 @@ from fabric.slicing.curved.options import MAX_THICKNESS_RATIO
 from fabric.slicing.curved.shapes import SHAPES
 from fabric.slicing.profile import load_profile
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.slow]    # slow: slicing the shapes takes 14 s (not the fast tier)
 
 PROFILE = load_profile("taz-pla-medium")
 MOVE = re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) I(\S+) J(\S+) K(\S+) E(\S+)")

@@ -24,8 +24,8 @@ from fabric.store.jobs import JobStore
 from fabric.wire.config import SessionSettings
 from fabric.wire.keys import SERVICES
 
-from conftest import free_port
-from proc_lines import ProcLines
+from support.loopback import free_port
+from support.proc_lines import ProcLines
 
 pytestmark = pytest.mark.timeout(240)
 

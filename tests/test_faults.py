@@ -12,8 +12,8 @@ from fabric import schemas as s
 from fabric.client import Client
 from fabric.demo import sample_model
 
-from conftest import make_settings
-from faults import PROFILE, SupervisedCell, read_csv, reference_beads, run_with_fault, same_beads, wait_state
+from support.faults import PROFILE, SupervisedCell, read_csv, reference_beads, run_with_fault, same_beads, wait_state
+from support.loopback import make_settings
 
 pytestmark = [pytest.mark.timeout(300), pytest.mark.slow]
 

@@ -115,6 +115,7 @@ word = st.sampled_from("XYZEF").flatmap(lambda k: (feed if k == "F" else number)
 move = st.lists(word, min_size=1, max_size=5, unique_by=lambda w: w[0])
 
 
+@pytest.mark.slow                         # 1.5 s (not the fast tier)
 @FAST
 @given(st.lists(move, min_size=1, max_size=6), st.data())
 def test_a_repeated_letter_or_an_exponent_is_refused_on_its_line(moves: list, data: st.DataObject) -> None:
@@ -132,6 +133,7 @@ def test_a_repeated_letter_or_an_exponent_is_refused_on_its_line(moves: list, da
     assert err.value.details["line"] == bad + 1 and what in str(err.value)
 
 
+@pytest.mark.slow                         # 2.3 s (not the fast tier)
 @FAST
 @given(st.lists(move, min_size=1, max_size=8), st.data())
 def test_any_style_a_controller_accepts_reads_the_same(moves: list, data: st.DataObject) -> None:

@@ -16,7 +16,7 @@ from fabric.demo import sample_model
 from fabric.security.credentials import Credentials
 from fabric.wire.config import SessionSettings
 
-from conftest import free_port
+from support.loopback import free_port
 
 pytestmark = pytest.mark.timeout(180)
 PRINT_RTF = 250.0            # the sample part (~1,600 s simulated) prints in some 6 s

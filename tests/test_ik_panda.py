@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from ik_checks import assert_tracking_equals_full_rule
 
 from fabric.robot.arm_family import IKFamilyMismatch
 from fabric.robot.batch_dls import BatchDLSIK
@@ -22,6 +21,8 @@ from fabric.robot.panda import PandaArm
 from fabric.robot.panda_derive import derive_panda
 from fabric.robot.path_ik import solve_path
 from fabric.wire.errors import ConfigError
+
+from support.ik_checks import assert_tracking_equals_full_rule
 
 N = 10_000
 POS_TOL_MM = 1e-3             # issue 20: 1e-6 m ...
@@ -243,6 +244,7 @@ def test_the_hand_as_flange_is_the_same_family() -> None:
     np.testing.assert_allclose(r.fk(qs), T, atol=1e-8)
 
 
+@pytest.mark.slow                         # 1.4 s (not the fast tier)
 def test_the_redundancy_joint_must_be_the_families(panda: Cell) -> None:
     text = (CELLS_DIR / "panda.toml").read_text()
     with pytest.raises(ConfigError) as exc:

@@ -3,11 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from ik_checks import assert_tracking_equals_full_rule
 
 from fabric.robot.cell import Cell
 from fabric.robot.closed_form import ClosedFormIK
 from fabric.robot.kinematics import IK_OK, IK_SINGULAR
+
+from support.ik_checks import assert_tracking_equals_full_rule
 
 ROBOTS = ["irb140", "kr6r700", "ur5", "ur10"]
 FAMILY = {"irb140": "opw", "kr6r700": "opw", "ur5": "ur", "ur10": "ur"}

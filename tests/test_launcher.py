@@ -14,7 +14,7 @@ import pytest
 from fabric.client import Client
 from fabric.wire.keys import SERVICES
 
-from conftest import make_settings
+from support.loopback import make_settings
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -73,7 +73,7 @@ def test_up_listens_where_asked_restarts_a_dead_service_and_stops_the_print_on_c
     from fabric.demo import sample_model
     from fabric.store.station import StationStore
 
-    from conftest import free_port
+    from support.loopback import free_port
 
     st = make_settings()
     port = free_port()

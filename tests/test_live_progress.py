@@ -22,7 +22,7 @@ from fabric.demo import sample_model
 from fabric.printjobs.history import material_text, state_text
 from fabric.printjobs.live import apply_live
 
-from conftest import free_port
+from support.loopback import free_port
 
 
 def _printing(job_id: str = "j1") -> s.JobRecord:

@@ -88,6 +88,7 @@ def test_rows_out_of_reach_and_past_a_limit_give_numpys_statuses(cell: Cell) -> 
     assert {int(s) for s in np.unique(st)} > {IK_OK}
 
 
+@pytest.mark.slow                         # 1 s per cell (not the fast tier)
 def test_the_stretched_elbow_takes_the_nearest_branch(cell: Cell) -> None:
     """Through the stretched elbow two branches pass close together: each row takes the allowed branch
     nearest the row before (a brute-force chain over all 8 branches), in both paths. (numpy's path once

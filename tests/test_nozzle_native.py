@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from support.numeric import assert_ulps
 
 from fabric import native
 from fabric.robot import nozzle_native
@@ -18,6 +17,8 @@ from fabric.robot.cell import Cell
 from fabric.robot.frames import QUAT_SIGN_TOL
 from fabric.robot.nozzle_frames import NozzleFrames, unit_axes
 from fabric.robot.path_ik import solve_path
+
+from support.numeric import assert_ulps
 
 pytestmark = pytest.mark.skipif(native.library("nozzle") is None, reason="no C compiler: numpy's path only")
 

@@ -98,6 +98,7 @@ def test_the_chunks_are_the_whole_toolpath(markers: bool, rows: int) -> None:
 
 # -- the program in chunks, in memory or in files --------------------------------------------------------
 
+@pytest.mark.slow                         # 2.5 s each (not the fast tier)
 @pytest.mark.parametrize("markers", [True, False])
 def test_planning_in_chunks_gives_the_whole_plan(cell: Cell, tmp_path: Path, markers: bool) -> None:
     text = rich_gcode(n_layers=40, seed=4, markers=markers)
@@ -195,6 +196,7 @@ def _raster(n_moves: int) -> str:
     return "\n".join(lines) + "\n"
 
 
+@pytest.mark.slow                         # 3.6 s (not the fast tier)
 def test_planning_holds_a_chunk_not_the_file(cell: Cell, tmp_path: Path) -> None:
     """Planned into files in chunks of 20 k rows, three times the moves take the same memory: the planner's
     own allocations (tracemalloc sees NumPy's) are a chunk's and the blocks', not the file's. Before chunked
@@ -224,6 +226,7 @@ def _rss_file_mb() -> float:
     return float("nan")
 
 
+@pytest.mark.slow                         # 1.1 s (not the fast tier)
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="resident pages are read from /proc")
 def test_a_mapped_program_is_read_through_with_its_pages_given_back(cell: Cell, tmp_path: Path) -> None:
     path = tmp_path / "r.gcode"

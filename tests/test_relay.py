@@ -18,7 +18,7 @@ from fabric.services.supervisor import SupervisorService
 from fabric.wire import codec
 from fabric.wire.config import SessionSettings
 
-from conftest import free_port, relay_process
+from support.loopback import free_port, relay_process
 
 POSE = s.Pose(seq=1, t_sim_s=2.0, q_deg=[0.0] * 6, xyz_mm=[1.0, 2.0, 3.0], quat_wxyz=[1.0, 0.0, 0.0, 0.0],
               base_xyz_mm=[4.0, 5.0, 6.0])

@@ -27,7 +27,7 @@ from fabric.security.zconfigs import read_json5, write_json5
 from fabric.services.supervisor import SupervisorService
 from fabric.wire.config import SessionSettings
 
-from conftest import free_port, relay_process
+from support.loopback import free_port, relay_process
 
 pytestmark = pytest.mark.timeout(180)
 

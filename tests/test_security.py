@@ -23,7 +23,7 @@ from fabric.wire.config import SessionSettings
 from fabric.wire.errors import PermissionDenied
 from fabric.wire.keys import ENDPOINTS, Keys
 
-from conftest import free_port, relay_process
+from support.loopback import free_port, relay_process
 
 pytestmark = pytest.mark.timeout(120)
 REFUSED_WITHIN_S = 1.0

@@ -25,8 +25,8 @@ from fabric.wire.config import SessionSettings
 from fabric.wire.errors import StateError
 from fabric.wire.keys import SERVICES
 
-from conftest import free_port
-from proc_lines import ProcLines, wait_until
+from support.loopback import free_port
+from support.proc_lines import ProcLines, wait_until
 
 pytestmark = pytest.mark.timeout(240)
 CLI = [sys.executable, "-m", "fabric.cli.main"]

@@ -24,7 +24,7 @@ from fabric.tui.screens.values import ValuesDialog
 from fabric.tui.widgets.toolpath_view import HIT_GLYPH, ToolpathView
 from fabric.wire.keys import SERVICES
 
-from conftest import make_settings
+from support.loopback import make_settings
 
 pytestmark = pytest.mark.timeout(240)
 

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from test_tui_snapshots import square_layers
 from textual.app import App, ComposeResult
-from tui_stub import StubClient
 
 from fabric import schemas as s
 from fabric.motion.program import MOVEL, PRINT, Program
@@ -20,6 +19,8 @@ from fabric.tui.screens.confirm import ConfirmDialog
 from fabric.tui.screens.report import ReportDialog
 from fabric.tui.widgets.toolpath_view import HIT_GLYPH, NOZZLE_GLYPH, ToolpathView
 from fabric.wire.errors import CollisionError
+
+from support.tui_stub import StubClient
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -158,6 +159,7 @@ async def check(pilot, app: FabricConsole) -> None:
     await until(pilot, lambda: not app.screen.is_modal, what="the report closed")
 
 
+@pytest.mark.slow                         # 3 s (not the fast tier)
 def test_the_console_marks_the_hit_until_a_clean_check_another_program_or_another_cell():
     art = program_artifact(program())
     client = CheckingClient(state=s.StationState(state="ready", program_id=art.artifact_id, layers_total=4))

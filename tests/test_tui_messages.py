@@ -12,7 +12,6 @@ from pathlib import Path
 import pytest
 from textual.app import App
 from textual.reactive import Reactive
-from tui_stub import StubClient
 
 import fabric.tui
 from fabric import schemas as s
@@ -21,6 +20,8 @@ from fabric.tui.app import FabricConsole
 from fabric.tui.messages import CallRequested, JobRemoved, Reply, ReprintRequested
 from fabric.tui.screens.confirm import ConfirmDialog
 from fabric.tui.screens.jobs import JobsScreen
+
+from support.tui_stub import StubClient
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -7,7 +7,6 @@ import asyncio
 import time
 
 import pytest
-from tui_stub import StubClient
 
 from fabric import schemas as s
 from fabric.samples import SAMPLES_DIR
@@ -24,7 +23,9 @@ from fabric.tui.screens.values import ValuesDialog
 from fabric.tui.widgets.extruder_panel import ExtruderPanel
 from fabric.tui.widgets.temps_panel import TempsPanel
 
-pytestmark = pytest.mark.timeout(60)
+from support.tui_stub import StubClient
+
+pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]     # slow: 12 s of console sessions (not the fast tier)
 
 PRINTING = s.StationState(state="printing", program_id="p", job_id="a1b2c3d4e5f6", total_s=100.0,
                           remaining_s=50.0, layers_total=10, layer=4, progress_r=0.5, rtf=10.0, plate_clear=False,

@@ -14,7 +14,7 @@ from fabric.tui.messages import CollisionChecked
 from fabric.tui.screens.submit import SubmitDialog
 from fabric.tui.toolpath import Toolpath
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]    # slow: 24 snapshots, 15 s (not the fast tier)
 
 SIZES = {"80x24": (80, 24), "160x48": (160, 48)}
 NOW_S = 1_767_225_600.0          # 2026-01-01 00:00:00 UTC

@@ -17,6 +17,7 @@ from fabric.slicing import load_profile, slice_model
 UR5 = Path(__file__).resolve().parents[1] / "fabric" / "cells" / "ur5.toml"
 
 
+@pytest.mark.slow                         # 1.7 s (not the fast tier)
 def test_sample_part_on_the_ur5_cell():
     cell = Cell.load(UR5)
     model = sample_model()

@@ -29,8 +29,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 from fabric.client import Client  # noqa: E402
 from fabric.wire.errors import FabricError  # noqa: E402
 
-from conftest import make_settings  # noqa: E402
-from faults import SupervisedCell, read_csv, reference_beads, run_with_fault, same_beads  # noqa: E402
+from support.faults import SupervisedCell, read_csv, reference_beads, run_with_fault, same_beads  # noqa: E402
+from support.loopback import make_settings  # noqa: E402
 
 SERVICES = ("station", "supervisor", "planner", "slicer")
 
