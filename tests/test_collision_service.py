@@ -118,8 +118,8 @@ def test_a_restart_whose_descent_goes_through_the_part_is_refused_and_changes_no
     client, station, _, pid, _ = fabric
     client.load(pid)
     print_tower(client)
-    path, vel_r = station.commands.read(lambda: (station.twin.moves.restart_path(
-        station.twin.moves.layer_start_row(9)), station.twin.config.home_vel_r))
+    path, vel_r = station.commands.read(lambda: (station.twin.moves.restart_path(station.twin.restart_point(9)),
+                                                 station.twin.config.home_vel_r))
     joint_only = client.check(s.CollisionRequest(q_from_deg=deg(path.q_from_rad), q_to_deg=deg(path.q_above_rad),
                                                  beads="station", tip_layer=-2, kind="restart", vel_r=vel_r))
     assert joint_only.collision_free                  # the move the station checked before: free
@@ -138,7 +138,7 @@ def test_a_restart_whose_descent_goes_through_the_part_is_refused_and_changes_no
     # the part (the tip runs over its old beads' top), but every bead of it would go into the part
     with pytest.raises(ValidationError, match="layer 12 is printed to its end and no layer follows it"):
         client.start(rtf=0, from_layer=11)
-    station_row = station.commands.read(lambda: station.twin.restart_row(10))
+    station_row = station.commands.read(lambda: station.twin.restart_point(10).row)
     report = client.check(s.CollisionRequest(program_id=pid, from_row=station_row, beads="station",
                                              q_start_deg=deg(path.q_down_rad)))
     hit = report.first_hit

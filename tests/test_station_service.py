@@ -269,7 +269,7 @@ def test_going_on_above_the_part_and_the_next_layer_is_refused(fabric):
 
 
 def test_stop_then_start_again_at_a_layer(fabric):
-    client, _station, pid, _ = fabric
+    client, station, pid, _ = fabric
     client.load(pid)
     events = client.subscribe("station", "events")
     try:
@@ -281,8 +281,9 @@ def test_stop_then_start_again_at_a_layer(fabric):
         with pytest.raises(ValidationError, match="no layer 7"):
             client.start(from_layer=6)
         assert client.state().state == "stopped"
-        ack = client.start(rtf=0, from_layer=2)
-        assert "from layer 3" in ack.message
+        top = station.commands.read(station.plate.top_layer)         # layer 1, or 2 if a bead of it was laid
+        ack = client.start(rtf=0, from_layer=top + 1)                 # the next layer
+        assert f"from layer {top + 2}" in ack.message
         assert wait_event(events, ("at_layer", "fault")).kind == "at_layer"
         assert wait_event(events, ("finished", "fault")).kind == "finished"
     finally:

@@ -166,10 +166,11 @@ def test_restart_at_a_layer_after_a_stop_heats_and_prints_the_rest(cell: Cell, p
     np.testing.assert_allclose(got["end_mm"][stopped_beads:], want, atol=1e-9)   # layer 3 printed as planned
 
 
-def test_recover_at_a_layer_records_the_cut_row_and_never_prints_into_the_part(cell: Cell, prog: Program) -> None:
-    """Interrupted inside layer 2, recovered at layer 2's start (forced: the station would refuse it): the row
-    cut short is a partial bead, and the twin's last guard faults before the first bead laid along layer 2's
-    beads again."""
+def test_recover_at_the_layer_it_was_cut_in_goes_on_where_it_stopped(cell: Cell, prog: Program,
+                                                                      reference: Twin) -> None:
+    """Interrupted inside layer 2, recovered at layer 2: the row cut short is a partial bead and the print goes on
+    from where it stopped (the restart's move above that spot, then down), not from the layer's first row
+    through what it laid: the same volume as an uninterrupted print, layer 2 once."""
     twin = Twin(cell)
     twin.load(prog)
     twin.start()
@@ -179,11 +180,9 @@ def test_recover_at_a_layer_records_the_cut_row_and_never_prints_into_the_part(c
     at_row = twin.resume_row
     assert at is not None and not np.allclose(at[0], at[1])
     partial = twin.beads.to_arrays()["row"]
-    twin.recover(from_layer=1)                                         # redo layer 2 from its start: into itself
+    twin.recover(from_layer=1)
     finish(twin)
-    assert twin.state == "fault" and twin.reason.startswith("deposit guard: ")   # the twin's last guard
-    assert "(layer 2) would lay its bead into the part" in twin.reason
-    layers = twin.beads.to_arrays()["layer"]
-    assert list(np.unique(layers)) == [0, 1]
-    cut = np.setdiff1d(twin.beads.to_arrays()["row"], partial)
-    assert len(cut) == 1 and cut[0] == at_row                          # the row cut short, as a partial bead
+    assert (twin.state, twin.reason) == ("idle", "finished")
+    rows = twin.beads.to_arrays()["row"]
+    assert (rows == at_row).sum() == 2 and at_row not in partial         # the cut row: a partial bead, then the rest
+    assert twin.beads.total_volume_mm3 == pytest.approx(reference.beads.total_volume_mm3, rel=1e-3)

@@ -361,7 +361,7 @@ class StationService(Service):
                 return Planned([], None)
             path = self._restart_path(layer, "start")
             what = f"the move to layer {layer + 1}"
-            row = self.twin.restart_row(layer)
+            row = path.row
             return Planned([self.move(path.q_from_rad, path.q_above_rad, what, "restart",
                                       descent=(path.q_down_rad, layer), accepted=self.plate.going_on()),
                             self.rest_of_program(row, path.q_down_rad, f"the print from layer {layer + 1}")],
@@ -380,7 +380,7 @@ class StationService(Service):
         nothing is loaded or the program has no such layer."""
         if self.twin.program is None:
             raise StateError("no program loaded", state=self.twin.state, command=command)
-        return self.twin.moves.restart_path(self.twin.restart_row(layer))
+        return self.twin.moves.restart_path(self.twin.restart_point(layer))
 
     def _set_rtf(self, rtf: float | None) -> None:
         """Take the request's real-time factor, if it gives one (nil keeps the current one)."""
@@ -421,7 +421,7 @@ class StationService(Service):
                                None, what)
             self.plate.refuse_in_the_air("recover", layer)
             path = self._restart_path(layer, "recover")    # from a layer: the move above it, then down
-            row = self.twin.restart_row(layer)
+            row = path.row
             return Planned([self.move(path.q_from_rad, path.q_above_rad, what, "recover",
                                       descent=(path.q_down_rad, layer), accepted="or recover at the interrupted spot"),
                             self.rest_of_program(row, path.q_down_rad, f"the print from layer {layer + 1}")],
@@ -465,6 +465,7 @@ class StationService(Service):
         def act() -> tuple[Any, Any, Any]:
             if self.twin.state.in_print:
                 raise StateError("cannot calibrate during a print", state=self.twin.state, command="calibrate")
+            self.plate.refuse_probing()
             r = self.twin.calibrate()
             self.twin.note("calibrated", {"residual_rms_mm": float(r.residual_rms_mm),
                                           "correction_xyz_mm": [float(v) for v in r.correction_xyz_mm]})

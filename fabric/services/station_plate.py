@@ -79,7 +79,7 @@ class PlateGuard:
         if top < 0:
             return "start from the beginning: the plate holds none of it"
         try:
-            self.twin.restart_row(top)
+            self.twin.restart_point(top)
         except ValidationError:
             return (f"the part is printed to its last layer ({top + 1}): take it off and say so (fabric-cli "
                     f"plate-clear) to print it again")
@@ -105,6 +105,15 @@ class PlateGuard:
                          f"layer {top + 1}, so layer {from_layer + 1} would be laid {from_layer - top - 1} "
                          f"layer(s) above it, in the air; go on at layer {top + 1} (where it ends) or {top + 2}",
                          state=self.twin.state, command=command, from_layer=from_layer + 1, top_layer=top + 1)
+
+    def refuse_probing(self) -> None:
+        """Calibrating probes the plate's top face at points spread over it: with a part on the plate the probe
+        would touch it (no probe point is certified against the part), so it is refused until the part is off."""
+        if self.meta.plate_occupied:
+            raise StateError(f"cannot calibrate while the plate holds {self.text()}: the probe touches the plate "
+                             f"where the part may stand; take it off and say so (fabric-cli plate-clear) first",
+                             state=self.twin.state, command="calibrate", plate="occupied",
+                             plate_job_id=self.meta.plate_job_id)
 
     def clear(self) -> str:
         """The operator took the part off (refused while it is being printed); what was taken off, in words

@@ -31,20 +31,31 @@ from fabric.sim.state import ResumePoint, TwinState
 from fabric.sim.types import IK_ACCEPT
 from fabric.wire.errors import UnreachableError, ValidationError
 
-__all__ = ["MotionPlanner", "RestartPath"]
+__all__ = ["MotionPlanner", "RestartPath", "RestartPoint"]
+
+
+@dataclass(frozen=True)
+class RestartPoint:
+    """Where a restart goes on: program row ``row``, from ``pose`` (where the row before it ends, or, for a row
+    a stop cut short, the spot ``s_mm`` along the row where its bead ends)."""
+
+    row: int
+    pose: PoseSpec
+    s_mm: float = 0.0
 
 
 @dataclass(frozen=True)
 class RestartPath:
     """The motion of a restart at a layer before it prints: a joint move from ``q_from_rad`` (where the
-    robot rests) to ``q_above_rad``, ``xyz_above_mm`` (plate frame) above the point where the layer's first
-    row starts, then straight down to ``q_down_rad`` there. ``target`` is that point's pose."""
+    robot rests) to ``q_above_rad``, ``xyz_above_mm`` (plate frame) above the point where it goes on
+    (:class:`RestartPoint`), then straight down to ``q_down_rad`` there. ``target`` is that point's pose."""
 
     q_from_rad: np.ndarray
     q_above_rad: np.ndarray
     xyz_above_mm: np.ndarray
     q_down_rad: np.ndarray
     target: PoseSpec
+    row: int                   # the program row it goes on with (from ``target``)
 
 
 class MotionPlanner:
@@ -284,29 +295,45 @@ class MotionPlanner:
                                   layers=top + 1)
         return int(rows[0])
 
-    def restart_path(self, row: int) -> RestartPath:
-        """Where a restart at ``row`` goes before printing (what :meth:`restart_at` queues, and what the
+    def row_point(self, row: int) -> RestartPoint:
+        """Going on at the start of ``row``: from where the row before it ends."""
+        p = self.state.program
+        assert p is not None, "no program loaded"
+        return RestartPoint(row, PoseSpec(p.q_rad[row - 1], p.xyz_mm[row - 1], p.quat_wxyz[row - 1]))
+
+    def cut_point(self, row: int, end_mm: np.ndarray) -> RestartPoint:
+        """Going on along ``row`` from ``end_mm`` (plate frame), where a stop cut its bead short."""
+        p = self.state.program
+        assert p is not None, "no program loaded"
+        _, wobj = self.queue_end()
+        q = self._ik_one(wobj, np.asarray(end_mm, dtype=float), p.quat_wxyz[row], p.q_rad[row - 1])
+        s_mm = float(np.linalg.norm(np.asarray(end_mm, dtype=float) - p.xyz_mm[row - 1]))
+        return RestartPoint(row, PoseSpec(q, np.asarray(end_mm, dtype=float).copy(), p.quat_wxyz[row].copy()), s_mm)
+
+    def restart_path(self, point: RestartPoint) -> RestartPath:
+        """Where a restart at ``point`` goes before printing (what :meth:`restart_at` queues, and what the
         station has certified first): from where the queue ends, a joint move to ``lift_mm`` (at least 1 mm)
-        above where ``row`` starts, then straight down onto it."""
+        above the point, then straight down onto it."""
         st, cfg = self.state, self.config
         p = st.program
         assert p is not None, "no program loaded"
         start, wobj = self.queue_end()
-        target = PoseSpec(p.q_rad[row - 1], p.xyz_mm[row - 1], p.quat_wxyz[row - 1])
+        target = point.pose
         above = np.asarray(target.xyz_mm, dtype=float) + [0.0, 0.0, max(cfg.lift_mm, 1.0)]
         q_above = self._ik_one(wobj, above, target.quat_wxyz, target.q_rad)
-        return RestartPath(start.q_rad.copy(), q_above, above, np.asarray(target.q_rad, dtype=float).copy(), target)
+        return RestartPath(start.q_rad.copy(), q_above, above, np.asarray(target.q_rad, dtype=float).copy(), target,
+                           point.row)
 
-    def restart_at(self, row: int, end_kind: str) -> None:
-        """Go on with the program from ``row`` as a print restarted at a layer does: the heaters to the set
-        points the program has there (waiting for them), a joint move to ``lift_mm`` above where ``row``
-        starts, straight down, then the program from ``row`` (:meth:`restart_path`). ``end_kind`` fires
-        once down."""
+    def restart_at(self, point: RestartPoint, end_kind: str) -> None:
+        """Go on with the program from ``point`` as a print restarted at a layer does: the heaters to the set
+        points the program has there (waiting for them), a joint move to ``lift_mm`` above the point,
+        straight down, then the program from there (:meth:`restart_path`). ``end_kind`` fires once down."""
         st, cfg = self.state, self.config
         p = st.program
         assert p is not None, "no program loaded"
         start, wobj = self.queue_end()
-        path = self.restart_path(row)
+        path = self.restart_path(point)
+        row = point.row
         target = path.target
         rows: list[dict[str, Any]] = []
         here = {"q_rad": start.q_rad, "xyz_mm": start.xyz_mm, "quat_wxyz": start.quat_wxyz}
@@ -322,12 +349,12 @@ class MotionPlanner:
         rows.append({"op": MOVEL, "q_rad": path.q_down_rad, "xyz_mm": target.xyz_mm, "quat_wxyz": target.quat_wxyz,
                      "speed_mm_s": cfg.resume_speed_mm_s})
         self.runner.enqueue(self.aux_leg(rows, start, wobj, [end_kind], heaters=True))
-        self.runner.enqueue(Leg(ProgramLegSpec(row, target, 0.0, 0.0), True, ["finished"]))
+        self.runner.enqueue(Leg(ProgramLegSpec(row, target, point.s_mm, 0.0), True, ["finished"]))
         self.pause_preview_s = None
 
-    def restart_move(self, row: int) -> tuple[np.ndarray, np.ndarray]:
-        """Joints where the robot rests and joints above where ``row`` starts (the restart's joint move)."""
-        path = self.restart_path(row)
+    def restart_move(self, point: RestartPoint) -> tuple[np.ndarray, np.ndarray]:
+        """Joints where the robot rests and joints above ``point`` (the restart's joint move)."""
+        path = self.restart_path(point)
         return path.q_from_rad, path.q_above_rad
 
     # Overrides --------------------------------------------------------------------------

@@ -37,7 +37,7 @@ from fabric.sim.config import TwinConfig
 from fabric.sim.deposition import Deposition
 from fabric.sim.legs import Leg, ProgramLegSpec
 from fabric.sim.material import DepositGuard, PlateMaterial
-from fabric.sim.moves import MotionPlanner
+from fabric.sim.moves import MotionPlanner, RestartPoint
 from fabric.sim.readout import Readout
 from fabric.sim.runner import DepositTrip, Interlock, LegRunner
 from fabric.sim.state import JobState, TwinState
@@ -45,6 +45,7 @@ from fabric.sim.types import EVENT_KINDS, IK_ACCEPT, STATES, Event, ExtrusionSta
 from fabric.wire.errors import CollisionError, FabricError, StateError, UnreachableError, ValidationError
 
 SPEED_R_MIN, SPEED_R_MAX = 0.0, 10.0         # speed and flow overrides: (0, 10]
+CUT_MM = 1e-3                                # a bead ending this far short of its row's end was cut there
 
 __all__ = ["EVENT_KINDS", "STATES", "Event", "ExtrusionState", "Pose", "Temps", "TimeInfo", "Twin", "TwinConfig"]
 
@@ -222,10 +223,11 @@ class Twin:
         if st.program is None:
             raise StateError(f"cannot start while {st.state}: no program loaded", state=st.state, command="start")
         self._busy("start")
-        row = self.restart_row(from_layer) if from_layer is not None else 0
+        point = self.restart_point(from_layer) if from_layer is not None else None
+        row = point.row if point is not None else 0
         if not collision_ok:
             raise CollisionError("the move to the layer was refused by the collision check", command="start")
-        if row == 0:
+        if point is None or row == 0:
             self._new_job(st.program)
             self.runner.guard = None
             leg = Leg(ProgramLegSpec(0), True, ["finished"])
@@ -235,8 +237,8 @@ class Twin:
         else:
             st.job.resume_at = None
             st.job.carry_mm3.clear()
-            self._guard_run(row)
-            self.moves.restart_at(row, "at_layer")
+            self._guard_run(row + 1 if point.s_mm > 0 else row)     # a cut row goes on along what it laid
+            self.moves.restart_at(point, "at_layer")
             st.estimate_s = self.moves.remaining_s()
             reason = f"restarted at layer {from_layer + 1}" if from_layer is not None else "restarted"
         st.t_started_s, st.t_ended_s = st.t_sim_s, None
@@ -245,32 +247,39 @@ class Twin:
                 "from_layer": from_layer if from_layer is not None else 0}
         self.runner.emit(st.pending, st.t_sim_s, "started", data)
 
-    def restart_row(self, layer: int) -> int:
-        """The row a restart at ``layer`` (0-based) goes on from: the layer's first row; or, where the part on
-        the plate has beads of that layer already (a print stopped in it), the row after its last one: the
-        restart goes on where the part ends, not through the layer's first part again. Refused (ValidationError)
-        for a layer with nothing left to print (the part has it all)."""
+    def restart_point(self, layer: int) -> RestartPoint:
+        """Where a restart at ``layer`` (0-based) goes on: the layer's first row; or, where the part on the plate
+        has beads of that layer already (a print stopped in it), where its last bead ends (along the row a stop
+        cut short, or at the next row): the restart goes on where the part ends, not through the layer's first
+        part again. Refused (ValidationError) for a layer with nothing left to print (the part has it all)."""
         p = self.s.program
         if p is None:
             raise StateError("no program loaded", state=self.state, command="start")
         row = self.moves.layer_start_row(layer)
+        at = self.s.job.resume_at
+        if at is not None and self.s.job.carry_mm3 and int(p.layer[at.row]) == layer:
+            return self.moves.cut_point(at.row, at.pose.xyz_mm)       # an interrupted row: where it stopped
         beads = self.s.beads
-        laid = beads.row[beads.layer == layer] if len(beads) else beads.row[:0]
+        laid = np.flatnonzero(beads.layer == layer) if len(beads) else np.zeros(0, np.int64)
         if not len(laid):
-            return row
-        after = int(laid.max()) + 1
+            return self.moves.row_point(row)
+        last = int(laid[np.argmax(beads.row[laid])])
+        r = int(beads.row[last])
+        end = np.asarray(beads.end_mm[last], dtype=float)
+        if np.linalg.norm(end - p.xyz_mm[r]) > CUT_MM:               # a stop cut that row short: go on along it
+            return self.moves.cut_point(r, end)
         extruding = np.flatnonzero((p.op == MOVEL) & (p.flow_mm3_mm > 0) & (p.layer >= layer))
-        if not len(extruding) or extruding[-1] < after:
+        if not len(extruding) or extruding[-1] <= r:
             raise ValidationError(f"layer {layer + 1} is printed to its end and no layer follows it: nothing is left "
                                   f"to print", field="from_layer", from_layer=layer + 1)
-        return max(row, after)
+        return self.moves.row_point(max(row, r + 1))
 
     def layer_move(self, from_layer: int) -> tuple[np.ndarray, np.ndarray]:
         """Joints where the robot rests and joints above the first point of ``from_layer`` (for a
         collision check of a restart there)."""
         if self.s.program is None:
             raise StateError("no program loaded", state=self.s.state, command="start")
-        return self.moves.restart_move(self.restart_row(from_layer))
+        return self.moves.restart_move(self.restart_point(from_layer))
 
     def pause(self) -> None:
         """Controlled stop, extruder off, retract, lift; ``paused`` event once the robot is clear."""
@@ -386,19 +395,19 @@ class Twin:
         bead). ``collision_ok``: the collision service's verdict on the move back."""
         st = self.s
         self._refuse("recover", (Station.INTERRUPTED,))
-        row = self.restart_row(from_layer) if from_layer is not None else None
+        point = self.restart_point(from_layer) if from_layer is not None else None
         if not collision_ok:
             raise CollisionError("the move back to the interrupted spot was refused by the collision check",
                                  command="recover")
         st.state, st.reason = Station.PRINTING, "recovering"
-        if row is None:
+        if point is None:
             at = st.job.resume_at
             self._guard_run(at.row + 1 if at is not None else 0)       # the row cut short goes on where it was
             self._command(lambda: self.moves.resume("recovered"))
             return
         self.runner.record_partial()
-        self._guard_run(row)
-        self._command(lambda: self.moves.restart_at(row, "recovered"))
+        self._guard_run(point.row + 1 if point.s_mm > 0 else point.row)
+        self._command(lambda: self.moves.restart_at(point, "recovered"))
 
     @property
     def resume_row(self) -> int | None:
