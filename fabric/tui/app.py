@@ -21,7 +21,7 @@ from fabric.extras import missing_extra
 from fabric.schemas import states
 from fabric.tui.commands import COMMANDS, PRESETS, Preset, describe, refusal, refused_hit
 from fabric.tui.format import event_data_text
-from fabric.tui.joblist import console_jobs
+from fabric.tui.joblist import after_change, console_jobs, not_listed
 from fabric.tui.link import CellLink
 from fabric.tui.messages import (
     CallRequested,
@@ -132,6 +132,9 @@ class FabricConsole(App):
         self._toolpath_id = ""          # the program the toolpath is of
         self._hit_program_id = ""       # the program the collision hit is of
         self._limits_source = ""        # who told the joints' limits shown: "station", "model" or "" (none yet)
+        self._queue_changes = 0         # changes of the queue taken (supervisor/queue): a list asked before is stale
+        self._removed: set[str] = set()     # jobs removed (by any client): a record of one still on its way is not
+                                            # listed again
         self._add_screens()
 
     def _add_screens(self) -> None:
@@ -164,6 +167,7 @@ class FabricConsole(App):
         self.station_state = self.pose = self.extrusion = self.temps = self.toolpath = self.collision_hit = None
         self.limits, self._limits_source = None, ""
         self.alive, self.degraded, self.jobs, self._toolpath_id, self._hit_program_id = {}, {}, [], "", ""
+        self._removed = set()
         self.link = CellLink(client, self.post_message)
         self.link.open()
         self.load_limits()
@@ -255,8 +259,24 @@ class FabricConsole(App):
                             title=f"print {p.kind}", severity=severity, timeout=8)
         elif msg.topic == "jobs":
             self._job_changed(p)
+        elif msg.topic == "queue":
+            self._queue_changed(p)
+
+    def _queue_changed(self, change: s.QueueChange) -> None:
+        """A job submitted, removed or moved, by this console or any other client: the list shows it at once (a
+        removal has no record on ``jobs`` to say it, a move changes no record). A list asked before this change
+        is asked again when it comes (it may not show it)."""
+        self._queue_changes += 1
+        if change.kind == "removed":
+            self._removed.add(change.job_id)
+        self.jobs = after_change(self.jobs, change)
+        self.add_log(f"queue: job {change.job_id} {change.kind}")
+        if not_listed(self.jobs, change):
+            self.refresh_jobs()        # a job submitted: its record is on its way, the list read says it too
 
     def _job_changed(self, rec: s.JobRecord) -> None:
+        if rec.job_id in self._removed:
+            return                     # sent before its removal, come after it
         jobs = list(self.jobs)
         for i, old in enumerate(jobs):
             if old.job_id == rec.job_id:
@@ -286,8 +306,12 @@ class FabricConsole(App):
 
     @on(JobsListed)
     def _take_jobs(self, msg: JobsListed) -> None:
-        if msg.cell == self.cell:
-            self.jobs = list(msg.jobs)
+        if msg.cell != self.cell:
+            return
+        if msg.changes_seen < self._queue_changes:
+            self.refresh_jobs()        # asked before the queue last changed: it may undo the change on the screen
+            return
+        self.jobs = [r for r in msg.jobs if r.job_id not in self._removed]
 
     @on(ProgramReady)
     def _take_program(self, msg: ProgramReady) -> None:
@@ -348,6 +372,7 @@ class FabricConsole(App):
     @on(JobRemoved)
     def _forget_job(self, msg: JobRemoved) -> None:
         """A job removed: off the screens at once (the list read next confirms it)."""
+        self._removed.add(msg.job_id)
         self.jobs = [r for r in self.jobs if r.job_id != msg.job_id]
 
     @on(ReprintRequested)
@@ -428,7 +453,8 @@ class FabricConsole(App):
     @work(thread=True, group="commands")
     def run_call(self, label: str, fn: Callable[[Client], Any], refresh_jobs: bool = False) -> None:
         """A job command (``fn(client)``), answered on the reply line; ``refresh_jobs``: read the job list after
-        (the ``jobs`` stream carries changed records, not removed ones)."""
+        (the queue's changes come on ``supervisor/queue``, the records' on ``jobs``: the list read confirms them).
+        A ``job move``'s own list is not taken: it is the queue's first page, not the jobs the console lists."""
         if self.client is None:
             return
         try:
@@ -438,9 +464,7 @@ class FabricConsole(App):
             return
         text = getattr(result, "message", "") or "ok"
         self.post_message(Reply(label, True, text))
-        if isinstance(result, s.JobList):
-            self.post_message(JobsListed(self.cell, result.jobs))
-        elif refresh_jobs:
+        if refresh_jobs:
             self._list_jobs()
 
     @work(thread=True, group="jobs")
@@ -449,11 +473,11 @@ class FabricConsole(App):
 
     def _list_jobs(self) -> None:
         """Ask the supervisor for the job list (blocking: from a thread)."""
-        client = self.client
+        client, seen = self.client, self._queue_changes
         if client is None:
             return
         try:
-            self.post_message(JobsListed(client.keys.cell, console_jobs(client)))
+            self.post_message(JobsListed(client.keys.cell, console_jobs(client), seen))
         except FabricError as err:
             self.post_message(Reply("jobs", False, f"[{err.code}] {err.message}"))
 

@@ -16,7 +16,7 @@ from fabric.printjobs.history import (
 from fabric.schemas import states
 
 __all__ = ["duration_text", "eta_text", "layer_text", "clock_text", "event_data_text", "job_outcome", "job_report",
-           "STATE_STYLE"]
+           "plate_text", "STATE_STYLE"]
 
 STATE_STYLE = {states.Station.IDLE: "white on grey23", states.Station.READY: "black on green",
                states.Station.PRINTING: "black on green", states.Station.MOVING: "black on dark_cyan",
@@ -42,6 +42,17 @@ def eta_text(st: s.StationState, now_s: float) -> str:
     if state is states.Station.PAUSED:
         return f"paused: {duration_text(wall_s)} to go once resumed"
     return f"ETA {time.strftime('%H:%M:%S', time.localtime(now_s + wall_s))} (in {duration_text(wall_s)})"
+
+
+def plate_text(st: s.StationState | None, whose: bool = True) -> str:
+    """What is on the plate, as the station says ("" before it has said anything); ``whose``: the job whose part
+    it is, too."""
+    if st is None:
+        return ""
+    if st.plate_clear:
+        return "plate clear"
+    of = (f" of job {st.plate_job_id}" if st.plate_job_id else " printed by hand") if whose else ""
+    return f"plate holds {'the' if whose else 'a'} part{of} ({st.plate_mm3:.0f} mm3)"
 
 
 def clock_text(t_s: float) -> str:

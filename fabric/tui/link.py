@@ -5,12 +5,14 @@ import logging
 import queue
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
+from typing import Any
 
 from textual.message import Message
 
 from fabric.client import AliveSubscription, Client, Subscription
 from fabric.schemas import states
+from fabric.tui.joblist import console_jobs
 from fabric.tui.messages import HealthReport, JobsListed, Liveliness, ProgramReady, Telemetry
 from fabric.wire.errors import FabricError
 
@@ -19,11 +21,14 @@ __all__ = ["CellLink", "STREAMS"]
 log = logging.getLogger("fabric.tui")
 
 STREAMS = (("station", "pose"), ("station", "extrusion"), ("station", "temps"), ("station", "state"),
-           ("station", "events"), ("supervisor", "jobs"))
+           ("station", "events"), ("supervisor", "jobs"), ("supervisor", "queue"))
 # sampled streams: the screen shows at most one message of each per period (s). The robot's pose and the
 # extruder at 10 Hz; the temperatures (a graph of the last minute, and their figures) at 2 Hz: each update
 # re-renders the graph, and at 10 Hz an idle console spent a fifth of a core on it
 THROTTLED = {"pose": 0.1, "extrusion": 0.1, "temps": 0.5}
+# ... but a sample that says something new is posted at once: a set point changed (by this console or any
+# other client) shows when the station says it, not up to a period later
+CHANGED: dict[str, Callable[[Any], Hashable]] = {"temps": lambda t: (t.nozzle_target_c, t.bed_target_c)}
 HEALTH_PERIOD_S = 5.0          # how often the console asks the services how they are
 
 
@@ -71,7 +76,8 @@ class CellLink:
     # --- threads ---------------------------------------------------------------
 
     def _feed(self, topic: str, sub: Subscription) -> None:
-        last_post = 0.0
+        last_post, last_key = 0.0, None
+        changed = CHANGED.get(topic)
         while not self._stop.is_set():
             try:
                 msg = sub.get(timeout=0.25)
@@ -81,10 +87,10 @@ class CellLink:
                 log.warning("bad %s message: %s", topic, err)
                 continue
             if topic in THROTTLED:
-                now = time.monotonic()
-                if now - last_post < THROTTLED[topic]:
+                now, key = time.monotonic(), changed(msg) if changed is not None else None
+                if now - last_post < THROTTLED[topic] and key == last_key:
                     continue
-                last_post = now
+                last_post, last_key = now, key
             self.post(Telemetry(self.cell, topic, msg))
             if topic == "state" and msg.program_id != self._program_id:
                 self._program_id = msg.program_id
@@ -118,9 +124,9 @@ class CellLink:
         self.refresh_jobs()
 
     def refresh_jobs(self) -> None:
-        """Ask the supervisor for the job list (blocking: call from a thread)."""
+        """Ask the supervisor for the job list the console shows (blocking: call from a thread)."""
         try:
-            self.post(JobsListed(self.cell, self.client.jobs().jobs))
+            self.post(JobsListed(self.cell, console_jobs(self.client)))
         except FabricError as err:
             log.info("no job list: %s", err)
 

@@ -24,7 +24,7 @@ __all__ = ["Telemetry", "Liveliness", "HealthReport", "Reply", "ProgramReady", "
 
 @dataclass
 class Telemetry(Message):
-    """One decoded message of ``topic`` (pose, extrusion, temps, state, events, jobs) from cell ``cell``."""
+    """One decoded message of ``topic`` (pose, extrusion, temps, state, events, jobs, queue) from cell ``cell``."""
 
     cell: str
     topic: str
@@ -80,10 +80,13 @@ class LimitsReady(Message):
 
 @dataclass
 class JobsListed(Message):
-    """The supervisor's job list (queue order, then history)."""
+    """The supervisor's job list (queue order, then history). ``changes_seen``: how many changes of the queue
+    (``supervisor/queue``) the console had taken when the list was asked for; a list asked before the latest one
+    may not show it, and is asked for again."""
 
     cell: str
     jobs: list[Any]
+    changes_seen: int = 0
 
 
 @dataclass

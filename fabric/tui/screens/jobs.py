@@ -1,18 +1,19 @@
-"""The Jobs screen: the queue (reorder, remove, start next) and the history with outcome, duration, material and
-every run of each print; print a job again from either."""
+"""The Jobs screen: the queue (reorder, remove, start next), what is on the plate, and the history with outcome,
+duration, material and every run of each print; print a job again from either."""
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Vertical
 from textual.screen import Screen
-from textual.widgets import DataTable, Footer, Header, Label
+from textual.widgets import DataTable, Footer, Header, Label, Static
 
 from fabric import schemas as s
 from fabric.schemas import states
-from fabric.tui.format import clock_text, duration_text, job_report
+from fabric.tui.format import clock_text, duration_text, job_report, plate_text
 from fabric.tui.messages import CallRequested, JobRemoved, Reply, ReprintRequested
 from fabric.tui.screens.confirm import ConfirmDialog
 from fabric.tui.screens.report import ReportDialog
@@ -39,6 +40,7 @@ class JobsScreen(Screen):
         super().__init__()
         self.jobs: list[s.JobRecord] = []
         self.station_state: Any = None
+        self._plate_shown: str | None = None
 
     def compose(self) -> ComposeResult:
         yield Header()
@@ -46,6 +48,7 @@ class JobsScreen(Screen):
             yield Label("queue  a submit · n next · [ ] move · del remove · R print again · ⏎ record",
                         classes="section-title")
             yield DataTable(id="queue", cursor_type="row", zebra_stripes=True)
+            yield Static(id="plate")
             yield Label("history", classes="section-title")
             yield DataTable(id="history", cursor_type="row", zebra_stripes=True)
         yield ReplyLine(id="reply")
@@ -63,11 +66,18 @@ class JobsScreen(Screen):
 
     def _on_state(self, st: Any) -> None:
         self.station_state = st             # what the next job's question says is on the plate
+        occupied = st is not None and not st.plate_clear
+        text = plate_text(st) + (": once it is off, n loads the next job" if occupied else "")
+        if text != self._plate_shown:       # the state comes twice a second: the line is drawn when it changes
+            self._plate_shown = text
+            self.query_one("#plate", Static).update(Text(text or "plate: no word from the station yet",
+                                                         style="yellow" if occupied else ""))
 
     def _on_jobs(self, jobs: list[s.JobRecord]) -> None:
         self.jobs = list(jobs)
         queue_t, history_t = self.query_one("#queue", DataTable), self.query_one("#history", DataTable)
         keep_q, keep_h = self._selected("#queue"), self._selected("#history")
+        rows_q, rows_h = queue_t.cursor_row, history_t.cursor_row
         queue_t.clear()
         history_t.clear()
         for rec in jobs:                         # whole ids: what fabric-cli job show takes
@@ -84,9 +94,11 @@ class JobsScreen(Screen):
             runs = str(len(rec.segments)) if rec.segments else "-"
             history_t.add_row(rec.job_id, outcome, rec.filename, runs, material, took,
                               clock_text(rec.ended_s), rec.reason, key=rec.job_id)
-        for table, key in ((queue_t, keep_q), (history_t, keep_h)):
+        for table, key, row in ((queue_t, keep_q, rows_q), (history_t, keep_h, rows_h)):
             if key is not None and key in table.rows:
                 table.move_cursor(row=table.get_row_index(key))
+            elif table.row_count:             # the job selected is gone (removed, ended): the row where it was
+                table.move_cursor(row=min(row, table.row_count - 1))
 
     def _selected(self, table_id: str) -> str | None:
         table = self.query_one(table_id, DataTable)

@@ -1,4 +1,5 @@
-"""Extruder on/off and flow, the overrides in force, the deposited volume and the services' liveliness."""
+"""Extruder on/off and flow, the overrides in force, the deposited volume, the plate and the services'
+liveliness."""
 from __future__ import annotations
 
 from typing import Any
@@ -7,6 +8,7 @@ from rich.text import Text
 from textual.reactive import reactive
 from textual.widgets import Static
 
+from fabric.tui.format import plate_text
 from fabric.wire.keys import SERVICES
 
 
@@ -31,6 +33,7 @@ class ExtruderPanel(Static):
             rtf = "max" if st.rtf == 0 else f"{st.rtf:g}"
             out.append(f"speed x{st.speed_r:.2f}  flow x{st.flow_r:.2f}  rtf {rtf}\n")
             out.append(f"deposited {st.deposited_mm3:.0f}/{st.planned_mm3:.0f} mm3\n")
+            out.append(plate_text(st, whose=False) + "\n", style="" if st.plate_clear else "yellow")
         sick = []
         width, used = max(self.content_size.width, 20), 0
         for name in SERVICES:                    # whole names, on as many lines as the width needs
