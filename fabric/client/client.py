@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import queue
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -286,9 +287,10 @@ class Client:
                              f"{service} artifact {artifact_id}", service=service)
 
     def wait_job(self, service: str, job_id: str, timeout: float = 600.0,
-                 on_progress: Callable[[s.JobStatus], None] | None = None) -> s.JobStatus:
+                 on_progress: Callable[[s.JobStatus], None] | None = None,
+                 cancel: threading.Event | None = None) -> s.JobStatus:
         """Follow a job until it ends; raise its error if it failed (see :func:`fabric.client.job_waits.wait_job`)."""
-        return wait_job(self, service, job_id, timeout, on_progress)
+        return wait_job(self, service, job_id, timeout, on_progress, cancel)
 
     # --- station: the paper's commands ------------------------------------------
 

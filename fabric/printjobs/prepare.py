@@ -102,7 +102,7 @@ class Preparer:
             overrides["filament_diameter_mm"] = f"{rec.filament_diameter_mm:g}"
         acc = self.client.slice(s.SliceRequest(model=model, filename=rec.filename, profile=rec.profile,
                                                backend=rec.backend, overrides=overrides, layers=rec.layers))
-        done = self.client.wait_job("slicer", acc.job_id, timeout=self.budget_s)
+        done = self.client.wait_job("slicer", acc.job_id, timeout=self.budget_s, cancel=self.closed)
         rec.gcode_id = done.result_id
         self.client.pin("slicer", rec.gcode_id, rec.job_id)
 
@@ -114,7 +114,7 @@ class Preparer:
                                              filename=name, wobj_xyz_mm=station.wobj_xyz_mm,
                                              wobj_rpy_deg=station.wobj_rpy_deg,
                                              filament_diameter_mm=rec.filament_diameter_mm))
-        done = self.client.wait_job("planner", acc.job_id, timeout=self.budget_s)
+        done = self.client.wait_job("planner", acc.job_id, timeout=self.budget_s, cancel=self.closed)
         summary = self.client.plan_summary(done.result_id)
         rec.program_id, rec.plan = done.result_id, summary
         self.client.pin("planner", rec.program_id, rec.job_id)

@@ -120,9 +120,9 @@ class SupervisorService(Service):
     def close(self) -> None:
         super().close()                      # sets ``closed``: the workers finish what they are doing
         self.wake.set()
+        self.writer.close()                  # a worker asking for a step now hears at once that there is none
         for t in getattr(self, "_workers", []):
             t.join(timeout=5.0)
-        self.writer.close()
         if hasattr(self, "_live_sub"):
             self._live_sub.undeclare()
             self._events.close()
