@@ -104,6 +104,14 @@ def test_a_stopped_part_goes_on_only_where_it_ends_and_ends_with_the_planned_vol
     _refused_everywhere_under(client, station, top)
     with pytest.raises(StateError, match="in the air"):
         client.start(rtf=0, from_layer=top + 2)
-    assert _until(client, ("finished", "fault"), {"rtf": 0, "from_layer": top}).kind == "finished"
+    events = client.subscribe("station", "events")
+    try:
+        ack = client.start(rtf=0, from_layer=top)
+        assert f"from layer {top + 1}, where the part ends," in ack.message
+        while (ev := events.get(timeout=60.0)).kind not in ("finished", "fault"):
+            pass
+        assert ev.kind == "finished"
+    finally:
+        events.close()
     st = client.state()
     assert st.plate_mm3 == pytest.approx(st.planned_mm3, rel=0.01)

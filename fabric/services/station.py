@@ -353,25 +353,31 @@ class StationService(Service):
 
     def on_start(self, req: s.StartRequest) -> s.Ack:
         layer = req.from_layer if req.from_layer >= 0 else None
-        where = "" if layer is None else f" from layer {layer + 1} (heating, then the move above it)"
 
-        def plan() -> Planned[None]:
+        def where(goes_on: bool) -> str:
+            if layer is None:
+                return ""
+            on = ", where the part ends," if goes_on else ""
+            return f" from layer {layer + 1}{on} (heating, then the move above it)"
+
+        def plan() -> Planned[bool]:
             self.plate.refuse_start("start", layer)
             if layer is None:                          # from the beginning: the program was certified when planned
-                return Planned([], None)
+                return Planned([], False)
             path = self._restart_path(layer, "start")
             what = f"the move to layer {layer + 1}"
             row = path.row
+            goes_on = row > self.twin.moves.layer_start_row(layer)       # the part has some of this layer
             return Planned([self.move(path.q_from_rad, path.q_above_rad, what, "restart",
                                       descent=(path.q_down_rad, layer), accepted=self.plate.going_on()),
                             self.rest_of_program(row, path.q_down_rad, f"the print from layer {layer + 1}")],
-                           None, what)
+                           goes_on, what)
 
-        def act(_: Planned[None]) -> s.Ack:
+        def act(planned: Planned[bool]) -> s.Ack:
             self.plate.refuse_start("start", layer)
             self.twin.start(from_layer=layer)
             self._set_rtf(req.rtf)
-            return self.ack(f"printing{where} at {self._rtf_text()}")
+            return self.ack(f"printing{where(planned.data)} at {self._rtf_text()}")
         return self.commands.checked("start", plan, act)
 
     def _restart_path(self, layer: int, command: str) -> RestartPath:
