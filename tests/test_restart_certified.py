@@ -107,7 +107,7 @@ def test_a_stopped_part_goes_on_only_where_it_ends_and_ends_with_the_planned_vol
     events = client.subscribe("station", "events")
     try:
         ack = client.start(rtf=0, from_layer=top)
-        assert f"from layer {top + 1}, where the part ends," in ack.message
+        assert f"from layer {top + 1}, where the part ends (heating" in ack.message
         while (ev := events.get(timeout=60.0)).kind not in ("finished", "fault"):
             pass
         assert ev.kind == "finished"

@@ -357,7 +357,7 @@ class StationService(Service):
         def where(goes_on: bool) -> str:
             if layer is None:
                 return ""
-            on = ", where the part ends," if goes_on else ""
+            on = ", where the part ends" if goes_on else ""
             return f" from layer {layer + 1}{on} (heating, then the move above it)"
 
         def plan() -> Planned[bool]:
