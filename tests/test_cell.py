@@ -39,7 +39,7 @@ def test_irb140_cell_is_the_papers_layout(irb: Cell) -> None:
     np.testing.assert_allclose(irb.robot.tool_T[:3, 3], [0, 0, 150])
 
 
-@pytest.mark.parametrize("name", ["irb140", "irb140-multiaxis", "ur5", "ur10", "kr6r700", "panda"])
+@pytest.mark.parametrize("name", ["irb140", "irb140-multiaxis", "ur5", "ur10", "kr6r700", "panda", "fr3"])
 def test_home_is_within_limits_clear_of_the_plate_and_collision_free(name: str) -> None:
     cell = Cell.builtin(name)
     r = cell.robot
@@ -148,7 +148,7 @@ def test_ur5_closed_form_ik_round_trip_agrees_with_numeric_ik(ur5: Cell) -> None
     assert r.ik(far, q[0])[1][0] != IK_OK
 
 
-@pytest.mark.parametrize("name", ["irb140", "irb140-multiaxis", "ur5", "ur10", "kr6r700", "panda"])
+@pytest.mark.parametrize("name", ["irb140", "irb140-multiaxis", "ur5", "ur10", "kr6r700", "panda", "fr3"])
 def test_plate_and_200_mm_above_are_reachable_with_a_vertical_nozzle(name: str) -> None:
     cell = Cell.builtin(name)
     W = cell.wobj_T()
@@ -177,11 +177,11 @@ def test_load_or_builtin_reads_the_cell_config_option(irb: Cell, tmp_path: Path)
     with pytest.raises(NotFound):
         Cell.load_or_builtin(tmp_path / "missing.toml")
     for name, family, nq in (("irb140", "opw", 6), ("ur5", "ur", 6), ("ur10", "ur", 6), ("kr6r700", "opw", 6),
-                             ("panda", "panda", 7)):
+                             ("panda", "panda", 7), ("fr3", "panda", 7)):
         cell = Cell.load_or_builtin(name)                                      # a built-in by name
         assert cell.name == name and cell.robot.ik_family == family and cell.robot.nq == nq
         assert cell.to_dict()["robot"]["ik_family"] == family
-    assert builtin_cell_names() == ["irb140", "irb140-multiaxis", "kr6r700", "panda", "ur10", "ur5"]
+    assert builtin_cell_names() == ["fr3", "irb140", "irb140-multiaxis", "kr6r700", "panda", "ur10", "ur5"]
     with pytest.raises(NotFound) as exc:
         Cell.load_or_builtin("kuka")
     assert exc.value.details["known"] == builtin_cell_names()
@@ -195,14 +195,16 @@ def test_cell_list_prints_the_builtin_cells(capsys: pytest.CaptureFixture[str]) 
     assert main(["cell", "list", "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)
     assert [(r["cell"], r["robot"], r["joints"], r["ik_family"], r["export"]) for r in rows] == [
+        ("fr3", "fr3", 7, "panda", "csv"),
         ("irb140", "irb140", 6, "opw", "rapid"), ("irb140-multiaxis", "irb140", 6, "opw", "rapid"),
         ("kr6r700", "kr6r700", 6, "opw", "krl"),
         ("panda", "panda", 7, "panda", "csv"), ("ur10", "ur10", 6, "ur", "urscript"),
         ("ur5", "ur5", 6, "ur", "urscript")]
-    assert [r["default"] for r in rows] == [True, False, False, False, False, False]
+    assert [r["default"] for r in rows] == [False, True, False, False, False, False, False]
     assert main(["cell", "list"]) == 0
-    assert capsys.readouterr().out.splitlines()[0].split() == ["irb140", "irb140", "6", "joints", "IK", "opw",
-                                                               "export", "rapid", "(default)"]
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split() == ["fr3", "fr3", "7", "joints", "IK", "panda", "export", "csv"]
+    assert lines[1].split() == ["irb140", "irb140", "6", "joints", "IK", "opw", "export", "rapid", "(default)"]
 
 
 @pytest.mark.parametrize("service", ["station", "slicer", "planner", "collision"])
