@@ -105,8 +105,14 @@ def quat_sign(q_wxyz: np.ndarray) -> np.ndarray:
     1/2). The same rule as ``w >= 0`` but where ``w`` is zero in exact arithmetic: there the sign of the
     rounding error, which differs between CPUs' kernels, would choose."""
     q = np.asarray(q_wxyz, dtype=float)
-    lead = np.argmax(np.abs(q) > QUAT_SIGN_TOL, axis=-1)
-    return np.where(np.take_along_axis(q, lead[..., None], axis=-1) < 0.0, -q, q)
+    if q.ndim == 2 and len(q) == 1:                    # one row (the twin's pose, read at every sample)
+        row = q[0]
+        lead = next((v for v in row.tolist() if abs(v) > QUAT_SIGN_TOL), 0.0)
+        return -q if lead < 0.0 else q.copy()
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    lead = np.where(np.abs(w) > QUAT_SIGN_TOL, w,
+                    np.where(np.abs(x) > QUAT_SIGN_TOL, x, np.where(np.abs(y) > QUAT_SIGN_TOL, y, z)))
+    return np.where(lead[..., None] < 0.0, -q, q)
 
 
 def quat_from_R(R: np.ndarray) -> np.ndarray:

@@ -91,7 +91,7 @@ class Readout:
     def time_info(self) -> TimeInfo:
         """Elapsed, expected total and remaining simulated time of the job (paused: if resumed now)."""
         st = self.state
-        state = Station(st.state)
+        state = st.state
         if state == Station.READY:
             return TimeInfo(0.0, st.estimate_s, st.estimate_s, st.estimate_s)
         if st.t_started_s is None:

@@ -259,11 +259,11 @@ class LegRunner:
             self.emit(events, t, kind, self.totals(t))
         elif kind in ("resumed", "recovered", "at_layer"):
             job.resume_at = None
-            if Station(st.state).printing and kind != "at_layer":     # the move back is over: say so, not "-ing"
+            if st.state.printing and kind != "at_layer":     # the move back is over: say so, not "-ing"
                 st.reason = kind
             self.emit(events, t, kind)
         elif kind == "home":
-            if not Station(st.state).in_print:
+            if not st.state.in_print:
                 st.reason = "at home"
             self.emit(events, t, kind)
         elif kind == "jogged":

@@ -19,6 +19,7 @@ import numpy as np
 
 from fabric.motion.program import Program
 from fabric.motion.thermal import Thermal
+from fabric.schemas.states import Station
 from fabric.sim.deposition import Deposition
 from fabric.sim.legs import Leg, PoseSpec, thermal_from_dict, thermal_to_dict
 from fabric.sim.types import Event
@@ -89,7 +90,7 @@ class TwinState:
     rest_q_rad: np.ndarray
     rest_T: np.ndarray
     rng: np.random.Generator
-    state: str = "idle"
+    state: Station = Station.IDLE
     reason: str = ""
     t_sim_s: float = 0.0
     thermal: Thermal = field(default_factory=Thermal)
@@ -145,7 +146,7 @@ class TwinState:
         rng.bit_generator.state = json.loads(d["rng"])
         return cls(
             work_T=np.asarray(d["work_T"], float), rest_q_rad=np.asarray(d["rest_q_rad"], float),
-            rest_T=np.asarray(d["rest_T"], float), rng=rng, state=str(d["state"]), reason=str(d["reason"]),
+            rest_T=np.asarray(d["rest_T"], float), rng=rng, state=Station(str(d["state"])), reason=str(d["reason"]),
             t_sim_s=float(d["t_sim_s"]), thermal=thermal_from_dict(d["thermal"]), speed_r=float(d["speed_r"]),
             flow_r=float(d["flow_r"]), program=program, estimate_s=float(d["estimate_s"]),
             t_started_s=_opt_float(d["t_started_s"]), t_ended_s=_opt_float(d["t_ended_s"]), seq=int(d["seq"]),

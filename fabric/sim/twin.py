@@ -100,8 +100,8 @@ class Twin:
 
     @property
     def state(self) -> Station:
-        """Lifecycle state (one of :data:`STATES`; its record ``s.state`` keeps the plain string)."""
-        return Station(self.s.state)
+        """Lifecycle state (one of :data:`STATES`)."""
+        return self.s.state
 
     @property
     def reason(self) -> str:
@@ -377,7 +377,7 @@ class Twin:
         if point is not None:
             st.job.resume_at = point
         st.job.extruder_on = False
-        if Station(was).in_print and st.job.resume_at is not None:
+        if was.in_print and st.job.resume_at is not None:
             if not st.job.retracted:
                 st.job.pause_retract_mm = 0.0        # the pause's retraction had not happened yet
             at = st.job.resume_at
