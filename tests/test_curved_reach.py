@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from fabric.slicing.curved.axis import unit_rows
+from fabric.slicing.curved.axis import TiltLimits, unit_rows
 from fabric.slicing.curved.crease import crease_nodes, round_creases
 from fabric.slicing.curved.heat import fem_operators, node_gradients
 from fabric.slicing.curved.options import CurvedOptions
@@ -81,8 +81,8 @@ def test_a_nozzle_leaning_into_a_wall_is_turned_clear_and_one_leaning_away_is_no
     away = _path(-0.5, [-1.0, 0.0, 1.0])
     far = _path(-30.0, [1.0, 0.0, 1.0])
     lean_before = [p.axes.copy() for p in (away, far)]
-    limits = [np.full(len(p.axes), 45.0) for p in (into, away, far)]
-    reach.hold([into, away, far], limits)
+    reach.hold([into, away, far], TiltLimits(plate_z_mm=0.0, first_layer_mm=0.3, tip_radius_mm=0.0,
+                                             max_tilt_deg=45.0))
     tree_check = NozzleReach(CurvedOptions())
     tree_check._laid = list(reach._laid[:1])
     from scipy.spatial import cKDTree

@@ -29,9 +29,11 @@ class SlicerService(Service):
     name = "slicer"
 
     def __init__(self, session: zenoh.Session, cell_id: str, plate_size_mm: tuple[float, float],
-                 build_height_mm: float, data_dir: Path | None = None) -> None:
+                 build_height_mm: float, data_dir: Path | None = None, cell: Cell | None = None) -> None:
+        """``cell``: the cell the slices are printed on (curved layers lean only as far as its arm holds)."""
         super().__init__(session, cell_id, data_dir)
         self.plate_size_mm, self.build_height_mm = plate_size_mm, build_height_mm
+        self.cell = cell
         self.jobs = JobRunner("slicer", self.publisher("progress", lossless=True), data_dir=self.data_dir)
         self.handle("slice", self.on_slice)
         self.handle("job", lambda q: self.jobs.get(q.job_id))
@@ -71,7 +73,7 @@ class SlicerService(Service):
         model = self.uploads.path(req.upload_id).read_bytes() if req.upload_id else req.model
         res = slice_model(model, req.filename, profile, backend=req.backend, placement=placement,
                           plate_size_mm=self.plate_size_mm, build_height_mm=self.build_height_mm,
-                          progress=lambda fr: job.progress(fr, "slicing"), layers=req.layers)
+                          progress=lambda fr: job.progress(fr, "slicing"), layers=req.layers, cell=self.cell)
         data = res.gcode.encode() if isinstance(res.gcode, str) else bytes(res.gcode)
         name = req.filename.rsplit(".", 1)[0] + ".gcode"
         gid = self.store_artifact(s.Artifact(artifact_id=content_id(data), name=name,
@@ -104,4 +106,4 @@ def build(session: zenoh.Session, cell_id: str, options: argparse.Namespace) -> 
     cell = Cell.load_or_builtin(options.cell_config)
     size = (float(cell.plate_size_mm[0]), float(cell.plate_size_mm[1]))
     return SlicerService(session, cell_id, size, options.build_height,
-                         service_data_dir(options.data_dir, cell_id, "slicer"))
+                         service_data_dir(options.data_dir, cell_id, "slicer"), cell=cell)

@@ -14,6 +14,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import metadata
+from typing import Any
 
 from fabric.slicing.builtin.slicer import slice_mesh
 from fabric.slicing.external import EXTERNAL, external_version, run_external
@@ -81,12 +82,15 @@ def available_backends() -> dict[str, str | None]:
 def slice_model(data: bytes, filename: str, profile: Profile, backend: str = "builtin",
                 placement: Placement | None = None, plate_size_mm: tuple[float, float] = (250.0, 250.0),
                 build_height_mm: float = 250.0,
-                progress: Callable[[float], None] | None = None, layers: str = "planar") -> SliceResult:
+                progress: Callable[[float], None] | None = None, layers: str = "planar",
+                cell: Any = None) -> SliceResult:
     """Slice a model given as bytes (format from ``filename``'s suffix) with ``profile`` on ``backend``.
 
     ``layers`` "curved" runs the built-in curved-layer slicer (:mod:`.curved`), which writes the
-    multi-axis dialect. Raises NotFound (unknown or missing back-end), BadRequest (curved layers on
-    an external back-end), MeshError, PlacementError, SlicerError (an external slicer failed).
+    multi-axis dialect, with nozzle axes the arm of ``cell`` (a :class:`fabric.robot.cell.Cell`, when given)
+    holds where the part stands on its plate. Raises NotFound (unknown or missing back-end), BadRequest
+    (curved layers on an external back-end), MeshError, PlacementError, SlicerError (an external slicer
+    failed).
     """
     t0 = time.perf_counter()
     if backend not in BACKENDS:
@@ -111,7 +115,7 @@ def slice_model(data: bytes, filename: str, profile: Profile, backend: str = "bu
     curved: dict[str, float] = {}           # a curved slice's measured figures (curved/metrics.py)
     if layers == "curved":
         from fabric.slicing.curved import slice_curved  # TetGen and the field solvers: only when asked
-        cs = slice_curved(placed, profile, progress=sub(0.05, 0.98))
+        cs = slice_curved(placed, profile, progress=sub(0.05, 0.98), cell=cell)
         gcode, layers_n, extruded, filament = cs.gcode, cs.layers, cs.extruded_mm3, cs.filament_mm
         retractions, travel_mm, bridge_mm2 = cs.retractions, cs.travel_mm, 0.0
         warnings += cs.warnings

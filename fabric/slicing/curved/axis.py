@@ -24,12 +24,23 @@ degrees: ``1 sin 5 = 0.09`` mm on the multi-axis cell, within the thinnest
 layer the bounds allow). Where the layer itself leans further than the tilt
 limit plus that, the tilt limit wins and the deviation grows; the slice
 reports its largest.
+
+The cell's arm. Where the slicer knows the cell, the tilt limit also depends
+on where the nozzle is and which way it leans: what the arm holds there
+without a joint at its limit or the wrist at its singularity
+(:mod:`.cell_tilt`). :class:`TiltLimits` is the one rule every step asks (the
+field's axes, the band's direction, the paths' axes, the nozzle's reach).
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-__all__ = ["limit_tilt", "limit_deviation", "plate_tilt_deg", "smooth_along", "unit_rows"]
+if TYPE_CHECKING:
+    from fabric.slicing.curved.cell_tilt import CellTilts
+
+__all__ = ["limit_tilt", "limit_deviation", "plate_tilt_deg", "smooth_along", "unit_rows", "TiltLimits"]
 
 AXIS_SMOOTHING_PASSES = 3       # box filters along a path: about a Gaussian
 
@@ -84,6 +95,32 @@ def plate_tilt_deg(height_mm: np.ndarray, first_layer_mm: float, tip_radius_mm: 
         return np.full(h.shape, max_tilt_deg)
     sin_a = np.clip((h - first_layer_mm) / tip_radius_mm, 0.0, 1.0)
     return np.minimum(np.degrees(np.arcsin(sin_a)), max_tilt_deg)
+
+
+class TiltLimits:
+    """The largest tilt (deg) of the nozzle at a point along the way its axis leans: ``max_tilt_deg``, the plate's
+    rule for a tip of ``tip_radius_mm`` (:func:`plate_tilt_deg`, heights over ``plate_z_mm``) and, given the
+    cell's tilts, what its arm holds there (:class:`.cell_tilt.CellTilts`)."""
+
+    def __init__(self, plate_z_mm: float, first_layer_mm: float, tip_radius_mm: float, max_tilt_deg: float,
+                 cell: CellTilts | None = None) -> None:
+        self.plate_z_mm = plate_z_mm
+        self.first_layer_mm = first_layer_mm
+        self.tip_radius_mm = tip_radius_mm
+        self.max_tilt_deg = max_tilt_deg
+        self.cell = cell
+
+    def deg(self, points_mm: np.ndarray, axes: np.ndarray) -> np.ndarray:
+        """(n,) the largest tilt at each point along the lean of its axis (the axis's tilt is not looked at)."""
+        p = np.asarray(points_mm, dtype=float)
+        limit = plate_tilt_deg(p[:, 2] - self.plate_z_mm, self.first_layer_mm, self.tip_radius_mm, self.max_tilt_deg)
+        if self.cell is None or len(p) == 0:
+            return limit
+        return np.minimum(limit, self.cell.limit_deg(p, axes))
+
+    def hold(self, points_mm: np.ndarray, axes: np.ndarray) -> np.ndarray:
+        """Unit ``axes`` turned towards +z, in their vertical plane, where they lean past the limit."""
+        return limit_tilt(axes, self.deg(points_mm, axes))
 
 
 def smooth_along(points_mm: np.ndarray, axes: np.ndarray, closed: bool, width_mm: float,

@@ -18,13 +18,24 @@ to a direction field ``X``: the normal of the nearest followed faces, so past
 the followed faces the band's layers run on straight (in the followed faces'
 last direction) until they leave the part through its surface. A face is
 followed when it faces up no further from +z than the nozzle may tilt there
-(:func:`.axis.plate_tilt_deg`: so the band's layers flatten towards the plate
-as the nozzle must) and ``top_slope_deg``; ``X`` is limited to the same tilt
-at each element's height. Where the band's layers would overhang a side wall
+(:class:`.axis.TiltLimits`: so the band's layers flatten towards the plate
+as the nozzle must, and lean no further than the cell's arm holds) and
+``top_slope_deg``; ``X`` is limited to the same tilt at each element. Where the band's layers would overhang a side wall
 (a wall leaning out further than 45 degrees from them, as round a frustum's
 top) ``X`` turns to the core's build direction within ``margin`` of the wall
 and the top faces there are not followed: the band's layers bend down with
 the core's and leave through the top instead.
+
+Only the part's tops are followed. Faces that face up but have the part rise
+above them (a cup's floor inside its walls, the ledge round the sample part's
+boss) are not the top: a band under them has its layers run on into the
+material beside them, which then lies above the band's top (``g < 0``) and
+was neither band nor core (the sample part's curved slice laid 18 layers of a
+100-layer cup). A connected patch of followed faces is kept only when no node
+of the part stands more than ``TOP_TOLERANCE_MM`` above the patch's highest
+point within ``margin`` of it (in plan view), after the faces near walls are
+let go (what is left of a flaring lip's inside is no top: the lip rises over
+it); the core lays the rest, as planar layers would.
 """
 from __future__ import annotations
 
@@ -32,9 +43,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from fabric.slicing.curved.axis import limit_tilt, plate_tilt_deg, unit_rows
+from fabric.slicing.curved.axis import TiltLimits, unit_rows
 from fabric.slicing.curved.heat import (
     FemOperators,
     edge_distance,
@@ -46,9 +59,10 @@ from fabric.slicing.curved.heat import (
 from fabric.slicing.curved.options import CurvedOptions
 from fabric.slicing.curved.tetmesh import TetMesh
 
-__all__ = ["Band", "build_band", "followed_faces"]
+__all__ = ["Band", "build_band", "followed_faces", "top_patches"]
 
 NEAREST_FACES = 8            # followed faces whose normals (inverse-square distance weighted) give X
+TOP_TOLERANCE_MM = 0.5       # a node this much above a patch's highest point, beside it: the patch is not the top
 SIN45 = math.sin(math.radians(45.0))
 
 
@@ -62,17 +76,45 @@ class Band:
     followed: np.ndarray         # (f,) bool over mesh.boundary_faces(): the faces the band's top layer is
 
 
-def followed_faces(mesh: TetMesh, options: CurvedOptions, first_layer_mm: float) -> np.ndarray:
+def followed_faces(mesh: TetMesh, options: CurvedOptions, tilts: TiltLimits) -> np.ndarray:
     """(f,) the boundary faces the band follows: off the plate, facing up no further from +z than the nozzle may
-    tilt at their lowest corner's height (and ``top_slope_deg``)."""
+    tilt at their lowest corner (``tilts``, along the way the face leans) and ``top_slope_deg``."""
     faces, normals = mesh.boundary_faces()
     z = mesh.nodes[:, 2]
     zmin = float(z.min())
     on_plate = np.all(z[faces] <= zmin + 0.02, axis=1)
     tilt = np.degrees(np.arccos(np.clip(normals[:, 2], -1.0, 1.0)))
-    limit = np.minimum(plate_tilt_deg(z[faces].min(axis=1) - zmin, first_layer_mm, options.tip_radius_mm,
-                                      options.max_tilt_deg), options.top_slope_deg)
+    low = mesh.nodes[faces].mean(axis=1)
+    low[:, 2] = z[faces].min(axis=1)
+    limit = np.minimum(tilts.deg(low, normals), options.top_slope_deg)
     return (tilt <= limit) & ~on_plate
+
+
+def top_patches(mesh: TetMesh, faces: np.ndarray, followed: np.ndarray, margin_mm: float) -> np.ndarray:
+    """(f,) ``followed`` less the patches (faces connected through their corners) that have the part rising
+    above them within ``margin_mm`` in plan view (module docstring: only the part's tops are followed)."""
+    idx = np.flatnonzero(followed)
+    if len(idx) == 0:
+        return followed
+    corners = faces[idx]
+    # faces sharing a node are one patch: a graph of the followed faces through their nodes
+    n_nodes = len(mesh.nodes)
+    rows = np.repeat(np.arange(len(idx)), 3)
+    incidence = sp.csr_matrix((np.ones(len(rows)), (rows, corners.ravel())), shape=(len(idx), n_nodes))
+    n_patches, label = connected_components(incidence @ incidence.T, directed=False)
+    z = mesh.nodes[:, 2]
+    out = followed.copy()
+    for k in range(n_patches):
+        mine = idx[label == k]
+        nodes = np.unique(faces[mine].ravel())
+        top = float(z[nodes].max())
+        higher = np.flatnonzero(z > top + TOP_TOLERANCE_MM)
+        if len(higher) == 0:
+            continue
+        dist, _i = cKDTree(mesh.nodes[nodes, :2]).query(mesh.nodes[higher, :2], distance_upper_bound=margin_mm)
+        if np.any(np.isfinite(dist)):
+            out[mine] = False
+    return out
 
 
 def _nearest_normals(centres: np.ndarray, normals: np.ndarray, areas: np.ndarray, at: np.ndarray) -> np.ndarray:
@@ -86,14 +128,14 @@ def _nearest_normals(centres: np.ndarray, normals: np.ndarray, areas: np.ndarray
 
 
 def build_band(mesh: TetMesh, ops: FemOperators, core_field: np.ndarray, options: CurvedOptions,
-               first_layer_mm: float, margin_mm: float) -> Band | None:
+               tilts: TiltLimits, margin_mm: float) -> Band | None:
     """The band field of ``mesh`` (module docstring), or None when no face can be followed.
 
     ``core_field`` is the core's layer field (its gradient is the direction the band bends to at walls it
     would overhang); ``margin_mm`` how far from such walls it does.
     """
     faces, normals = mesh.boundary_faces()
-    followed = followed_faces(mesh, options, first_layer_mm)
+    followed = followed_faces(mesh, options, tilts)
     if not np.any(followed):
         return None
     p = mesh.nodes[faces]
@@ -106,7 +148,6 @@ def build_band(mesh: TetMesh, ops: FemOperators, core_field: np.ndarray, options
     wall = ~followed & ~on_plate & (np.einsum("ij,ij->i", normals, x_face) < -SIN45)
     tet_c = mesh.nodes[mesh.tets].mean(axis=1)
     x = _nearest_normals(centres[followed], normals[followed], areas[followed], tet_c)
-    tilt = plate_tilt_deg(tet_c[:, 2] - zmin, first_layer_mm, options.tip_radius_mm, options.max_tilt_deg)
     if np.any(wall):
         near, _ = cKDTree(centres[wall]).query(tet_c, distance_upper_bound=margin_mm)
         w = np.clip(1.0 - np.asarray(near) / margin_mm, 0.0, 1.0)
@@ -114,9 +155,10 @@ def build_band(mesh: TetMesh, ops: FemOperators, core_field: np.ndarray, options
         x = unit_rows((1.0 - w)[:, None] * x + w[:, None] * core)
         face_near, _ = cKDTree(centres[wall]).query(centres, distance_upper_bound=margin_mm)
         followed = followed & ~np.isfinite(face_near)
-        if not np.any(followed):
-            return None
-    x = limit_tilt(x, tilt)
+    followed = top_patches(mesh, faces, followed, margin_mm)       # what is left of a top may be no top
+    if not np.any(followed):
+        return None
+    x = tilts.hold(tet_c, x)
     sources = np.unique(faces[followed].ravel())
     g = fit_potential(mesh, ops, -x, sources, edge_distance(mesh, sources))
     direction = unit_rows(-node_gradients(ops, mesh.tets, g))

@@ -8,7 +8,9 @@ Two scalar fields on the volume mesh define the layers:
   like wave fronts, so they climb along an outward-leaning wall (the wall's
   normal is perpendicular to the front's direction: no overhang) and up both
   legs of an arch, where they meet in a crease over the crown, which is rounded
-  (:mod:`.crease`). Layers are its level sets, ``nominal`` apart along the gradient.
+  (:mod:`.crease`), and lean no further than the nozzle can follow them
+  (:mod:`.lean`: round a hook's curl they would lean past horizontal).
+  Layers are its level sets, ``nominal`` apart along the gradient.
 * the *band* field ``d_top``: the distance from the top surface (faces whose
   normal is within ``top_slope_deg`` of +z). The last ``top_band_layers``
   layers are its level sets ``d_top = const`` below the top, so the part's top
@@ -26,8 +28,10 @@ fronts meet: 0.17 on an arch's crown, which read the layers there as almost
 six times their step and thinned the whole layer for it). The nozzle axis is
 that direction smoothed over the mesh (Laplacian passes over its edges,
 which averages it with its neighbours in every direction, across layers too)
-and then limited to the tilt the cell reaches (rotated towards +z in the
-vertical plane that holds it).
+and then limited to the tilt the cell reaches there, the way it leans
+(:class:`.axis.TiltLimits`: rotated towards +z in the vertical plane that
+holds it). Core layers end solid under the tops the band does not follow
+(:mod:`.tops`).
 """
 from __future__ import annotations
 
@@ -37,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from fabric.slicing.curved.axis import limit_deviation, limit_tilt, plate_tilt_deg, unit_rows
+from fabric.slicing.curved.axis import TiltLimits, limit_deviation, limit_tilt, unit_rows
 from fabric.slicing.curved.band import build_band
 from fabric.slicing.curved.crease import round_creases
 from fabric.slicing.curved.heat import (
@@ -47,8 +51,10 @@ from fabric.slicing.curved.heat import (
     node_gradient_norms,
     node_gradients,
 )
+from fabric.slicing.curved.lean import limit_lean
 from fabric.slicing.curved.options import CurvedOptions
 from fabric.slicing.curved.tetmesh import TetMesh
+from fabric.slicing.curved.tops import under_tops_mm
 from fabric.wire.errors import MeshError
 
 __all__ = ["LayerField", "build_field", "limit_tilt", "base_nodes", "plate_blend"]
@@ -75,6 +81,7 @@ class LayerField:
     in_band: np.ndarray          # (n,) bool
     band_clip_mm: np.ndarray     # (n,) d_top - band: < 0 in the band, >= 0 in the core
     followed: np.ndarray         # (f,) bool over mesh.boundary_faces(): the top faces the band follows
+    under_top_mm: np.ndarray     # (n,) distance from the nearest top the band does not follow (:mod:`.tops`)
 
     @property
     def build_dir(self) -> np.ndarray:
@@ -104,24 +111,24 @@ def _crease_half_angles_deg(build: np.ndarray, edges: np.ndarray, adj: sp.csr_ma
     return out
 
 
-def _nozzle_axes(build: np.ndarray, edges: np.ndarray, max_tilt_deg: np.ndarray, options: CurvedOptions,
+def _nozzle_axes(build: np.ndarray, edges: np.ndarray, nodes: np.ndarray, tilts: TiltLimits, options: CurvedOptions,
                  ) -> np.ndarray:
     """Tilt-limited nozzle axes: the build direction smoothed over the mesh edges (Laplacian passes,
     renormalised, each kept within ``max_axis_deviation_deg`` of the node's build direction), as few passes
     as bring every edge's two axes within ``max_neighbour_deg`` (at least ``MIN_SMOOTHING_PASSES``, at most
-    ``axis_smoothing_passes``), then limited to each node's ``max_tilt_deg``."""
+    ``axis_smoothing_passes``), then limited to the tilt allowed at each node (``tilts``)."""
     n = len(build)
     adj = sp.csr_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
                         shape=(n, n))
     deg = np.asarray(adj.sum(axis=1))
     cos_limit = math.cos(math.radians(options.max_neighbour_deg))
     out = build
-    axes = limit_tilt(out, max_tilt_deg)
+    axes = tilts.hold(nodes, out)
     allowed = np.maximum(options.max_axis_deviation_deg, _crease_half_angles_deg(build, edges, adj))
     for k in range(options.axis_smoothing_passes):
         out = 0.5 * out + 0.5 * (adj @ out) / np.maximum(deg, 1.0)
         out = limit_deviation(out, build, allowed)
-        axes = limit_tilt(out, max_tilt_deg)
+        axes = tilts.hold(nodes, out)
         if k + 1 >= MIN_SMOOTHING_PASSES and np.einsum("ij,ij->i", axes[edges[:, 0]], axes[edges[:, 1]]).min() \
                 >= cos_limit:
             break
@@ -139,8 +146,9 @@ def plate_blend(height_mm: np.ndarray, first_layer_mm: float, blend_mm: float) -
 
 
 def build_field(mesh: TetMesh, options: CurvedOptions, nominal_mm: float, side_margin_mm: float,
-                first_layer_mm: float) -> LayerField:
-    """Solve the core and band fields on ``mesh`` (a tetrahedralised part) and derive the nozzle axes."""
+                first_layer_mm: float, tilts: TiltLimits | None = None) -> LayerField:
+    """Solve the core and band fields on ``mesh`` (a tetrahedralised part) and derive the nozzle axes, each no
+    more tilted than ``tilts`` allows (default: the options' limit and the plate's rule)."""
     ops = fem_operators(mesh)
     base = base_nodes(mesh.nodes)
     if len(base) == 0:
@@ -149,12 +157,14 @@ def build_field(mesh: TetMesh, options: CurvedOptions, nominal_mm: float, side_m
     w = plate_blend(height, first_layer_mm, options.plate_blend_mm)
     geodesic = round_creases(mesh, ops, geodesic_distance(mesh, ops, base, options.heat_time_r),
                              options.crease_flatten_r, options.crease_width_mm)
-    d_base = w * geodesic + (1.0 - w) * height
+    if tilts is None:
+        tilts = TiltLimits(float(mesh.nodes[:, 2].min()), first_layer_mm, options.tip_radius_mm, options.max_tilt_deg)
+    d_base = limit_lean(mesh, ops, w * geodesic + (1.0 - w) * height, base, tilts)
     core_dir = unit_rows(node_gradients(ops, mesh.tets, d_base))
     core_grad = node_gradient_norms(ops, mesh.tets, d_base)
     n = len(mesh.nodes)
-    band = build_band(mesh, ops, d_base, options, first_layer_mm, margin_mm=max(side_margin_mm, 2.0 * nominal_mm *
-                                                                                  options.top_band_layers))
+    band = build_band(mesh, ops, d_base, options, tilts, margin_mm=max(side_margin_mm, 2.0 * nominal_mm *
+                                                                       options.top_band_layers))
     band_mm = options.top_band_layers * nominal_mm if band is not None else 0.0
     if band is not None and band_mm > 0.0:
         d_top, band_dir, band_grad, followed = band.g_mm, band.direction, band.grad_r, band.followed
@@ -166,8 +176,7 @@ def build_field(mesh: TetMesh, options: CurvedOptions, nominal_mm: float, side_m
         followed = np.zeros(len(mesh.boundary_faces()[0]), dtype=bool)
     in_band = clip < 0.0
     build = np.where(in_band[:, None], band_dir, core_dir)
-    tilt = plate_tilt_deg(height, first_layer_mm, options.tip_radius_mm, options.max_tilt_deg)
-    axis = _nozzle_axes(build, mesh.edges, tilt, options)
+    axis = _nozzle_axes(build, mesh.edges, mesh.nodes, tilts, options)
     return LayerField(mesh=mesh, ops=ops, d_base_mm=d_base, d_top_mm=d_top, band_mm=band_mm, core_dir=core_dir,
                       core_grad_r=core_grad, band_dir=band_dir, band_grad_r=band_grad, axis=axis, in_band=in_band,
-                      band_clip_mm=clip, followed=followed)
+                      band_clip_mm=clip, followed=followed, under_top_mm=under_tops_mm(mesh, core_dir, followed))

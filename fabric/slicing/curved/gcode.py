@@ -26,6 +26,7 @@ __all__ = ["MULTIAXIS_HEADER", "GcodeTotals", "write_multiaxis"]
 MULTIAXIS_HEADER = "multiaxis: nozzle axis in I J K"
 TYPE_NAMES = {"perimeter": "Perimeter", "solid infill": "Solid infill", "infill": "Internal infill"}
 TRAVEL_LIFT_MM = 1.0          # travels that retract leave and approach along the nozzle axis by this much
+END_CLEARANCE_MM = 2.0        # the print ends with the nozzle upright this far over the part's highest bead
 # no move turns the nozzle more than this: the twin (and a controller's joint interpolation) moves the joints
 # linearly between two targets, and the tip strays from the straight line the more the nozzle turns (0.05 mm
 # for 1 degree, 0.3 mm for 5 on the multi-axis cell): a move that turns more is written in equal pieces
@@ -160,6 +161,14 @@ def write_multiaxis(layers: list[list[CurvedPath]], profile: Profile, header: li
     if not retracted and p.retract_length_mm > 0 and here is not None:
         out.append(f"G1 E{-p.retract_length_mm:.5f} F{retract_f:.0f}")
         retractions += 1
+    if here is not None:
+        # end over the part with the nozzle upright: off the last bead along its axis, then straight up clear of
+        # the part, turning upright on the way (the planner's return home rises from there along the axis: 50 mm
+        # along a tilted last axis took the hook's wrist past its limit)
+        go(here + here_axis * lift, here_axis)
+        assert at is not None
+        clear = max(float(np.max(heights.z)), float(at[2])) + END_CLEARANCE_MM
+        go(np.array([at[0], at[1], clear]), np.array([0.0, 0.0, 1.0]))
     out += [";TYPE:Custom", "M104 S0", "M140 S0", ""]
     moves = _format_moves(np.vstack(blocks)) if blocks else []
     first = np.r_[0, np.cumsum([len(b) for b in blocks])].tolist()

@@ -24,11 +24,12 @@ from fabric.slicing.curved.isosurface import Surface, boundary_loops, clip_surfa
 from fabric.slicing.flow import bead_spacing_mm
 from fabric.slicing.profile import Profile
 
-__all__ = ["CurvedPath", "LayerSpec", "layer_paths", "order_paths", "POS", "NORMAL", "AXIS", "THICK", "CLIP"]
+__all__ = ["CurvedPath", "LayerSpec", "layer_paths", "order_paths", "POS", "NORMAL", "AXIS", "THICK", "CLIP",
+           "UNDER_TOP"]
 
-# attribute columns carried by layer surfaces
+# attribute columns carried by layer surfaces (UNDER_TOP: the distance from a top the band does not lay, mm)
 POS, NORMAL, AXIS = slice(0, 3), slice(3, 6), slice(6, 9)
-THICK, CLIP, N_ATTRS = 9, 10, 11
+THICK, CLIP, UNDER_TOP, N_ATTRS = 9, 10, 11, 12
 MIN_PATH_R = 2.0            # paths shorter than this many bead widths are dropped
 MIN_STEP_MM = 0.02          # points closer than this along a path are merged
 
@@ -122,19 +123,28 @@ def layer_paths(surface: Surface, spec: LayerSpec, profile: Profile) -> list[Cur
     levels = (np.arange(profile.perimeters) + 0.5) * spacing
     for lines in iso_lines_many(with_dist, dist, levels):
         out += _paths(lines, spec, "perimeter", width)
-    density = 1.0 if spec.solid else profile.infill_density_r
-    if density <= 0.0:
-        return out
     region = clip_surface(with_dist, N_ATTRS, inner) if profile.perimeters else with_dist
+    if spec.solid:
+        return out + _infill(region, spec, "solid infill", spacing, width)
+    # sparse, but solid within the top layers under a top the band does not lay (tops.py)
+    depth = profile.top_solid_layers * profile.layer_height_mm
+    out += _infill(clip_surface(region, UNDER_TOP, depth, keep_above=False), spec, "solid infill", spacing, width)
+    if profile.infill_density_r > 0.0:
+        out += _infill(clip_surface(region, UNDER_TOP, depth), spec, "infill", spacing / profile.infill_density_r,
+                       width)
+    return out
+
+
+def _infill(region: Surface, spec: LayerSpec, role: str, pitch_mm: float, width_mm: float) -> list[CurvedPath]:
+    """Infill lines ``pitch_mm`` apart over ``region``, at the layer's infill angle."""
     if len(region.tris) == 0:
-        return out
+        return []
     angle = math.radians(spec.infill_angle_deg)
     coord = region.points[:, 0] * math.cos(angle) + region.points[:, 1] * math.sin(angle)
-    pitch = spacing / density
-    first = math.floor(coord.min() / pitch) * pitch + pitch / 2.0
-    role = "solid infill" if spec.solid else "infill"
-    for lines in iso_lines_many(region, coord, np.arange(first, coord.max(), pitch)):
-        out += _paths(lines, spec, role, width)
+    first = math.floor(coord.min() / pitch_mm) * pitch_mm + pitch_mm / 2.0
+    out: list[CurvedPath] = []
+    for lines in iso_lines_many(region, coord, np.arange(first, coord.max(), pitch_mm)):
+        out += _paths(lines, spec, role, width_mm)
     return out
 
 

@@ -15,7 +15,8 @@ before:
 1. first towards +z in its own vertical plane (a fraction of its tilt at a
    time, the least that clears);
 2. else to the clear direction nearest it of a fixed fan (vertical, and tilts
-   up to the point's tilt limit all round);
+   all round, each as far as the point's tilt limit allows that way:
+   :class:`.axis.TiltLimits`);
 3. else it is left as it was and counted: the slice warns of such points, and
    the collision check of the planned program has the last word.
 
@@ -34,7 +35,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fabric.robot.tool import taper_cover
-from fabric.slicing.curved.axis import limit_tilt, smooth_along, unit_rows
+from fabric.slicing.curved.axis import TiltLimits, limit_tilt, smooth_along, unit_rows
 from fabric.slicing.curved.options import CurvedOptions
 from fabric.slicing.curved.paths import CurvedPath
 
@@ -48,7 +49,8 @@ SHANK_COARSE_MM = 2.0           # ... in pieces this long
 NEIGHBOURS = 24                 # bead centres measured exactly round each piece
 BEAD_STEP_MM = 0.15             # a path's bead centres kept this far apart (the margin covers half of it)
 REBUILD_R = 0.25                # the older beads' tree is rebuilt when the newer ones reach this share of it
-LOOK_STEP_MM = 0.5              # a path is first looked at with points this far apart
+LOOK_STEP_MM = 0.15             # a path is first looked at with points this far apart (the margin covers half:
+                                # 0.5 mm apart, a cone between two points clear met a bead of the arch's crown)
 PASSES = 4                      # turn, smooth along the path, look again: at most this many times
 TURN_FRACTIONS = (0.15, 0.3, 0.45, 0.6, 0.75, 0.9, 1.0)
 _FAN_TILTS_DEG = (10.0, 20.0, 30.0, 40.0, 45.0)
@@ -92,6 +94,15 @@ def nozzle_pieces(opts: CurvedOptions) -> list[tuple[float, float, float]]:
     return pieces
 
 
+class _FanLooks:
+    """Which directions of the fan the tilt limit allows and clear the beads at each point of one path (looked at
+    once per point: the fan, the point and the beads laid before do not change between the passes over it)."""
+
+    def __init__(self, n: int) -> None:
+        self.known = np.zeros(n, dtype=bool)
+        self.clear = np.zeros((n, len(FAN)), dtype=bool)
+
+
 class NozzleReach:
     """The bead centres laid so far, layer by layer, and the rule of the module docstring."""
 
@@ -105,9 +116,9 @@ class NozzleReach:
         self.turned = 0           # points whose axis was turned
         self.blocked = 0          # points no axis cleared (left as they were)
 
-    def hold(self, paths: list[CurvedPath], tilt_limit_deg: list[np.ndarray]) -> list[CurvedPath]:
-        """Turn the axes of one layer's ``paths`` (each point's tilt at most ``tilt_limit_deg``) where they
-        must, then count the layer's beads as laid."""
+    def hold(self, paths: list[CurvedPath], tilts: TiltLimits) -> list[CurvedPath]:
+        """Turn the axes of one layer's ``paths`` (each point's tilt within ``tilts``) where they must, then count
+        the layer's beads as laid."""
         if not paths or not self.pieces:
             return paths
         # the beads as centres at most BEAD_STEP_MM apart along their paths (a fine path is not a wider bead)
@@ -124,10 +135,10 @@ class NozzleReach:
                                 zip(paths, some, strict=True)])
         bad = self._blocked(points, axes, trees, reach)
         ends = np.cumsum([len(i) for i in some])
-        for path, limit, b, a in zip(paths, tilt_limit_deg, ends, np.r_[0, ends[:-1]], strict=True):
+        for path, b, a in zip(paths, ends, np.r_[0, ends[:-1]], strict=True):
             self.checked += len(path.axes)
             if bad[a:b].any():
-                self._hold_path(path, limit, trees)
+                self._hold_path(path, tilts, trees)
         return paths
 
     def _trees(self) -> list[cKDTree]:
@@ -142,17 +153,18 @@ class NozzleReach:
             return [self._old]
         return [self._old, cKDTree(np.vstack(self._recent))]
 
-    def _hold_path(self, path: CurvedPath, limit_deg: np.ndarray, trees: list[cKDTree]) -> None:
+    def _hold_path(self, path: CurvedPath, tilts: TiltLimits, trees: list[cKDTree]) -> None:
         reach = 0.5 * path.width_mm + MARGIN_MM
         bad = self._blocked(path.points_mm, path.axes, trees, reach)
         if not bad.any():
             return
         first = int(bad.sum())
+        fan = _FanLooks(len(path.axes))          # a point's fan is the same in every pass: looked at once
         for _pass in range(PASSES):
-            turned, todo = self._turn(path, bad, limit_deg, trees, reach)
+            turned, todo = self._turn(path, bad, tilts, trees, reach, fan)
             smooth = smooth_along(path.points_mm, turned, path.closed, self.opts.path_axis_window_mm)
             keep = bad & ~todo & (smooth[:, 2] < turned[:, 2])       # never less upright than the turn made it
-            path.axes = limit_tilt(unit_rows(np.where(keep[:, None], turned, smooth)), limit_deg)
+            path.axes = tilts.hold(path.points_mm, unit_rows(np.where(keep[:, None], turned, smooth)))
             bad = self._blocked(path.points_mm, path.axes, trees, reach)
             if not bad.any():
                 break
@@ -160,8 +172,8 @@ class NozzleReach:
         self.turned += first - left
         self.blocked += left
 
-    def _turn(self, path: CurvedPath, bad: np.ndarray, limit_deg: np.ndarray, trees: list[cKDTree], reach: float
-              ) -> tuple[np.ndarray, np.ndarray]:
+    def _turn(self, path: CurvedPath, bad: np.ndarray, tilts: TiltLimits, trees: list[cKDTree], reach: float,
+              fan: _FanLooks) -> tuple[np.ndarray, np.ndarray]:
         """The axes with the ``bad`` ones turned (steps 1 and 2 of the module docstring), and which are left."""
         turned = path.axes.copy()
         todo = bad.copy()
@@ -176,13 +188,17 @@ class NozzleReach:
             todo[idx[ok]] = False
         idx = np.flatnonzero(todo)
         if len(idx):
-            # every point against every direction of the fan in one look (point by point, direction by direction)
-            m, n_fan = len(idx), len(FAN)
-            clear = ~self._blocked(np.repeat(path.points_mm[idx], n_fan, axis=0), np.tile(FAN, (m, 1)), trees,
-                                   reach).reshape(m, n_fan)
-            best = np.full(m, -2.0)
-            for j, (d, d_tilt) in enumerate(zip(FAN, FAN_TILT_DEG, strict=True)):
-                ok = clear[:, j] & (d_tilt <= limit_deg[idx] + 1e-9)
+            # every point not looked at yet against every direction of the fan in one look
+            new = idx[~fan.known[idx]]
+            if len(new):
+                looks, towards = np.repeat(path.points_mm[new], len(FAN), axis=0), np.tile(FAN, (len(new), 1))
+                allowed = tilts.deg(looks, towards).reshape(len(new), -1) + 1e-9 >= FAN_TILT_DEG
+                fan.clear[new] = allowed & ~self._blocked(looks, towards, trees, reach).reshape(len(new), -1)
+                fan.known[new] = True
+            clear = fan.clear[idx]
+            best = np.full(len(idx), -2.0)
+            for j, d in enumerate(FAN):
+                ok = clear[:, j]
                 score = np.where(ok, path.axes[idx] @ d, -2.0)
                 better = score > best
                 turned[idx[better]] = d
@@ -193,23 +209,28 @@ class NozzleReach:
     def _blocked(self, points: np.ndarray, axes: np.ndarray, trees: list[cKDTree], reach_mm: float | np.ndarray
                  ) -> np.ndarray:
         """(n,) bool: the nozzle on ``axes`` at ``points`` comes within ``reach_mm`` (one, or one per point) of a
-        bead centre."""
+        bead centre. Each piece is looked at only for the rows still clear (a row blocked low on the nozzle,
+        as most of a blocked fan's are, costs a piece or two instead of all of them)."""
         bad = np.zeros(len(points), dtype=bool)
         reach = np.broadcast_to(np.asarray(reach_mm, dtype=float), (len(points),))
         widest = float(reach.max(initial=0.0))
         for tree in trees:
             beads = tree.data
             for s0, s1, radius in self.pieces:
-                centre = points + axes * (0.5 * (s0 + s1))
+                alive = np.flatnonzero(~bad)
+                if len(alive) == 0:
+                    return bad
+                centre = points[alive] + axes[alive] * (0.5 * (s0 + s1))
                 bound = float(np.hypot(radius, 0.5 * (s1 - s0))) + widest
                 # the nearest bead first (cheap): only where one is within the piece's ball, the nearest few
                 nearest, _i = tree.query(centre, k=1, distance_upper_bound=bound)
-                close = np.flatnonzero(np.isfinite(nearest) & ~bad)
+                close = np.flatnonzero(np.isfinite(nearest))
                 if len(close) == 0:
                     continue
                 _d, near = tree.query(centre[close], k=NEIGHBOURS, distance_upper_bound=bound)
                 found = near < len(beads)
-                rows = close[np.nonzero(found)[0]]
+                hit = np.nonzero(found)[0]
+                rows = alive[close[hit]]
                 rel = beads[near[found]] - points[rows]
                 a = axes[rows]
                 along = np.einsum("ij,ij->i", rel, a)

@@ -1,10 +1,15 @@
-"""Generated test parts for curved slicing: a dome, an inverted frustum, an arch and a wing.
+"""Generated test parts for curved slicing: a dome, an inverted frustum, an arch and a wing; and three the
+slicer was not tuned on, a hook, a vase with a flared lip and a bridge with a skewed span.
 
 Each is a watertight, outward-wound :class:`trimesh.Trimesh` in mm resting
 on z = 0 and centred on the origin in XY; the slicer places it on the plate
 as any other model. They exercise what curved layers are for: a top surface
 to follow (dome, wing), walls overhanging more than 45 degrees (frustum), an
-unsupported span (arch).
+unsupported span (arch). The others (:data:`OTHER_SHAPES`) go where the
+first four do not: a curl that leans its layers past horizontal, away from
+the robot (hook), a cup whose floor and rim are tops the band must not
+follow and a lip flaring out 50 degrees (flared vase), a span at an angle
+to its piers and to the robot (skewed bridge).
 """
 from __future__ import annotations
 
@@ -14,7 +19,8 @@ import numpy as np
 import trimesh
 from shapely.geometry import Polygon
 
-__all__ = ["dome", "inverted_frustum", "arch", "wing", "extrude_xz", "SHAPES"]
+__all__ = ["dome", "inverted_frustum", "arch", "wing", "hook", "flared_vase", "skewed_bridge", "extrude_xz", "SHAPES",
+           "OTHER_SHAPES"]
 
 
 def _revolve(profile_rz: list[tuple[float, float]], sections: int) -> trimesh.Trimesh:
@@ -74,4 +80,48 @@ def extrude_xz(polygon: Polygon, depth_mm: float) -> trimesh.Trimesh:
     return mesh
 
 
+def hook(width_mm: float = 6.0, post_mm: float = 14.0, bend_radius_mm: float = 9.0, sweep_deg: float = 150.0,
+         depth_mm: float = 8.0, segments: int = 40) -> trimesh.Trimesh:
+    """A J hook: a post ``width_mm`` wide standing ``post_mm`` on the plate, then bending over towards +x round
+    a centre ``bend_radius_mm`` out, through ``sweep_deg`` (150: its end points down and out)."""
+    t = np.radians(np.linspace(180.0, 180.0 - sweep_deg, segments + 1))
+    outer_r, inner_r = bend_radius_mm + width_mm / 2.0, bend_radius_mm - width_mm / 2.0
+    outer = np.column_stack([bend_radius_mm + outer_r * np.cos(t), post_mm + outer_r * np.sin(t)])
+    inner = np.column_stack([bend_radius_mm + inner_r * np.cos(t[::-1]), post_mm + inner_r * np.sin(t[::-1])])
+    foot = np.array([[width_mm / 2.0, 0.0], [-width_mm / 2.0, 0.0]])
+    return extrude_xz(Polygon(np.vstack([foot, outer, inner])).buffer(0), depth_mm)
+
+
+def flared_vase(base_radius_mm: float = 9.0, waist_radius_mm: float = 8.0, lip_radius_mm: float = 17.0,
+                body_mm: float = 18.0, lip_mm: float = 7.0, wall_mm: float = 2.0, floor_mm: float = 2.0,
+                sections: int = 64) -> trimesh.Trimesh:
+    """A cup on a ``floor_mm`` floor whose wall narrows to a waist at ``body_mm`` and then flares out to a lip
+    of ``lip_radius_mm`` (about 50 degrees from vertical), its wall ``wall_mm`` thick."""
+    lip_inner = lip_radius_mm - 1.2 * wall_mm            # the lip's wall, measured across it, near wall_mm
+    return _revolve([(0.0, 0.0), (base_radius_mm, 0.0), (waist_radius_mm, body_mm),
+                     (lip_radius_mm, body_mm + lip_mm), (lip_inner, body_mm + lip_mm),
+                     (waist_radius_mm - wall_mm, body_mm + 0.5), (base_radius_mm - wall_mm, floor_mm),
+                     (0.0, floor_mm)], sections)
+
+
+def skewed_bridge(span_mm: float = 36.0, pier_mm: float = 6.0, deck_mm: float = 4.0, height_mm: float = 16.0,
+                  depth_mm: float = 10.0, skew_deg: float = 30.0, turn_deg: float = 35.0, segments: int = 40
+                  ) -> trimesh.Trimesh:
+    """A bridge: two piers ``pier_mm`` thick and a ``deck_mm`` deck over a half-elliptic opening, its span
+    skewed ``skew_deg`` against its depth (x += tan(skew) y) and turned ``turn_deg`` about z on the plate."""
+    half, a, b = span_mm / 2.0, span_mm / 2.0 - pier_mm, height_mm - deck_mm
+    t = np.linspace(0.0, math.pi, segments + 1)
+    opening = np.column_stack([-a * np.cos(t), b * np.sin(t)])          # from (-a, 0) over the top to (a, 0)
+    outline = np.vstack([[[-half, 0.0]], opening, [[half, 0.0], [half, height_mm], [-half, height_mm]]])
+    mesh = extrude_xz(Polygon(outline).buffer(0), depth_mm)
+    shear = np.eye(4)
+    shear[0, 1] = math.tan(math.radians(skew_deg))
+    mesh.apply_transform(shear)
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(math.radians(turn_deg), [0.0, 0.0, 1.0]))
+    lo, hi = mesh.bounds
+    mesh.apply_translation([-(lo[0] + hi[0]) / 2.0, -(lo[1] + hi[1]) / 2.0, -lo[2]])
+    return mesh
+
+
 SHAPES = {"dome": dome, "frustum": inverted_frustum, "arch": arch, "wing": wing}
+OTHER_SHAPES = {"hook": hook, "flared_vase": flared_vase, "skewed_bridge": skewed_bridge}

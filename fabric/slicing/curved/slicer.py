@@ -1,13 +1,15 @@
 """The curved-layer slicer: placed mesh + profile -> multi-axis G-code and its measured figures.
 
 Steps: tetrahedralise the part (:mod:`.tetmesh`); solve the core and top-band
-fields and the nozzle axes (:mod:`.field`); cut the core field's level sets
-one layer apart (the first at the first-layer height), each clipped to below
-the top band and thinned where it would leave a larger staircase on an upward
-face than planar layers do, then the band's level sets (:mod:`.isosurface`);
-lay perimeters and infill on each (:mod:`.paths`); write the multi-axis
-dialect (:mod:`.gcode`); measure the result against planar slicing
-(:mod:`.metrics`).
+fields and the nozzle axes (:mod:`.field`: the layers leaning no further than
+the nozzle can follow them, :mod:`.lean`; every axis one the cell's arm holds
+where it is, when the slicer knows the cell, :mod:`.cell_tilt`); cut the core
+field's level sets one layer apart (the first at the first-layer height), each
+clipped to below the top band and thinned where it would leave a larger
+staircase on an upward face than planar layers do, then the band's level sets
+(:mod:`.isosurface`); lay perimeters and infill on each (:mod:`.paths`); write
+the multi-axis dialect (:mod:`.gcode`); measure the result against planar
+slicing (:mod:`.metrics`).
 """
 from __future__ import annotations
 
@@ -15,11 +17,13 @@ import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import trimesh
 
-from fabric.slicing.curved.axis import limit_deviation, limit_tilt, plate_tilt_deg, smooth_along
+from fabric.slicing.curved.axis import TiltLimits, limit_deviation, smooth_along
+from fabric.slicing.curved.cell_tilt import CellTilts
 from fabric.slicing.curved.field import LayerField, build_field
 from fabric.slicing.curved.gcode import write_multiaxis
 from fabric.slicing.curved.isosurface import Surface, clip_surface, iso_surface
@@ -79,20 +83,16 @@ def _fit_step(surface: Surface, want_mm: float, bounds: ThicknessBounds) -> floa
     return max(step, min(floor, bounds.max_mm / float(inv.max())), 1e-3)
 
 
-def _held_axes(paths: list[CurvedPath], plate_z: float, profile: Profile, opts: CurvedOptions,
-               max_deviation_deg: float, reach: NozzleReach) -> list[CurvedPath]:
+def _held_axes(paths: list[CurvedPath], tilts: TiltLimits, opts: CurvedOptions, max_deviation_deg: float,
+               reach: NozzleReach) -> list[CurvedPath]:
     """The axis rules (:mod:`.axis`) held exactly at every point of ``paths``, where the tip rides: the field's
     axes are interpolated between mesh nodes, which hold them only at the nodes. Then the nozzle's reach
     (:mod:`.reach`) turns those that would run into the beads."""
-    limits = []
     for path in paths:
         axes = smooth_along(path.points_mm, path.axes, path.closed, opts.path_axis_window_mm)
         axes = limit_deviation(axes, path.normals, max_deviation_deg)
-        tilt = plate_tilt_deg(path.points_mm[:, 2] - plate_z, profile.first_layer_height_mm,
-                              opts.tip_radius_mm, opts.max_tilt_deg)
-        path.axes = limit_tilt(axes, tilt)
-        limits.append(tilt)
-    return reach.hold(paths, limits)
+        path.axes = tilts.hold(path.points_mm, axes)
+    return reach.hold(paths, tilts)
 
 
 def _core_layer(fld: LayerField, attrs: np.ndarray, level: float, step: float) -> Surface:
@@ -144,7 +144,7 @@ def _layer_surfaces(fld: LayerField, first_mm: float, bounds: ThicknessBounds,
     nodes = fld.mesh.nodes
     under_band = fld.band_clip_mm / np.maximum(fld.band_grad_r, 1e-6)       # about the distance under its bottom
     core_attrs = np.column_stack([nodes, fld.core_dir, fld.axis, 1.0 / np.maximum(fld.core_grad_r, 1e-6),
-                                  np.minimum(under_band, 1e9)])
+                                  np.minimum(under_band, 1e9), np.minimum(fld.under_top_mm, 1e9)])
     core = fld.d_base_mm if fld.band_mm <= 0 else np.where(fld.in_band, -np.inf, fld.d_base_mm)
     top = float(core[np.isfinite(core)].max()) if np.any(np.isfinite(core)) else 0.0
     out: list[tuple[Surface, bool]] = []
@@ -175,7 +175,7 @@ def _layer_surfaces(fld: LayerField, first_mm: float, bounds: ThicknessBounds,
     band_step = 0.0
     if fld.band_mm > 0:
         band_attrs = np.column_stack([nodes, fld.band_dir, fld.axis, 1.0 / np.maximum(fld.band_grad_r, 1e-6),
-                                      fld.band_clip_mm])
+                                      fld.band_clip_mm, np.zeros(len(nodes))])
         inv = band_attrs[fld.in_band, THICK] if np.any(fld.in_band) else np.ones(1)
         weakest, strongest = float(inv.max()), float(inv.min())
         # no thicker than the bounds allow where the band's gradient is weakest, and never thinner than the
@@ -197,8 +197,10 @@ def _layer_surfaces(fld: LayerField, first_mm: float, bounds: ThicknessBounds,
 
 
 def slice_curved(part: trimesh.Trimesh, profile: Profile, options: CurvedOptions | None = None,
-                 progress: Callable[[float], None] | None = None) -> CurvedSlice:
-    """Slice a placed, watertight part into curved layers (see the module docstring).
+                 progress: Callable[[float], None] | None = None, cell: Any = None) -> CurvedSlice:
+    """Slice a placed, watertight part into curved layers (see the module docstring). Given the ``cell`` it
+    will be printed on (a :class:`fabric.robot.cell.Cell`; the part placed in its plate frame), every nozzle
+    axis is one its arm holds there (:mod:`.cell_tilt`).
 
     Raises MeshError (not a closed solid, or not meshable) and SlicerError.
     """
@@ -209,14 +211,16 @@ def slice_curved(part: trimesh.Trimesh, profile: Profile, options: CurvedOptions
     tet = tetrahedralise(part, opts.interior_nodes)
     done = dict(PROGRESS_STAGES)
     report(done["volume mesh"])
+    plate_z = float(tet.nodes[:, 2].min())
+    arm = None if cell is None else CellTilts.of_cell(cell, np.asarray(part.bounds), opts.max_tilt_deg)
+    tilts = TiltLimits(plate_z, profile.first_layer_height_mm, opts.tip_radius_mm, opts.max_tilt_deg, arm)
     fld = build_field(tet, opts, bounds.nominal_mm, side_margin_mm=profile.extrusion_width_mm,
-                      first_layer_mm=profile.first_layer_height_mm)
+                      first_layer_mm=profile.first_layer_height_mm, tilts=tilts)
     report(done["fields"])
     surfaces, layering = _layer_surfaces(fld, profile.first_layer_height_mm, bounds)
     report(done["layer surfaces"])
     layers: list[list[CurvedPath]] = []
     here = np.array([0.0, 0.0, 0.0])
-    plate_z = float(tet.nodes[:, 2].min())
     first_band = next((i for i, (_s, in_band) in enumerate(surfaces) if in_band), -1)
     reach = NozzleReach(opts)
     for i, (surface, in_band) in enumerate(surfaces):
@@ -225,7 +229,7 @@ def slice_curved(part: trimesh.Trimesh, profile: Profile, options: CurvedOptions
         # the band's first layer lies on the ends of many core layers, not on one layer: its tip must not dig
         deviation = min(opts.max_axis_deviation_deg, BAND_BASE_DEVIATION_DEG) if i == first_band else \
             opts.max_axis_deviation_deg
-        paths = _held_axes(layer_paths(surface, spec, profile), plate_z, profile, opts, deviation, reach)
+        paths = _held_axes(layer_paths(surface, spec, profile), tilts, opts, deviation, reach)
         ordered = order_paths(paths, here)
         if ordered:                         # a sliver of a level set too small for a bead prints nothing
             here = ordered[-1].points_mm[-1]
