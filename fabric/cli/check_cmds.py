@@ -57,7 +57,7 @@ def _runnable(summary: s.PlanSummary) -> None:
     fu = summary.first_unreachable
     if fu is not None:
         raise UnreachableError(f"the program has unreachable targets, the first at G-code line {fu.gcode_line}: "
-                               f"{fu.why()}", gcode_line=fu.gcode_line, reason=fu.reason, row=fu.row)
+                               f"{fu.why()}{summary.counted()}", **fu.error_details())
     cold = summary.cold_extrusion
     if cold is not None:
         raise ColdExtrusionError(f"the program would extrude cold: {cold.message}", **{

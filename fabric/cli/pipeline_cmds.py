@@ -123,7 +123,8 @@ def cmd_plan(c: Client, a: argparse.Namespace) -> int:
                          f"{fs.gcode_line} (A{fs.joint})")
         fu = r.first_unreachable
         if fu is not None:
-            lines.append(f"NOT RUNNABLE: first unreachable target at G-code line {fu.gcode_line}: {fu.why()}")
+            lines.append(f"NOT RUNNABLE: first unreachable target at G-code line {fu.gcode_line}: {fu.why()}"
+                         f"{r.counted()}")
         if r.cold_extrusion is not None:
             lines.append(f"NOT RUNNABLE: cold extrusion: {r.cold_extrusion.message}")
         outside = {k: v for k, v in r.unreachable_by_reason.items() if k in ("off the plate", "below the plate")}

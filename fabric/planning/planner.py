@@ -51,7 +51,7 @@ from fabric.planning.material import resolve_material
 from fabric.planning.options import PlanOptions
 from fabric.planning.post.names import program_name
 from fabric.planning.refine import PrevRow, reach_bound_mm, refine_linear
-from fabric.planning.report import PlanResult, PlanStats, Reachability
+from fabric.planning.report import PlanResult, PlanStats, Reachability, joints_at_fault
 from fabric.planning.tally import Assembled, Reach, Totals
 from fabric.planning.turns import split_turns
 from fabric.robot.frames import inv_T
@@ -381,6 +381,7 @@ def _plan_chunks(chunks: ToolpathChunks | _Whole, cell: Any, opt: PlanOptions, p
                 motion[-1] = False               # the home move is not an IK target
             envelope = envelope_status(prog.xyz_mm, motion, cell.plate_size_mm)     # over the plate, not below it
             rep = Reachability.from_status(status, rot, motion, prog.gcode_line, envelope, opt.allow_off_plate)
+            rep.by_joint = joints_at_fault(prog.q_rad, status, motion, cell.robot.lower_rad, cell.robot.upper_rad)
             reach.add(rep, motion, sink.n)
             tot.add(prog, tp, asm, first)
             sink.append({**prog.columns(), "status": rep.status, "rot_deg": rep.rot_deg})

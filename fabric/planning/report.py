@@ -15,7 +15,8 @@ from fabric.planning.material import ResolvedMaterial, resolve_material
 from fabric.robot.kinematics import IK_JOINT_LIMIT, IK_JUMP, IK_OK, IK_OUT_OF_REACH, IK_REASONS, IK_SINGULAR
 from fabric.wire.errors import ColdExtrusionError, UnreachableError
 
-__all__ = ["Reachability", "PlanStats", "PlanResult", "UNREACHABLE_CODES"]
+__all__ = ["Reachability", "PlanStats", "PlanResult", "UNREACHABLE_CODES", "TargetWhy", "target_why",
+           "unreachable_detail", "joints_at_fault"]
 
 # Statuses a program cannot run through. IK_SINGULAR rows have an exact
 # solution (the motion model slows the TCP there): reported, not fatal. Targets outside the work
@@ -23,6 +24,7 @@ __all__ = ["Reachability", "PlanStats", "PlanResult", "UNREACHABLE_CODES"]
 UNREACHABLE_CODES = (IK_OUT_OF_REACH, IK_JOINT_LIMIT, IK_JUMP, ENV_OFF_PLATE, ENV_BELOW_PLATE)
 REASONS = {**IK_REASONS, **ENVELOPE_REASONS}
 MULTIAXIS_CELL = "irb140-multiaxis"   # the built-in cell whose wrist stays bent under a tilted nozzle
+WRIST_NEAR_SIN = float(np.sin(np.radians(2.0)))      # a wrist bent less than this is at its singularity
 
 
 @dataclass
@@ -37,6 +39,7 @@ class Reachability:
     first_unreachable: tuple[int, str] | None = None        # (G-code line, reason)
     first_unreachable_row: int = -1
     cold: ColdExtrusion | None = None        # the first move extruding below the material's minimum
+    by_joint: dict[str, int] = field(default_factory=dict)  # joint-limit and joint-jump targets by joint at fault
 
     @classmethod
     def from_status(cls, status: np.ndarray, rot_deg: np.ndarray, motion: np.ndarray,
@@ -124,27 +127,101 @@ class PlanStats:
         return asdict(self)
 
 
-def unreachable_detail(program: Program, row: int, reason: str, cell_name: str = "") -> str:
-    """The first unreachable target's reason in more words, where there are more to say: which joint jumps
-    and by how much; for a tilted nozzle (a multi-axis program) whose jump or singularity is in the wrist,
-    that the cell's wrist cannot follow the tilt (and, on another cell than :data:`MULTIAXIS_CELL`, that
-    one can). "" otherwise."""
-    if not 0 < row < len(program):
-        return ""
+@dataclass(frozen=True)
+class TargetWhy:
+    """Why one target is unreachable, in words (``detail``, "" when the reason says it all) and as figures: the
+    joint at fault (1-based: A1 = 1; 0 for none), its angle there (deg) and, at a joint limit, the limit it
+    passes (deg)."""
+
+    detail: str = ""
+    joint: int = 0
+    value_deg: float | None = None
+    limit_deg: float | None = None
+
+
+def unreachable_detail(program: Program, row: int, reason: str, cell_name: str = "", robot: Any = None) -> str:
+    """The words of :func:`target_why`."""
+    return target_why(program, row, reason, cell_name, robot).detail
+
+
+def target_why(program: Program, row: int, reason: str, cell_name: str = "", robot: Any = None) -> TargetWhy:
+    """The first unreachable target's reason in more words and figures (``robot``: the cell's
+    :class:`~fabric.robot.model.RobotModel`, for its joint limits and wrist):
+
+    * joint limit: the joint furthest past its limit, its angle and the limit (``A5 at 123.0 deg, past its
+      limit 115 deg``), as the arm's configuration there has them;
+    * joint jump: which joint turns and by how much, and where the wrist passes its singularity; for a tilted
+      nozzle (a multi-axis program) whose jump is in the wrist, that the cell's wrist cannot follow the tilt
+      (and, on another cell than :data:`MULTIAXIS_CELL`, that one can);
+    * out of reach: how far the tip is from the robot's base.
+    """
+    if not 0 <= row < len(program):
+        return TargetWhy()
+    q_deg = np.degrees(program.q_rad[row])
+    if reason == "joint limit" and robot is not None:
+        return _past_limit(q_deg, np.degrees(robot.lower_rad), np.degrees(robot.upper_rad))
+    if reason == "out of reach":
+        tip = program.wobj[:3, :3] @ program.xyz_mm[row] + program.wobj[:3, 3]
+        return TargetWhy(f"the nozzle tip would be {float(np.linalg.norm(tip)):.0f} mm from the robot's base "
+                         f"(base frame {np.round(tip).astype(int).tolist()} mm), beyond what the arm reaches")
     wrist = ""
     if program.meta.get("multiaxis", False):
         wrist = ("; the tilted nozzle turns the wrist past a limit or through its singularity, so this cell "
                  "cannot follow the tilt continuously")
         if cell_name != MULTIAXIS_CELL:
             wrist += f" (a cell whose wrist stays bent can: {MULTIAXIS_CELL})"
-    if reason == "joint jump":
-        step = np.degrees(np.abs(program.q_rad[row] - program.q_rad[row - 1]))
+    if reason == "joint jump" and row > 0:
+        step = np.abs(q_deg - np.degrees(program.q_rad[row - 1]))
         j = int(np.argmax(step))
         text = f"A{j + 1} turns {step[j]:.0f} deg between two neighbouring targets, a change of configuration"
-        return text + (wrist if j >= 3 else "")
+        text += _at_singularity(program, row, robot)
+        return TargetWhy(text + (wrist if j >= 3 else ""), joint=j + 1, value_deg=float(q_deg[j]))
     if reason == "singular" and wrist:
-        return "the wrist is straight" + wrist
-    return ""
+        return TargetWhy("the wrist is straight" + wrist)
+    return TargetWhy()
+
+
+def _past_limit(q_deg: np.ndarray, lower_deg: np.ndarray, upper_deg: np.ndarray) -> TargetWhy:
+    """The joint furthest past a limit (or, within rounding of them all, the one nearest its limit)."""
+    over = np.maximum(lower_deg - q_deg, q_deg - upper_deg)
+    j = int(np.argmax(over))
+    limit = float(upper_deg[j] if q_deg[j] - upper_deg[j] >= lower_deg[j] - q_deg[j] else lower_deg[j])
+    past = "past its limit" if over[j] > 0.0 else "at its limit"
+    return TargetWhy(f"A{j + 1} at {q_deg[j]:.1f} deg, {past} {limit:g} deg", joint=j + 1,
+                     value_deg=float(q_deg[j]), limit_deg=limit)
+
+
+def _at_singularity(program: Program, row: int, robot: Any) -> str:
+    """", through the wrist singularity (A5 at 0.4 deg)" where the wrist is (nearly) straight at ``row``."""
+    cf = getattr(robot, "closed_form", None)
+    if cf is None:
+        return ""
+    sin = cf.wrist_sin(program.q_rad[row - 1:row + 1])
+    if float(sin.min()) >= WRIST_NEAR_SIN:
+        return ""
+    return f", through the wrist singularity (A5 at {np.degrees(program.q_rad[row, 4]):.1f} deg)"
+
+
+def joints_at_fault(q_rad: np.ndarray, status: np.ndarray, motion: np.ndarray, lower_rad: np.ndarray,
+                    upper_rad: np.ndarray) -> dict[str, int]:
+    """Targets at a joint limit or a joint jump counted by the joint at fault (``{"A5": 338}``): the joint
+    furthest past its limit, the joint that turns most from the target before."""
+    out: dict[str, int] = {}
+    limit = np.flatnonzero(motion & (status == IK_JOINT_LIMIT))
+    if len(limit):
+        q = q_rad[limit]
+        over = np.maximum(lower_rad - q, q - upper_rad)
+        for j, n in enumerate(np.bincount(np.argmax(over, axis=1), minlength=q_rad.shape[1])):
+            if n:
+                out[f"A{j + 1}"] = out.get(f"A{j + 1}", 0) + int(n)
+    jump = np.flatnonzero(motion & (status == IK_JUMP))
+    jump = jump[jump > 0]
+    if len(jump):
+        step = np.abs(q_rad[jump] - q_rad[jump - 1])
+        for j, n in enumerate(np.bincount(np.argmax(step, axis=1), minlength=q_rad.shape[1])):
+            if n:
+                out[f"A{j + 1}"] = out.get(f"A{j + 1}", 0) + int(n)
+    return out
 
 
 @dataclass

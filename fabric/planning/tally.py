@@ -28,17 +28,21 @@ class Assembled:
 
 
 class Reach:
-    """The reachability of the chunks so far (counts by reason, the first unreachable target)."""
+    """The reachability of the chunks so far (counts by reason and by joint at fault, the first unreachable
+    target)."""
 
     def __init__(self) -> None:
         self.counts: dict[str, int] = {}
         self.ok = self.n = 0
         self.first: tuple[int, str] | None = None
         self.first_row = -1
+        self.by_joint: dict[str, int] = {}
 
     def add(self, rep: Reachability, motion: np.ndarray, base: int) -> None:
         for reason, k in rep.counts.items():
             self.counts[reason] = self.counts.get(reason, 0) + k
+        for joint, k in rep.by_joint.items():
+            self.by_joint[joint] = self.by_joint.get(joint, 0) + k
         st = rep.status[motion]
         self.n += len(st)
         self.ok += int(len(st) - np.count_nonzero(np.isin(st, UNREACHABLE_CODES)))
@@ -47,7 +51,8 @@ class Reach:
 
     def report(self, status: np.ndarray, rot_deg: np.ndarray) -> Reachability:
         return Reachability(status=status, rot_deg=rot_deg, feasible_r=self.ok / self.n if self.n else 1.0,
-                            counts=self.counts, first_unreachable=self.first, first_unreachable_row=self.first_row)
+                            counts=self.counts, first_unreachable=self.first, first_unreachable_row=self.first_row,
+                            by_joint=dict(sorted(self.by_joint.items())))
 
 
 @dataclass

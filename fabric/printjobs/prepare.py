@@ -121,8 +121,7 @@ class Preparer:
         fu = summary.first_unreachable
         if fu is not None:
             raise UnreachableError(f"the program has unreachable targets, the first at G-code line "
-                                   f"{fu.gcode_line}: {fu.why()}", gcode_line=fu.gcode_line, reason=fu.reason,
-                                   row=fu.row)
+                                   f"{fu.gcode_line}: {fu.why()}{summary.counted()}", **fu.error_details())
         cold = summary.cold_extrusion
         if cold is not None:
             raise ColdExtrusionError(f"the program would extrude cold: {cold.message}", **{
@@ -139,3 +138,4 @@ class Preparer:
                                    f"{hit.body_a} hits {hit.body_b}")
             raise CollisionError(f"collision at {what}", **{k: v for k, v in s.to_plain(hit).items()
                                                             if k != "message"})
+

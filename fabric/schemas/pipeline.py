@@ -106,18 +106,36 @@ class PlanRequest:
                                     # controller streamed the CSV's joints interpolate them)
 
 
-@schema("planner.UnreachableTarget", version=2)
+@schema("planner.UnreachableTarget", version=3)
 class UnreachableTarget:
     """The first target the robot cannot reach: where (G-code line, program row) and why (version 2:
-    ``detail``, the why in words where there is more to say: which joint jumps, and by how much)."""
+    ``detail``, the why in words where there is more to say: which joint jumps, and by how much; version 3:
+    the joint at fault as figures: ``joint`` (1-based, A1 = 1; 0: none), its angle there ``value_deg`` and,
+    at a joint limit, the limit it passes ``limit_deg``: "joint limit: A5 at 123.0 deg, past its limit 115
+    deg"; a joint jump through the wrist singularity says so)."""
     gcode_line: int                 # the G-code line (1-based; -1: not from G-code)
     reason: str = f(choices=UNREACHABLE_REASONS)    # why
     row: int = -1                   # the program row
     detail: str = ""                # more on why, in words ("" when the reason says it all)
+    joint: int = f(default=0, ge=0)         # the joint at fault, 1-based (A1 = 1; 0: none)
+    value_deg: float | None = None          # its angle at the target (nil: no joint at fault)
+    limit_deg: float | None = None          # the limit it passes (nil: not a joint limit)
 
     def why(self) -> str:
         """The reason, and its detail when there is one."""
         return f"{self.reason}: {self.detail}" if self.detail else self.reason
+
+    def error_details(self) -> dict[str, Any]:
+        """The details of the ``unreachable`` error that reports this target (``UnreachableError(msg, **...)``):
+        where, why, and the joint at fault with its angle and limit where there is one."""
+        out: dict[str, Any] = {"gcode_line": self.gcode_line, "reason": self.reason, "row": self.row}
+        if self.detail:
+            out["detail"] = self.detail
+        if self.joint:
+            out.update(joint=self.joint, value_deg=self.value_deg)
+        if self.limit_deg is not None:
+            out["limit_deg"] = self.limit_deg
+        return out
 
 
 @schema("planner.ColdExtrusion")
@@ -145,12 +163,13 @@ class SlowedMove:
     joint: int = f(ge=1)        # the limiting axis, 1-based (A1 = 1)
 
 
-@schema("planner.PlanSummary", version=5)
+@schema("planner.PlanSummary", version=6)
 class PlanSummary:
     """What a plan produced. The material: ``filament_diameter_mm`` turned E into ``extruded_mm3``; it came
     from ``material_source`` (the request's option, the G-code's comments, or assumed: then ``warnings``
     says so); name, density and minimum extrusion temperature as the G-code states them (else empty).
-    ``unreachable_by_reason`` counts targets by reason, "off the plate" and "below the plate" included.
+    ``unreachable_by_reason`` counts targets by reason, "off the plate" and "below the plate" included;
+    ``unreachable_by_joint`` (version 6) the joint-limit and joint-jump targets by the joint at fault.
     Not ``runnable``: a target is unreachable (``first_unreachable``) or a move would extrude below the
     material's minimum temperature (``cold_extrusion``)."""
     program_id: str                            # the program's artifact id (``am/<cell>/planner/artifact/<id>``)
@@ -164,6 +183,8 @@ class PlanSummary:
     path_mm: float                             # TCP path length of the print section's linear moves
     first_unreachable: UnreachableTarget | None = None     # the first unreachable target (nil: none)
     unreachable_by_reason: dict[str, int] = f(factory=dict)    # unreachable targets counted by reason
+    unreachable_by_joint: dict[str, int] = f(factory=dict)     # joint-limit and joint-jump targets by the joint
+                                               # at fault ("A5": the joint furthest past its limit, or that turns most)
     elapsed_s: float = 0.0                     # wall-clock time planning took
     slowed_targets: int = 0                    # linear moves slowed to respect a joint velocity limit
     first_slowed: SlowedMove | None = None     # the first of them (nil: none)
@@ -178,6 +199,18 @@ class PlanSummary:
     cold_extrusion: ColdExtrusion | None = None    # the first move that would extrude cold (nil: none)
     native_export: str = ""                    # the export the cell's controller runs (rapid, krl, urscript; csv
                                                # for a cell of no brand): another brand's is a text, not a program
+
+    def counted(self) -> str:
+        """" (338 targets at joint limit: A5 338)": the targets the robot cannot reach, by reason and by the joint
+        at fault ("" when it reaches every one)."""
+        counts = {k: v for k, v in self.unreachable_by_reason.items() if k in UNREACHABLE_REASONS and k != "singular"}
+        if not counts:
+            return ""
+        text = ", ".join(f"{n} targets {'at ' if reason.startswith('joint') else ''}{reason}"
+                         for reason, n in counts.items())
+        if self.unreachable_by_joint:
+            text += ": " + ", ".join(f"{joint} {n}" for joint, n in self.unreachable_by_joint.items())
+        return f" ({text})"
 
 
 @schema("planner.ProgramMsg")

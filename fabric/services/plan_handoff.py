@@ -96,8 +96,7 @@ class PlanHandoff:
             fu = self._unreachable
             if fu is not None and fmt != "csv":
                 raise UnreachableError(f"program is not runnable: first unreachable target at G-code line "
-                                       f"{fu.gcode_line} ({fu.why()})", gcode_line=fu.gcode_line,
-                                       reason=fu.reason, row=fu.row)
+                                       f"{fu.gcode_line} ({fu.why()})", **fu.error_details())
             cold = self._cold
             if cold is not None and fmt != "csv":
                 raise ColdExtrusionError(f"program is not runnable: {cold.message}", **{

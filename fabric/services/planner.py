@@ -41,7 +41,7 @@ from fabric.planning.blas import single_blas_thread
 from fabric.planning.memory import give_back_freed_memory, keep_freed_memory
 from fabric.planning.post import write_export
 from fabric.planning.post.stream import ExportStream
-from fabric.planning.report import Reachability, unreachable_detail
+from fabric.planning.report import Reachability, target_why
 from fabric.programs import content_id, program_artifact_pieces, program_from_artifact
 from fabric.robot.cell import Cell
 from fabric.robot.frames import xyzrpy_to_T
@@ -201,7 +201,7 @@ class PlannerService(Service):
         def program_ready(program: Program, report: Reachability) -> None:
             # the program is final: exports by job id start formatting it, and it is encoded, hashed (its
             # id) and written to the durable store while the plan goes on with the cycle time
-            handoff.program_ready(program, _first_unreachable(report, program, self.cell.name), _cold_extrusion(report))
+            handoff.program_ready(program, _first_unreachable(report, program, self.cell), _cold_extrusion(report))
             storing.append(self._storer.submit(self._store_program, program, name))
 
         self._forget_plans(keep=job.job_id)
@@ -218,7 +218,7 @@ class PlannerService(Service):
         while len(self.recent) > KEEP_PLANS:
             self.recent.pop(next(iter(self.recent)))
         rep = result.report
-        first = _first_unreachable(rep, program, self.cell.name)
+        first = _first_unreachable(rep, program, self.cell)
         cold = _cold_extrusion(rep)
         st = result.stats
         estimate = float(result.estimate_s) if np.isfinite(result.estimate_s) else -1.0
@@ -227,6 +227,7 @@ class PlannerService(Service):
             feasible_r=float(rep.feasible_r), runnable=first is None and cold is None, estimate_s=estimate,
             extruded_mm3=float(st.extruded_volume_mm3), path_mm=float(st.path_length_mm), first_unreachable=first,
             unreachable_by_reason={str(k): int(v) for k, v in rep.counts.items() if k != "ok"},
+            unreachable_by_joint={str(k): int(v) for k, v in rep.by_joint.items()},
             elapsed_s=float(st.total_s), slowed_targets=0 if result.slowed_rows is None else len(result.slowed_rows),
             first_slowed=_first_slowed(result, program), allow_off_plate=req.allow_off_plate, cold_extrusion=cold,
             native_export=self.cell.native_export,
@@ -341,8 +342,7 @@ class PlannerService(Service):
         fu = summary.first_unreachable
         if fu is not None and fmt != "csv":
             raise UnreachableError(f"program is not runnable: first unreachable target at G-code line "
-                                   f"{fu.gcode_line} ({fu.why()})", gcode_line=fu.gcode_line, reason=fu.reason,
-                                   row=fu.row)
+                                   f"{fu.gcode_line} ({fu.why()})", **fu.error_details())
         cold = summary.cold_extrusion
         if cold is not None and fmt != "csv":
             raise _cold_error(cold)
@@ -376,13 +376,15 @@ def _material_fields(stats) -> dict:
             "warnings": list(stats.warnings)}
 
 
-def _first_unreachable(report: Reachability, program: Program, cell_name: str) -> s.UnreachableTarget | None:
+def _first_unreachable(report: Reachability, program: Program, cell: Cell) -> s.UnreachableTarget | None:
+    """The first unreachable target with its why: the joint at fault, its angle and limit (report.target_why)."""
     if report.first_unreachable is None:
         return None
     line, reason = report.first_unreachable
     row = int(report.first_unreachable_row)
-    return s.UnreachableTarget(gcode_line=int(line), reason=reason, row=row,
-                               detail=unreachable_detail(program, row, reason, cell_name))
+    why = target_why(program, row, reason, cell.name, cell.robot)
+    return s.UnreachableTarget(gcode_line=int(line), reason=reason, row=row, detail=why.detail, joint=why.joint,
+                               value_deg=why.value_deg, limit_deg=why.limit_deg)
 
 
 def _cold_extrusion(report: Reachability) -> s.ColdExtrusion | None:

@@ -89,6 +89,9 @@ def job_report(rec: s.JobRecord) -> str:
                      f"{estimate_text(p.estimate_s, duration_text)}")
         lines.append(f"filament  {p.filament_diameter_mm:g} mm ({p.material_source})"
                      + (f", {p.material}" if p.material else ""))
+        fu = p.first_unreachable
+        if fu is not None:             # which joint, its angle and limit, the line (and how many more)
+            lines.append(f"reach     NOT RUNNABLE at G-code line {fu.gcode_line}: {fu.why()}{p.counted()}")
     if rec.segments:
         lines.append("runs")
         lines += [f"  {line}" for line in segment_lines(rec)]
