@@ -222,6 +222,7 @@ def test_real_replies_and_publications_validate_against_the_description(cell_in_
                                                        offset_mm=[0.0, 0.0, 0.0]))["job_id"]
         status = client.wait_job("planner", job, timeout=120)
         raw.ask("planner", "job", s.JobQuery(job_id=job))
+        raw.ask("planner", "cancel", s.JobCancel(job_id=job, reason="contract"))      # ended: stays as it was
         pid = status.result_id
         summary = raw.ask("planner", "summary", s.ArtifactQuery(artifact_id=pid))
         assert summary["runnable"], summary
@@ -276,6 +277,7 @@ def test_real_replies_and_publications_validate_against_the_description(cell_in_
         job = raw.ask("slicer", "slice", s.SliceRequest(model=stl, filename="box.stl"))["job_id"]
         gcode_id = client.wait_job("slicer", job, timeout=120).result_id
         raw.ask("slicer", "job", s.JobQuery(job_id=job))
+        raw.ask("slicer", "cancel", s.JobCancel(job_id=job, reason="contract"))
         raw.ask("slicer", "result", s.ArtifactQuery(artifact_id=gcode_id))
         raw.ask("slicer", "pin", s.PinRequest(owner="contract", pinned=False))
         # the supervisor: a G-code job submitted with neither source nor start nor rtf

@@ -292,6 +292,10 @@ class Client:
         """Follow a job until it ends; raise its error if it failed (see :func:`fabric.client.job_waits.wait_job`)."""
         return wait_job(self, service, job_id, timeout, on_progress, cancel)
 
+    def cancel_job(self, service: str, job_id: str, reason: str = "") -> s.JobStatus:
+        """Cancel a slicing or planning job (queued: it never runs; running: it fails at its next step)."""
+        return self.call(service, "cancel", s.JobCancel(job_id=job_id, reason=reason))
+
     # --- station: the paper's commands ------------------------------------------
 
     def position(self) -> s.Pose: return self.call("station", "position")

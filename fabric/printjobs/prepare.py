@@ -8,6 +8,11 @@ budget: the launcher restarts dead services, and results are content-addressed
 and kept on disk, so a retried stage ends with the same artifact. Any other
 typed error (a broken mesh, an unreachable target, a move extruding below the
 material's minimum temperature, a collision) fails the job with that error.
+
+A job that fails (its stage's time ran out, say) or is removed while it is
+prepared cancels the slicing or planning job it started (``<service>/cmd/cancel``):
+the slicer went on for minutes slicing a part whose job had failed. A removal
+stops the wait at once (:meth:`Preparer.stop`), not when the stage ends.
 """
 from __future__ import annotations
 
@@ -51,16 +56,41 @@ class Preparer:
         self.save = save
         self.closed = closed
         self.budget_s = budget_s
+        self._lock = threading.Lock()
+        self._current = ""                          # the job being prepared
+        self._halt = threading.Event()              # set: stop preparing it (removed, or the supervisor closes)
+        self._started: tuple[str, str] | None = None    # (service, job id) of the slicing or planning job under way
+
+    def stop(self, job_id: str | None = None) -> None:
+        """Stop preparing ``job_id`` (None: whatever is prepared) within a quarter of a second: it was removed, or
+        the supervisor closes. The preparation ends with :class:`PrepareCancelled`."""
+        with self._lock:
+            if job_id is None or job_id == self._current:
+                self._halt.set()
 
     def prepare(self, rec: s.JobRecord) -> None:
         """Slice, plan and check ``rec``: on success it is ``prepared`` (still queued); on a typed
         error it is ``failed`` with the error. Progress is saved (and published) as it goes."""
+        with self._lock:
+            self._current, self._halt = rec.job_id, threading.Event()
+        try:
+            self._prepare(rec)
+        finally:
+            with self._lock:
+                self._current = ""
+
+    def _prepare(self, rec: s.JobRecord) -> None:
         try:
             if rec.source == "model":
                 self._stage(rec, PrintJob.SLICING, 0.0, lambda: self._slice(rec))
             self._stage(rec, PrintJob.PLANNING, 0.3, lambda: self._plan(rec))
             self._stage(rec, PrintJob.CHECKING, 0.7, lambda: self._check(rec))
+        except PrepareCancelled:
+            if not self.closed.is_set():
+                self._cancel_started(rec, f"print job {rec.job_id} was removed")
+            raise
         except FabricError as err:
+            self._cancel_started(rec, f"print job {rec.job_id} failed: {err.message}")
             wire = err.to_wire()
             rec.state, rec.reason = PrintJob.FAILED, f"{err.code}: {err.message}"
             rec.error = s.ErrorReply(code=wire["code"], message=wire["message"], details=wire["details"])
@@ -79,12 +109,12 @@ class Preparer:
         self.save(rec)
         deadline = time.monotonic() + self.budget_s
         for attempt in itertools.count():
-            if self.closed.is_set():
-                raise PrepareCancelled(rec.job_id)
+            self._check_halted(rec)
             try:
                 run()
                 return
             except (ServiceUnavailable, NotFound) as err:
+                self._check_halted(rec)             # a removed job, a closing supervisor: no failure, no retry
                 if time.monotonic() >= deadline:
                     raise ServiceUnavailable(f"{state} did not complete within {self.budget_s:g} s: {err.message}",
                                              timeout_s=self.budget_s) from err
@@ -93,7 +123,32 @@ class Preparer:
                 log.warning("job %s: %s failed (%s: %s); retrying in %.2f s", rec.job_id, state, err.code,
                             err.message, pause)
                 self.save(rec)
-                self.closed.wait(pause)
+                self._cancel_started(rec, f"print job {rec.job_id}: {state} is tried again")
+                self._halt.wait(pause)
+
+    def _check_halted(self, rec: s.JobRecord) -> None:
+        if self._halt.is_set() or self.closed.is_set():
+            raise PrepareCancelled(rec.job_id)
+
+    def _wait(self, service: str, job_id: str) -> s.JobStatus:
+        """Wait for the job just started at ``service`` (cancelled if the print job fails or is removed)."""
+        self._started = (service, job_id)
+        done = self.client.wait_job(service, job_id, timeout=self.budget_s, cancel=self._halt)
+        self._started = None
+        return done
+
+    def _cancel_started(self, rec: s.JobRecord, reason: str) -> None:
+        """Cancel the slicing or planning job this preparation started, if it is still under way."""
+        started, self._started = self._started, None
+        if started is None:
+            return
+        service, job_id = started
+        try:
+            st = self.client.cancel_job(service, job_id, reason)
+            log.info("job %s: cancelled %s job %s (%s): %s", rec.job_id, service, job_id, st.state, reason)
+        except FabricError as err:           # the service is gone (its job with it), or forgot the job
+            log.warning("job %s: could not cancel %s job %s: %s: %s", rec.job_id, service, job_id, err.code,
+                        err.message)
 
     def _slice(self, rec: s.JobRecord) -> None:
         model = self.models.get(rec.model_id).data
@@ -102,7 +157,7 @@ class Preparer:
             overrides["filament_diameter_mm"] = f"{rec.filament_diameter_mm:g}"
         acc = self.client.slice(s.SliceRequest(model=model, filename=rec.filename, profile=rec.profile,
                                                backend=rec.backend, overrides=overrides, layers=rec.layers))
-        done = self.client.wait_job("slicer", acc.job_id, timeout=self.budget_s, cancel=self.closed)
+        done = self._wait("slicer", acc.job_id)
         rec.gcode_id = done.result_id
         self.client.pin("slicer", rec.gcode_id, rec.job_id)
 
@@ -114,7 +169,7 @@ class Preparer:
                                              filename=name, wobj_xyz_mm=station.wobj_xyz_mm,
                                              wobj_rpy_deg=station.wobj_rpy_deg,
                                              filament_diameter_mm=rec.filament_diameter_mm))
-        done = self.client.wait_job("planner", acc.job_id, timeout=self.budget_s, cancel=self.closed)
+        done = self._wait("planner", acc.job_id)
         summary = self.client.plan_summary(done.result_id)
         rec.program_id, rec.plan = done.result_id, summary
         self.client.pin("planner", rec.program_id, rec.job_id)

@@ -120,6 +120,9 @@ COMMAND_EXAMPLES: dict[tuple[str, str], Example] = {
     ("slicer", "job"): (s.JobQuery(job_id=SLICE_JOB), s.JobStatus(
         job_id=SLICE_JOB, kind="slice", state=states.Job.DONE, progress_r=1.0, stage="done", result_id=GCODE_ID,
         created_s=1764031702.6, updated_s=1764031709.9)),
+    ("slicer", "cancel"): (s.JobCancel(job_id=SLICE_JOB, reason="print job 3f2a9c1e7b40 was removed"), s.JobStatus(
+        job_id=SLICE_JOB, kind="slice", state=states.Job.RUNNING, progress_r=0.62, stage="slicing",
+        created_s=1764031702.6, updated_s=1764031706.1)),
     ("slicer", "result"): (s.ArtifactQuery(artifact_id=GCODE_ID), s.SliceResult(
         gcode_id=GCODE_ID, backend="builtin", layers=58, extruded_mm3=6819.4, filament_mm=1069.0,
         model_volume_mm3=7602.1, faces=1248, elapsed_s=7.2)),
@@ -134,6 +137,15 @@ COMMAND_EXAMPLES: dict[tuple[str, str], Example] = {
     ("planner", "job"): (s.JobQuery(job_id=PLAN_JOB), s.JobStatus(
         job_id=PLAN_JOB, kind="plan", state=states.Job.RUNNING, progress_r=0.4, stage="inverse kinematics",
         created_s=1764031710.1, updated_s=1764031712.3)),
+    ("planner", "cancel"): (s.JobCancel(job_id=PLAN_JOB, reason="print job 3f2a9c1e7b40 failed: planning did not "
+                                                               "complete within 180 s"), s.JobStatus(
+        job_id=PLAN_JOB, kind="plan", state=states.Job.FAILED, stage="queued",
+        message="job 8b41d07c9e2a was cancelled: print job 3f2a9c1e7b40 failed: planning did not complete within 180 s",
+        error=s.ErrorReply(code="state", message="job 8b41d07c9e2a was cancelled: print job 3f2a9c1e7b40 failed: "
+                                                 "planning did not complete within 180 s",
+                           details={"state": "cancelled", "command": "cancel", "job_id": "8b41d07c9e2a",
+                                    "reason": "print job 3f2a9c1e7b40 failed: planning did not complete within 180 s"}),
+        created_s=1764031710.1, updated_s=1764031890.1)),
     ("planner", "summary"): (s.ArtifactQuery(artifact_id=PROGRAM_ID), PLAN),
     ("planner", "upload"): (s.UploadChunk(upload_id="5c8e1a3f9b0d2e74", offset=4194304, total_bytes=5242880,
                                           data=b"<1048576 bytes>", sha256=UPLOAD_SHA256),

@@ -8,6 +8,7 @@ from fabric.schemas.common import (
                                    ErrorReply,
                                    Health,
                                    JobAccepted,
+                                   JobCancel,
                                    JobQuery,
                                    JobStatus,
                                    PinRequest,
@@ -75,8 +76,8 @@ from fabric.schemas.upload import UploadChunk, UploadStatus
 
 __all__ = [
     "REGISTRY", "f", "schema", "to_plain", "validate_into",
-    "Ack", "Artifact", "ArtifactQuery", "Empty", "ErrorReply", "Health", "JobAccepted", "JobQuery", "JobStatus",
-    "PinRequest",
+    "Ack", "Artifact", "ArtifactQuery", "Empty", "ErrorReply", "Health", "JobAccepted", "JobCancel", "JobQuery",
+    "JobStatus", "PinRequest",
     "STATION_STATES", "WAITING_JOB_STATES", "JOB_STATES", "HEALTH_STATES", "FINAL_JOB_STATES", "MAX_JOBS_PAGE",
     "ON_STATION_JOB_STATES", "PRINT_JOB_STATES",
     "Backends", "Beads", "BeadsQuery", "ColdExtrusion", "CollisionHit", "CollisionReport", "CollisionRequest",

@@ -48,6 +48,15 @@ class JobQuery:
     job_id: str = f(max_len=128)    # the id from ``common.JobAccepted``
 
 
+@schema("common.JobCancel")
+class JobCancel:
+    """Cancel one job (of the service asked): queued, it never runs; running, it stops at its next step. Either
+    way it fails with a ``state`` error that says it was cancelled and ``reason``; an ended job stays as it was.
+    The supervisor cancels the slicing and planning jobs of a print job that failed or was removed."""
+    job_id: str = f(max_len=128)    # the id from ``common.JobAccepted``
+    reason: str = f(default="", max_len=1024)   # why, in words (the job's error says it)
+
+
 @schema("common.JobStatus", version=2)
 class JobStatus:
     """State of a slicing or planning job; ``result_id`` names the content-addressed result once done.

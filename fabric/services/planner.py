@@ -101,6 +101,7 @@ class PlannerService(Service):
         self.jobs = JobRunner("planner", self.publisher("progress", lossless=True), data_dir=self.data_dir)
         self.handle("plan", self.on_plan)
         self.handle("job", lambda q: self.jobs.get(q.job_id))
+        self.handle("cancel", lambda q: self.jobs.cancel(q.job_id, q.reason))
         self.handle("summary", self.on_summary)
         self.handle("export", self.on_export)
         self.handle("export_chunk", self.on_export_chunk)

@@ -37,6 +37,7 @@ class SlicerService(Service):
         self.jobs = JobRunner("slicer", self.publisher("progress", lossless=True), data_dir=self.data_dir)
         self.handle("slice", self.on_slice)
         self.handle("job", lambda q: self.jobs.get(q.job_id))
+        self.handle("cancel", lambda q: self.jobs.cancel(q.job_id, q.reason))
         self.handle("result", self.on_result)
         self.handle("backends", self.on_backends)
         self.uploads = UploadStore(self.data_dir / "uploads", MAX_MODEL_BYTES)     # large models, in pieces

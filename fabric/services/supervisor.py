@@ -119,6 +119,7 @@ class SupervisorService(Service):
 
     def close(self) -> None:
         super().close()                      # sets ``closed``: the workers finish what they are doing
+        self.preparer.stop()                 # a preparation waiting on a slicer or a planner stops waiting
         self.wake.set()
         self.writer.close()                  # a worker asking for a step now hears at once that there is none
         for t in getattr(self, "_workers", []):
@@ -251,6 +252,7 @@ class SupervisorService(Service):
             self._queue_changed("removed", rec.job_id)
             return rec
         rec = self._step(step)
+        self.preparer.stop(rec.job_id)       # being prepared: it stops, and cancels the slicing or planning it started
         self._release(rec)
         return s.Ack(ok=True, message=f"removed job {rec.job_id} ({rec.filename})", state=rec.state)
 

@@ -94,6 +94,8 @@ _TABLE = [
     # slicer
     _ep("slicer", "slice", s.SliceRequest, s.JobAccepted, 10.0, "start slicing a model (a job)", bulk=True),
     _ep("slicer", "job", s.JobQuery, s.JobStatus, doc="a slicing job's status"),
+    _ep("slicer", "cancel", s.JobCancel, s.JobStatus,
+        doc="cancel a slicing job (queued: it never runs; running: it stops at its next step and fails)"),
     _ep("slicer", "result", s.ArtifactQuery, s.SliceResult, doc="summary of a slicing result by G-code id"),
     _ep("slicer", "backends", s.Empty, s.Backends, doc="installed back-ends and profiles"),
     _ep("slicer", "upload", s.UploadChunk, s.UploadStatus, 30.0, "a large model, in chunks assembled on disk",
@@ -101,6 +103,8 @@ _TABLE = [
     # planner
     _ep("planner", "plan", s.PlanRequest, s.JobAccepted, 30.0, "start planning G-code (a job)", bulk=True),
     _ep("planner", "job", s.JobQuery, s.JobStatus, doc="a planning job's status"),
+    _ep("planner", "cancel", s.JobCancel, s.JobStatus,
+        doc="cancel a planning job (queued: it never runs; running: it stops at its next step and fails)"),
     _ep("planner", "summary", s.ArtifactQuery, s.PlanSummary, doc="summary of a planned program"),
     _ep("planner", "upload", s.UploadChunk, s.UploadStatus, 30.0, "large G-code, in chunks assembled on disk",
         bulk=True),
