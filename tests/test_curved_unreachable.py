@@ -94,9 +94,9 @@ def test_a_print_job_fails_naming_the_joint_its_angle_and_limit_and_the_line(mem
             svc.close()
     _says_which_joint(str(e.value), line)
     details = e.value.details
-    assert (details["gcode_line"], details["reason"], details["joint"]) == (line, "joint limit", 5)
+    assert (details["gcode_line"], details["reason"], details["joint"]) == (line, "joint limit", 4)    # 0-based
     assert details["limit_deg"] == pytest.approx(115.0) and details["value_deg"] > 115.0
-    assert rec.state == "failed" and rec.error is not None and rec.error.details["joint"] == 5
+    assert rec.state == "failed" and rec.error is not None and rec.error.details["joint"] == 4
     _says_which_joint(rec.reason, line)
     fu = rec.plan.first_unreachable
     assert (fu.gcode_line, fu.joint, fu.limit_deg) == (line, 5, pytest.approx(115.0))

@@ -127,12 +127,13 @@ class UnreachableTarget:
 
     def error_details(self) -> dict[str, Any]:
         """The details of the ``unreachable`` error that reports this target (``UnreachableError(msg, **...)``):
-        where, why, and the joint at fault with its angle and limit where there is one."""
+        where, why, and the joint at fault with its angle and limit where there is one (``joint`` 0-based there,
+        as in every unreachable error's details: A5 is 4)."""
         out: dict[str, Any] = {"gcode_line": self.gcode_line, "reason": self.reason, "row": self.row}
         if self.detail:
             out["detail"] = self.detail
         if self.joint:
-            out.update(joint=self.joint, value_deg=self.value_deg)
+            out.update(joint=self.joint - 1, value_deg=self.value_deg)
         if self.limit_deg is not None:
             out["limit_deg"] = self.limit_deg
         return out
