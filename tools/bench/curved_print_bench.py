@@ -1,17 +1,20 @@
-"""Curved layers from STL to a checked print, per test shape, planar beside curved, through the user's path.
+"""Curved layers from STL to a checked print, per shape, planar beside curved, through the user's path.
 
-For each shape of ``fabric/slicing/curved/shapes.py`` (dome, inverted frustum with 55 deg walls, arch, wing)
-the cell ``irb140-multiaxis`` runs as the five service processes ``fabric-cli up --cell-config
-irb140-multiaxis`` starts, and as whole ``fabric-cli`` processes:
+For each shape of ``fabric/slicing/curved/shapes.py`` (the first four: dome, inverted frustum with 55 deg walls,
+arch, wing; and ``OTHER_SHAPES``: hook, flared vase, skewed bridge) and each bundled sample, the cell
+``irb140-multiaxis`` runs as the five service processes ``fabric-cli up --cell-config irb140-multiaxis``
+starts, and as whole ``fabric-cli`` processes:
 
 * ``fabric-cli slice SHAPE.stl --layers curved|planar --json``: the slice's figures (overhang against
   planar, thickness, tilt, neighbouring axes, cusp) and its time;
-* ``fabric-cli check SHAPE.gcode --json``: plan (reachability of every target) and the certified collision
-  check of the whole print, the tilted tool and arm against the part as printed;
+* ``fabric-cli plan SHAPE.gcode --json``: reachability of every target (unreachable ones by reason and by
+  the joint at fault, the first one's why) and the planning time;
+* ``fabric-cli check SHAPE.gcode --json``: plan and the certified collision check of the whole print, the
+  tilted tool and arm against the part as printed;
 * ``fabric-cli job submit SHAPE.stl --layers curved --start --rtf 0`` then the job record: the print on the
   twin to its end (state, deposited volume against the plan's, beads, the largest bead tilt).
 
-Writes ``docs/bench/curved_print.md`` and ``curved_print.json``.
+Writes ``docs/bench/curved_print.md`` (:mod:`curved_print_report`) and ``curved_print.json``.
 
     .venv/bin/python tools/bench/curved_print_bench.py [shape ...]
 """
@@ -32,16 +35,17 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from curved_print_report import CELL, report  # noqa: E402
 from plan_bench import _free_port  # noqa: E402
 
 from fabric import schemas as s  # noqa: E402
 from fabric.cli.up import CellProcesses  # noqa: E402
 from fabric.client import Client  # noqa: E402
 from fabric.client.follow import follow_print  # noqa: E402
-from fabric.slicing.curved.shapes import SHAPES  # noqa: E402
+from fabric.samples import samples  # noqa: E402
+from fabric.slicing.curved.shapes import OTHER_SHAPES, SHAPES  # noqa: E402
 from fabric.wire.config import SessionSettings  # noqa: E402
 
-CELL = "irb140-multiaxis"
 DOCS = ROOT / "docs" / "bench"
 
 
@@ -60,20 +64,18 @@ def cli(args: list[str], settings: SessionSettings, timeout: float = 1800.0) -> 
     return r.returncode, out, wall
 
 
-def shape_row(name: str, tmp: Path, settings: SessionSettings) -> dict[str, object]:
-    stl = tmp / f"{name}.stl"
-    stl.write_bytes(SHAPES[name]().export(file_type="stl"))
+def shape_row(name: str, stl: Path, tmp: Path, settings: SessionSettings) -> dict[str, object]:
     row: dict[str, object] = {"shape": name}
     for layers in ("planar", "curved"):
         gcode = tmp / f"{name}-{layers}.gcode"
         _, sl, slice_s = cli(["slice", str(stl), "--layers", layers, "-o", str(gcode)], settings)
+        _, planned, plan_s = cli(["plan", str(gcode)], settings)
         code, ck, check_s = cli(["check", str(gcode)], settings)
-        summary, coll = ck.get("summary", {}), ck.get("collisions", {})
+        coll = ck.get("collisions", {})
         row[layers] = {
             "slice_s": slice_s, "layers": sl.get("layers"), "extruded_mm3": sl.get("extruded_mm3"),
-            "figures": sl.get("curved", {}), "check_s": check_s, "check_exit": code, "error": ck.get("error"),
-            "feasible_r": summary.get("feasible_r"), "targets": summary.get("targets"),
-            "first_unreachable": summary.get("first_unreachable"), "estimate_s": summary.get("estimate_s"),
+            "figures": sl.get("curved", {}), "plan": planned.get("summary", {}), "plan_wall_s": plan_s,
+            "check_s": check_s, "check_exit": code, "error": ck.get("error"),
             "collision_free": coll.get("collision_free"), "clearance_mm": coll.get("min_distance_mm"),
             "clearance_body": coll.get("clearance_body"), "segments": coll.get("segments"),
             "first_hit": (coll.get("first_hit") or {}).get("message"), "certify_s": coll.get("elapsed_s")}
@@ -94,6 +96,7 @@ def print_curved(stl: Path, settings: SessionSettings) -> dict[str, object]:
             end = follow_print(client, timeout_s=3600)
             rec = client.wait_print_job(acc.job_id, lambda r: False, timeout=30)
         except Exception as exc:  # noqa: BLE001 - the bench reports a failed job and goes on
+            client.clear_plate()
             return {"state": "failed", "error": str(exc), "wall_s": time.perf_counter() - t0}
         tilt, total, first = np.zeros(1), 0, 0
         while True:                         # every page of the part's beads (the first are the flat base's)
@@ -112,64 +115,25 @@ def print_curved(stl: Path, settings: SessionSettings) -> dict[str, object]:
     return out
 
 
-def _f(v: object, fmt: str = "{:.3f}") -> str:
-    return "-" if v is None or (isinstance(v, float) and not np.isfinite(v)) else fmt.format(v)
-
-
-def report(rows: list[dict], meta: dict[str, object]) -> str:
-    lines = [
-        "# Curved layers from STL to a checked print (issue 21)",
-        "",
-        f"`.venv/bin/python tools/bench/curved_print_bench.py` on {meta['machine']} ({meta['cpus']} CPUs, "
-        f"{meta['load']}). Cell `{CELL}` (fabric/cells/{CELL}.toml) as the five service processes; every "
-        "figure comes from a whole `fabric-cli` process against them: `slice --layers planar|curved`, `check` "
-        "(plan, then the certified collision check of every motion against the part as printed) and `job "
-        "submit --layers curved --start --rtf 0` printed on the twin to its end.",
-        "",
-        "Overhang: faces with n . d < -sin 45 (d = +z planar, the field's build direction curved), faces on the "
-        "plate excluded. Cusp: the top surface's staircase error (mean / max). Tilt: of the nozzle axis from +z.",
-        "",
-        "| shape | layers planar / curved | overhang mm2 planar / curved | thickness mm (ratio) | max tilt deg "
-        "| neighbour deg | cusp mean mm planar / curved | cusp max mm planar / curved | slice s planar / curved |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in rows:
-        p, c = r["planar"], r["curved"]
-        g = c["figures"] or {}
-        lines.append(
-            f"| {r['shape']} | {p['layers']} / {c['layers']} | {_f(g.get('planar_overhang_mm2'), '{:.0f}')} / "
-            f"{_f(g.get('overhang_mm2'), '{:.1f}')} | {_f(g.get('thickness_min_mm'))}-{_f(g.get('thickness_max_mm'))}"
-            f" ({_f(g.get('thickness_ratio_r'), '{:.2f}')}) | {_f(g.get('max_tilt_deg'), '{:.1f}')} "
-            f"| {_f(g.get('max_neighbour_deg'), '{:.1f}')} | {_f(g.get('planar_cusp_mean_mm'))} / "
-            f"{_f(g.get('cusp_mean_mm'))} | {_f(g.get('planar_cusp_max_mm'))} / {_f(g.get('cusp_max_mm'))} "
-            f"| {_f(p['slice_s'], '{:.1f}')} / {_f(c['slice_s'], '{:.1f}')} |")
-    lines += ["", "Reachability and collisions (`fabric-cli check`), and the print (`job submit --layers curved`):",
-              "",
-              "| shape | layers | targets | reachable | collision-free | certified clearance mm (body) "
-              "| segments | check s | print | deposited / planned mm3 | beads | max bead tilt deg |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for r in rows:
-        pr = r["print"]
-        for layers in ("planar", "curved"):
-            c = r[layers]
-            free = {True: "yes", False: f"NO: {c['first_hit']}", None: c.get("error") or "-"}[c["collision_free"]]
-            reach = "-" if c["feasible_r"] is None else f"{100 * c['feasible_r']:.2f} %"
-            printed = (f"{pr['state']} | {_f(pr.get('deposited_mm3'), '{:.0f}')} / "
-                       f"{_f(pr.get('planned_mm3'), '{:.0f}')} | {pr.get('beads', '-')} | "
-                       f"{_f(pr.get('max_bead_tilt_deg'), '{:.1f}')}") if layers == "curved" else "- | - | - | -"
-            lines.append(f"| {r['shape']} | {layers} | {c['targets'] or '-'} | {reach} | {free} "
-                         f"| {_f(c['clearance_mm'])} ({c['clearance_body'] or '-'}) | {c['segments'] or '-'} "
-                         f"| {_f(c['check_s'], '{:.1f}')} | {printed} |")
-    return "\n".join(lines) + "\n"
+def models(tmp: Path) -> dict[str, Path]:
+    """Every shape of the bench as an STL file: the generated ones, written to ``tmp``, then the samples."""
+    out = {}
+    for name, make in {**SHAPES, **OTHER_SHAPES}.items():
+        out[name] = tmp / f"{name}.stl"
+        out[name].write_bytes(make().export(file_type="stl"))
+    for sample in samples():
+        out[sample.path.stem] = sample.path
+    return out
 
 
 def main(argv: list[str]) -> None:
-    names = argv[1:] or list(SHAPES)
     settings = SessionSettings(connect=[f"tcp/127.0.0.1:{_free_port()}"], cell="curvedbench")
     load = f"load average {os.getloadavg()[0]:.1f} at the start"
     rows = []
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
+        stls = models(tmp)
+        names = argv[1:] or list(stls)
         procs = CellProcesses(settings, log_dir=tmp / "logs", data_dir=tmp / "data",
                               extra_args={svc: ["--cell-config", CELL]
                                           for svc in ("station", "slicer", "planner", "collision")})
@@ -177,7 +141,7 @@ def main(argv: list[str]) -> None:
         try:
             client_settings = procs.client_settings
             for name in names:
-                rows.append(shape_row(name, tmp, client_settings))
+                rows.append(shape_row(name, stls[name], tmp, client_settings))
                 print(json.dumps(rows[-1], default=str), flush=True)
         finally:
             procs.stop()
