@@ -4,7 +4,8 @@ it needs an extra that is not installed.
 The base install (eclipse-zenoh, msgpack, numpy) carries ``fabric.wire``, ``fabric.schemas``, ``fabric.client``
 and fabric-cli's client commands: enough for a monitor, or for the CLI against a running cell. ``services``
 runs the services (``fabric-cli serve``, ``up``, ``cell``), ``tui`` the console, ``record`` Parquet recordings,
-``plot`` and ``preview``; ``all`` is the three. Entry points catch ``ModuleNotFoundError`` in one place and turn
+``plot`` and ``preview``, ``robot`` the station's Franka driver (``--robot franka:HOST``); ``all`` is the first
+three. Entry points catch ``ModuleNotFoundError`` in one place and turn
 it into ``missing_extra``'s ``ConfigError`` (``error [config]: fabric-cli up needs the services extra ...``).
 """
 from __future__ import annotations
@@ -22,6 +23,7 @@ EXTRAS: dict[str, dict[str, str]] = {
                  "tetgen": "tetgen"},
     "tui": {"textual": "textual"},
     "record": {"pyarrow": "pyarrow", "matplotlib": "matplotlib"},
+    "robot": {"franky-control": "franky"},
 }
 """extra -> {distribution: the top-level module it installs}, as ``[project.optional-dependencies]`` lists
 them (a test keeps the two in step)."""

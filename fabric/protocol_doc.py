@@ -122,6 +122,8 @@ def _topic_when(svc: str, topic: str, f: dict[str, Any]) -> str:
         ("station", "state"): f"on every change of state, reason, program, plate, layer, rtf, overrides or "
                               f"progress (0.1 %), and every {f['state_period_s']:g} s",
         ("station", "events"): "each event as it happens, in order (several per tick at a high rtf)",
+        ("station", "deviation"): "with each pose sample while the station drives a robot (`--robot`); never for "
+                                  "the twin alone",
         ("slicer", "progress"): f"on every change of a job's state or stage, else every {f['progress_period_s']:g} s "
                                 f"while it runs",
         ("planner", "progress"): f"on every change of a job's state or stage, else every "

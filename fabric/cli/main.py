@@ -51,6 +51,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="hub with TLS, passwords and roles; credentials from 'fabric-cli auth init DIR'")
     add_data_argument(p)
     add_cell_argument(p, "for every service of the cell")
+    p.add_argument("--robot", default=None, metavar="KIND:HOST",
+                   help="the station drives this robot controller (franka:HOST: a Franka FR3 or franky-sim); "
+                        "default: the cell file's robot.controller, else $FABRIC_ROBOT, else the twin alone")
     p.set_defaults(local=_cmd_up)
 
     p = sub.add_parser("router", parents=[common], help="host the fabric hub (a Zenoh router) in this process")
@@ -104,9 +107,14 @@ def _cmd_serve(a: argparse.Namespace) -> int:
 def _cmd_up(a: argparse.Namespace) -> int:
     require("services")                 # here, not in each child as it starts (and is restarted)
     from fabric.cli.up import run_up
-    extra = {}
+    extra: dict[str, list[str]] = {}
     if a.cell_config:
         extra = {n: ["--cell-config", a.cell_config] for n in ("station", "slicer", "planner", "collision")}
+    if a.robot is not None:
+        from fabric.drivers.address import parse_robot
+        if parse_robot(a.robot) is not None:            # a typed error here, before anything starts
+            require("robot")
+        extra.setdefault("station", []).extend(["--robot", a.robot])
     settings = settings_from_args(a)
     if a.secure is None:
         return run_up(settings, tuple(a.services), not a.no_hub, a.log_dir, extra, a.data_dir)

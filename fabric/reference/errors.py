@@ -32,4 +32,6 @@ ERROR_DETAILS: dict[str, str] = {
     "store": "`file`, `reason` (`damaged`, `newer`, `migration`, `open`); `problem` when damaged; `table`, "
              "`version` when newer or migrating.",
     "disk_full": "`service`, `path`, `free_mb`, `need_mb` (in MiB).",
+    "robot": "`robot` (the controller's address, `franka:HOST`), `reason` (`unreachable`, `busy`, `version`, "
+             "`fault`, `lost`, `refused`); `server_version`, `library_version` for `version`.",
 }

@@ -37,7 +37,9 @@ STATE = s.StationState(state=states.Station.PRINTING, reason="started", program_
                        elapsed_s=412.8, total_s=1520.4, remaining_s=1107.6, progress_r=0.27, deposited_mm3=1841.2,
                        planned_mm3=6819.4, layer=15, layers_total=58, rtf=1.0, speed_r=1.0, flow_r=1.0,
                        wobj_xyz_mm=[500.0, -110.0, 220.0], wobj_rpy_deg=[0.0, 0.0, 0.0], plate_clear=False,
-                       plate_mm3=1841.2, plate_job_id=JOB)
+                       plate_mm3=1841.2, plate_job_id=JOB,
+                       robot=s.RobotStatus(address="franka:172.16.0.2", connected=True, following=True, mode="Move",
+                                           server_version=10, deviation_mm=0.042, deviation_max_mm=0.31))
 PLAN = s.PlanSummary(program_id=PROGRAM_ID, targets=48211, moves=47390, layers=58, feasible_r=1.0, runnable=True,
                      estimate_s=1520.4, extruded_mm3=6819.4, path_mm=61544.0, elapsed_s=3.9,
                      filament_diameter_mm=2.85, material_source="gcode", material="PLA", density_g_cm3=1.24,
@@ -200,6 +202,8 @@ TOPIC_EXAMPLES: dict[tuple[str, str], Any] = {
     ("station", "temps"): s.Temps(nozzle_c=199.8, nozzle_target_c=200.0, bed_c=59.9, bed_target_c=60.0,
                                   t_sim_s=842.36),
     ("station", "events"): EVENT,
+    ("station", "deviation"): s.Deviation(seq=42113, t_sim_s=842.36, now_mm=0.042, tick_max_mm=0.051, p50_mm=0.096,
+                                          p99_mm=0.274, max_mm=0.31, steps=206400, row=18833, gcode_line=20411),
     ("slicer", "progress"): s.JobStatus(job_id=SLICE_JOB, kind="slice", state=states.Job.RUNNING, progress_r=0.55,
                                         stage="infill", created_s=1764031702.6, updated_s=1764031706.0),
     ("planner", "progress"): s.JobStatus(job_id=PLAN_JOB, kind="plan", state=states.Job.RUNNING, progress_r=0.4,

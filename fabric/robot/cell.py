@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from fabric.drivers.address import parse_robot
 from fabric.robot import frames
 from fabric.robot.brands import NATIVE_EXPORTS
 from fabric.robot.model import RobotModel, ToolGeometry
@@ -61,7 +62,7 @@ def builtin_cell_names() -> list[str]:
 _SCHEMA: dict[str, set[str]] = {
     "cell": {"name", "description"},
     "robot": {"urdf", "example_robot_data", "flange_frame", "name", "brand", "redundancy_joint", "base_xyz_mm",
-              "base_rpy_deg"},
+              "base_rpy_deg", "controller", "deviation_bound_mm"},
     "tool": {"tcp_xyz_mm", "tcp_rpy_deg", "body_diameter_mm", "body_length_mm", "nozzle_diameter_mm",
              "nozzle_length_mm", "nozzle_clearance_mm", "tip_diameter_mm", "taper_length_mm"},
     "table": {"size_mm", "xyz_mm", "rpy_deg"},
@@ -171,6 +172,8 @@ class Cell:
     robot_source: str = ""
     description: str = ""
     brand: str = ""                  # the robot's maker (``NATIVE_EXPORTS``): which export its controller runs
+    controller: str = ""             # the robot controller the station drives (KIND:HOST; "": the twin alone)
+    deviation_bound_mm: float = 0.5  # a print on the robot pauses when its TCP leaves the commanded path by more
     raw: dict[str, Any] = field(default_factory=dict, repr=False)
 
     # Loading -----------------------------------------------------------
@@ -247,12 +250,16 @@ class Cell:
             raise ConfigError(f"{source}: robot.brand: {brand!r} is not one of {', '.join(known)}",
                               file=source, key="robot.brand", value=brand)
         plate_T = _pose(pl.vec("xyz_mm", lo=-5000, hi=5000), pl.vec("rpy_deg", default=[0, 0, 0], lo=-360, hi=360))
+        controller = rb.text("controller", default="")
+        parse_robot(controller, f"{source}: robot.controller")          # a typed error now, not at connect time
         return cls(
             name=c.text("name"),
             description=c.text("description", default=""),
             robot=robot,
             robot_source=robot_source,
             brand=brand,
+            controller=controller,
+            deviation_bound_mm=rb.num("deviation_bound_mm", default=0.5, lo=0.01, hi=100.0),
             base_T=_pose(rb.vec("base_xyz_mm", default=[0, 0, 0], lo=-1e4, hi=1e4),
                          rb.vec("base_rpy_deg", default=[0, 0, 0], lo=-360, hi=360)),
             table_size_mm=tb.vec("size_mm", lo=1.0, hi=1e4),
@@ -278,7 +285,7 @@ class Cell:
         """A short digest of what makes the cell this cell: its robot, tool, table, plate, home and approach
         (not its description or the file it came from). A station's saved twin belongs to one cell."""
         d = self.to_dict()
-        for key in ("description", "source_path"):
+        for key in ("description", "source_path", "controller", "deviation_bound_mm"):
             d.pop(key, None)
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
@@ -310,6 +317,8 @@ class Cell:
             "source_path": self.source_path,
             "brand": self.brand,
             "native_export": self.native_export,
+            "controller": self.controller,
+            "deviation_bound_mm": self.deviation_bound_mm,
             "robot": {"name": r.name, "source": self.robot_source, "flange_frame": r.flange_frame, "nq": r.nq,
                       "joint_names": list(r.joint_names), "closed_form_ik": r.closed_form is not None,
                       "ik_family": r.ik_family, "ik_parameters": r.family_choice.parameters(),

@@ -56,6 +56,7 @@ from fabric.schemas.station import (
                                    CalibrationReport,
                                    CellInfo,
                                    Check,
+                                   Deviation,
                                    Event,
                                    EventList,
                                    EventsQuery,
@@ -67,6 +68,7 @@ from fabric.schemas.station import (
                                    Overrides,
                                    Pose,
                                    ReadyReport,
+                                   RobotStatus,
                                    StartRequest,
                                    StationState,
                                    Temps,
@@ -92,5 +94,6 @@ __all__ = [
     "CalibrationReport", "CellInfo", "Check", "Event", "EventList", "EventsQuery", "ExtrudeRequest", "Extrusion",
     "JogRequest",
     "LoadRequest",
-    "MeshRequest", "Overrides", "Pose", "ReadyReport", "StartRequest", "StationState", "Temps", "TimeInfo",
+    "MeshRequest", "Overrides", "Pose", "ReadyReport", "StartRequest", "Deviation", "RobotStatus", "StationState",
+    "Temps", "TimeInfo",
 ]

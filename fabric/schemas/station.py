@@ -57,7 +57,42 @@ class Temps:
     t_sim_s: float = 0.0         # the station's simulated clock
 
 
-@schema("station.State", version=3)
+@schema("station.Robot")
+class RobotStatus:
+    """The robot controller the station drives (``fabric-cli up --robot franka:HOST``): absent for the twin
+    alone. The twin is then the robot's shadow: pose telemetry is the measured joints'."""
+    address: str                       # the controller, KIND:HOST ("franka:172.16.0.2")
+    connected: bool                    # the connection is open
+    following: bool = False            # the station streams its commanded path to it
+    mode: str = ""                     # the controller's own mode ("Idle", "Move", "Reflex", ...)
+    server_version: int = 0            # the controller's server version (0: not known yet)
+    errors: list[str] = f(factory=list)    # the controller's active errors, by its names
+    fault: str = ""                    # why driving it stopped (a reflex, the connection lost), or why connecting
+                                       # failed, in one line ("" when none)
+    deviation_mm: float = 0.0          # the commanded-versus-measured TCP deviation at the last control step
+    deviation_max_mm: float = 0.0      # the largest while laying beads in the current run (reset when one starts)
+    bound_mm: float = 0.5              # a print pauses when the deviation exceeds this (the cell's bound)
+
+
+@schema("station.Deviation")
+class Deviation:
+    """The commanded-versus-measured TCP deviation of a robot the station drives, per pose sample: the control
+    steps since the last sample (any motion), and the current run's figures over the steps that laid a bead
+    (reset when a motion starts from rest)."""
+    seq: int                     # this stream's number: from 1 for each run of the station process
+    t_sim_s: float               # the station's simulated clock (the commanded path's time)
+    now_mm: float                # the last control step's deviation
+    tick_max_mm: float           # the largest since the last sample
+    p50_mm: float                # the run's median
+    p99_mm: float                # the run's 99th percentile
+    max_mm: float                # the run's largest
+    steps: int                   # control steps of the run counted
+    row: int = -1                # the program row then (-1: none)
+    gcode_line: int = -1         # its G-code line (-1: none)
+    bound_mm: float = 0.5        # the cell's bound: a print pauses past it
+
+
+@schema("station.State", version=4)
 class StationState:
     """The station's whole state: a snapshot reply and a publication on change.
 
@@ -92,6 +127,7 @@ class StationState:
     plate_clear: bool = True           # no part on the plate (false from a print's first bead to ``clear_plate``)
     plate_mm3: float = 0.0             # volume of the part on the plate (0 when clear)
     plate_job_id: str = ""             # the job whose part is on the plate ("" when clear or printed by hand)
+    robot: RobotStatus | None = None   # the robot controller it drives (nil: the twin alone)
 
 
 @schema("station.Event")

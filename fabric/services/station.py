@@ -49,6 +49,8 @@ import zenoh
 
 from fabric import schemas as s
 from fabric.client import Client
+from fabric.drivers.address import open_controller, robot_address
+from fabric.drivers.controller import Controller
 from fabric.programs import content_id, program_from_artifact
 from fabric.robot.cell import Cell
 from fabric.robot.frames import T_to_xyzrpy
@@ -61,6 +63,7 @@ from fabric.services.station_commands import Check, CommandRunner, Move, Planned
 from fabric.services.station_manual import ManualCommands
 from fabric.services.station_messages import StationMessages
 from fabric.services.station_plate import PlateGuard
+from fabric.services.station_robot import JOINT_TIME_R, RobotLink
 from fabric.sim.deposition import Deposition
 from fabric.sim.moves import RestartPath
 from fabric.sim.twin import EVENT_KINDS, Twin
@@ -90,7 +93,8 @@ class StationService(Service):
     collision_report: Owned[s.CollisionReport | None] = Owned()
 
     def __init__(self, session: zenoh.Session, cell_id: str, cell: Cell, pose_hz: float = 50.0,
-                 data_dir: Path | None = None, checkpoint_s: float = DEFAULT_CHECKPOINT_PERIOD_S) -> None:
+                 data_dir: Path | None = None, checkpoint_s: float = DEFAULT_CHECKPOINT_PERIOD_S,
+                 controller: Controller | None = None) -> None:
         super().__init__(session, cell_id, data_dir)
         self.cell = cell
         self.client = Client(session, cell_id)
@@ -105,6 +109,14 @@ class StationService(Service):
         self.plate = PlateGuard(self.twin, self.meta)          # the part on the plate, and its rules
         self.commands = CommandRunner(self.writer, self._stamp, self._checkpoint, lambda move: self.certify(move),
                                       lambda: self.twin.state)
+        # the robot the station drives, if any: the twin is its shadow (fabric.services.station_robot)
+        self.robot = None if controller is None else RobotLink(controller, self.twin, cell.deviation_bound_mm,
+                                                                 self.log)
+        if self.robot is not None:
+            self.twin.time_for_robot(JOINT_TIME_R)   # the robot's controller follows these (station_robot)
+            self.msgs.follow_robot(self.robot)
+            self.pub_deviation = self.publisher("deviation")
+            self.commands.motion_gate = self.robot.gate
         self._last_state: tuple = ()
         self._last_state_s = 0.0
         self.pub_pose = self.publisher("pose")
@@ -132,6 +144,11 @@ class StationService(Service):
         # the clock thread runs Python for up to a tick; by default a command's thread could wait 5 ms for
         # the interpreter lock before being let in (the station is its own process: this is its setting)
         sys.setswitchinterval(GIL_SWITCH_S)
+        if self.robot is not None:                   # before the clock runs: this thread is the twin's still
+            try:
+                self.robot.connect(self.twin)
+            except FabricError as err:
+                self.log.error("%s (the station serves; a motion command connects again)", err.message)
         super().start()
         self._thread = threading.Thread(target=self._sim_loop, name="station:clock", daemon=True)
         self._thread.start()
@@ -141,6 +158,8 @@ class StationService(Service):
         if hasattr(self, "_thread"):                 # not there when start was refused
             self._thread.join(timeout=5.0)
         self.writer.close()
+        if self.robot is not None:                   # the clock has stopped feeding it: stop the robot
+            self.robot.close()
         super().close()
         self.journal.checkpoint(self.twin, self.meta, force=True)     # the writer has ended: this thread may
         self.journal.store.close()
@@ -264,7 +283,9 @@ class StationService(Service):
             if now - last > STALL_S:
                 self._stalled(now - last)
                 last = now
-            if self.rtf > 0 or not self.twin.state.printing:
+            if self.robot is not None:                 # real time, as far as the robot had its path
+                events = self.twin.advance(self.robot.advance_s(now, last))
+            elif self.rtf > 0 or not self.twin.state.printing:
                 events = self.twin.advance((now - last) * (self.rtf if self.rtf > 0 else 1.0))
             else:  # as fast as possible: whole chunks until this tick's wall budget is spent
                 events, t0 = [], time.monotonic()
@@ -276,6 +297,8 @@ class StationService(Service):
             msgs = [self.msgs.event(ev) for ev in backlog + events]
             backlog = []
             ext_now = self.twin.extrusion()
+            if self.robot is not None:
+                self._follow_robot(now, ext_now)
             self.plate.track(ext_now.extruded_mm3)
             key = self.msgs.state_key(ext_now)
             state_due = key != self._last_state or now - self._last_state_s >= STATE_PERIOD_S
@@ -296,6 +319,9 @@ class StationService(Service):
             if pose_due:
                 next_pose = max(next_pose + self.pose_period_s, now)
                 self.pub_pose.send_encoded(position)
+            if pose_due and self.robot is not None:
+                self.msgs.seq_deviation += 1
+                self.pub_deviation.send(self.robot.deviation_msg(self.msgs.seq_deviation, self.twin.t_sim_s))
             if ext is not None:
                 self.pub_extrusion.send(ext)
             if temps is not None:
@@ -303,6 +329,20 @@ class StationService(Service):
             if backoff.failures and backoff.recovered():       # a clock that failed has run well since
                 self.health.clear("clock")
                 backoff.failures = 0
+
+    def _follow_robot(self, now: float, ext: Any) -> None:
+        """The robot's tick (fabric.services.station_robot): a fault interrupts the print, a TCP off its path
+        pauses it."""
+        assert self.robot is not None
+        action = self.robot.tick(self.twin, now, int(ext.row), int(ext.gcode_line), bool(ext.on))
+        if action is None:
+            return
+        self.log.warning("%s", action.reason)
+        if action.kind == "interrupt":
+            self.robot.halt()
+            self.twin.interrupt(action.reason)
+        elif action.kind == "pause":
+            self.twin.pause(action.reason)
 
     def _stalled(self, gap_s: float) -> None:
         """The tick came ``gap_s`` late: simulated time does not jump (it is held, and the stall noted).
@@ -361,6 +401,7 @@ class StationService(Service):
             return f" from layer {layer + 1}{on} (heating, then the move above it)"
 
         def plan() -> Planned[bool]:
+            self._real_time("start", req.rtf)
             self.plate.refuse_start("start", layer)
             if layer is None:                          # from the beginning: the program was certified when planned
                 return Planned([], False)
@@ -393,6 +434,12 @@ class StationService(Service):
         if rtf is not None:
             self.meta.rtf = rtf
 
+    def _real_time(self, command: str, rtf: float | None) -> None:
+        """(In a step.) A station driving a robot runs in real time: another factor is refused, first."""
+        if self.robot is not None and rtf is not None and rtf != 1.0:
+            raise StateError(f"{command} refused: the station drives robot {self.robot.address}, which runs in "
+                             f"real time (rtf 1), not {rtf:g}", state=self.twin.state, command=command)
+
     def _rtf_text(self) -> str:
         return "max speed" if self.meta.rtf == 0 else f"{self.meta.rtf:g}x real time"
 
@@ -404,6 +451,9 @@ class StationService(Service):
 
     def on_resume(self, req: s.StartRequest) -> s.Ack:
         def act() -> s.Ack:
+            self._real_time("resume", req.rtf)
+            if self.robot is not None:
+                self.robot.gate("resume")
             self.twin.resume()
             self._set_rtf(req.rtf)
             return self.ack(f"resuming at the paused spot at {self._rtf_text()}")
@@ -413,9 +463,13 @@ class StationService(Service):
         layer = req.from_layer if req.from_layer >= 0 else None
         where = "the interrupted spot" if layer is None else f"layer {layer + 1}"
         what = f"the move back to {where}"
+        reconnected = self._reconnect_robot()
 
-        def plan() -> Planned[None]:
+        def plan() -> Planned[bool]:
+            self._real_time("recover", req.rtf)
             move = self.twin.recovery_move(layer)
+            if move is None and reconnected:           # the robot was the only thing to recover
+                return Planned([], True, what)
             if move is None:
                 raise StateError(f"nothing to recover while {self.twin.state}", state=self.twin.state,
                                  command="recover")
@@ -424,20 +478,35 @@ class StationService(Service):
                 assert row is not None, "recovery_move answers only when a spot is kept"
                 return Planned([self.move(*move, what, "recover"),
                                 self.rest_of_program(row, move[1], "the print from the interrupted spot")],
-                               None, what)
+                               False, what)
             self.plate.refuse_in_the_air("recover", layer)
             path = self._restart_path(layer, "recover")    # from a layer: the move above it, then down
             row = path.row
             return Planned([self.move(path.q_from_rad, path.q_above_rad, what, "recover",
                                       descent=(path.q_down_rad, layer), accepted="or recover at the interrupted spot"),
                             self.rest_of_program(row, path.q_down_rad, f"the print from layer {layer + 1}")],
-                           None, what)
+                           False, what)
 
-        def act(_: Planned[None]) -> s.Ack:
+        def act(planned: Planned[bool]) -> s.Ack:
+            if planned.data:
+                assert self.robot is not None
+                return self.ack(f"robot {self.robot.address} connected again, its errors cleared; it follows the "
+                                f"twin (nothing else to recover while {self.twin.state})")
             self.twin.recover(from_layer=layer)
             self._set_rtf(req.rtf)
             return self.ack(f"recovering: back to {where} (collision-checked), then going on at {self._rtf_text()}")
         return self.commands.checked("recover", plan, act)
+
+    def _reconnect_robot(self) -> bool:
+        """Before recover: a robot that is not ready is connected again (this thread: up to the connect
+        deadline) and follows the twin again (a step: the twin at rest stands where it stands). False when
+        there is no robot or it was ready; a RobotError says why it could not be."""
+        if self.robot is None or self.robot.ready:
+            return False
+        self.robot.reconnect()
+        robot = self.robot
+        self.commands.change(lambda: robot.attach(self.twin))
+        return True
 
     def on_stop(self, _: s.Empty) -> s.Ack:
         def act() -> s.Ack:
@@ -546,6 +615,7 @@ class StationService(Service):
     def on_rtf(self, req: s.StartRequest) -> s.StationState:
         """Change how fast simulated time runs; the simulation itself is unchanged (time is exact)."""
         def act() -> s.StationState:
+            self._real_time("rtf", req.rtf)
             self._set_rtf(req.rtf)
             return self.msgs.state()
         return self.commands.change(act)
@@ -604,12 +674,17 @@ def cell_info_of(cell: Cell) -> s.CellInfo:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_cell_argument(parser)
     parser.add_argument("--pose-hz", type=float, default=50.0, help="wall-clock rate of pose telemetry")
+    parser.add_argument("--robot", default=None, metavar="KIND:HOST",
+                        help="drive this robot controller (franka:HOST); default: the cell file's robot.controller, "
+                             "else $FABRIC_ROBOT, else the twin alone ('twin')")
     parser.add_argument("--checkpoint-s", type=float, default=DEFAULT_CHECKPOINT_PERIOD_S,
                         help="wall-clock period of the twin's checkpoints (also taken after every command)")
 
 
 def build(session: zenoh.Session, cell_id: str, options: argparse.Namespace) -> StationService:
     cell = Cell.load_or_builtin(options.cell_config)
+    address = robot_address(getattr(options, "robot", None), cell.controller)
     return StationService(session, cell_id, cell, pose_hz=options.pose_hz,
                           data_dir=service_data_dir(options.data_dir, cell_id, "station"),
-                          checkpoint_s=options.checkpoint_s)
+                          checkpoint_s=options.checkpoint_s,
+                          controller=None if address is None else open_controller(address))

@@ -101,6 +101,9 @@ class CommandRunner:
         self.writer = writer
         self._stamp_of, self._checkpoint, self._certify, self._state = stamp, checkpoint, certify, state
         self.generation = 0
+        self.motion_gate: Callable[[str], None] | None = None
+        """Called (on the writer) first in every checked command's plan: a station driving a robot refuses
+        a motion there while the robot is not ready."""
 
     def read(self, fn: Callable[[], R]) -> R:
         """``fn`` as a step that changes nothing (a consistent read of the twin); no checkpoint."""
@@ -120,6 +123,8 @@ class CommandRunner:
         writer), act only if nothing changed meanwhile (a step), checkpoint. A plan with no moves acts in
         its own step."""
         def planning() -> tuple[Planned[P], R | None]:
+            if self.motion_gate is not None:
+                self.motion_gate(command)
             planned = plan()
             if not planned.moves:                    # nothing to certify: act at once, in this step
                 reply = act(planned)

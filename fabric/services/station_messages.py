@@ -16,6 +16,7 @@ from fabric import schemas as s
 from fabric.motion.program import MOVEL
 from fabric.robot.frames import T_to_xyzrpy
 from fabric.schemas.states import Station
+from fabric.services.station_robot import RobotLink
 from fabric.services.telemetry_gate import EXTRUSION_PERIOD_S, TEMPS_PERIOD_S, ChangeOrPeriod
 from fabric.sim.twin import Twin
 from fabric.sim.types import ExtrusionState
@@ -37,6 +38,12 @@ class StationMessages:
         self._extrusion_gate = ChangeOrPeriod(EXTRUSION_PERIOD_S)
         self._temps_gate = ChangeOrPeriod(TEMPS_PERIOD_S)
         self._planned: tuple[int, np.ndarray] | None = None     # (program, its planned volume up to each row)
+        self.seq_deviation = 0
+        self.robot: RobotLink | None = None     # the robot the station drives: poses are its measured ones
+
+    def follow_robot(self, robot: RobotLink) -> None:
+        """Poses from now on are the robot's measured ones, and the state says how the robot is."""
+        self.robot = robot
 
     def event(self, ev) -> s.Event:
         """The wire event; a job's events name the job and its simulated time so far."""
@@ -52,7 +59,8 @@ class StationMessages:
         """The twin's pose now; ``sample``: it is the pose stream's next sample (numbered)."""
         if sample:
             self.seq_pose += 1
-        p = self.twin.pose()
+        p = self.robot.pose(self.twin) if self.robot is not None else None
+        p = p if p is not None else self.twin.pose()
         return s.Pose(seq=self.seq_pose, t_sim_s=self.twin.t_sim_s, q_deg=np.degrees(p.q_rad).tolist(),
                       xyz_mm=list(map(float, p.xyz_mm)), quat_wxyz=list(map(float, p.quat_wxyz)),
                       base_xyz_mm=list(map(float, p.base_xyz_mm)), wall_time_s=time.time())
@@ -96,9 +104,10 @@ class StationMessages:
     def state_key(self, ext: ExtrusionState) -> tuple:
         """What a published state says that matters to a watcher (a change is published at once);
         the first four fields changing also force a checkpoint."""
+        robot = () if self.robot is None else self.robot.status_key()
         return (self.twin.state, self.twin.reason, self.meta.program_id, self.meta.plate_occupied, int(ext.layer),
                 self.meta.rtf,
-                float(self.twin.speed_r), float(self.twin.flow_r), round(self.progress_r(ext), 3))
+                float(self.twin.speed_r), float(self.twin.flow_r), round(self.progress_r(ext), 3), robot)
 
     def state(self, ext: ExtrusionState | None = None) -> s.StationState:
         """The station's whole state (``ext``: the twin's extrusion now, when already read)."""
@@ -114,4 +123,5 @@ class StationMessages:
                               rtf=meta.rtf, speed_r=float(twin.speed_r), flow_r=float(twin.flow_r),
                               wobj_xyz_mm=np.asarray(wobj_xyz).tolist(), wobj_rpy_deg=np.asarray(wobj_rpy).tolist(),
                               plate_clear=not meta.plate_occupied, plate_mm3=float(meta.plate_mm3),
-                              plate_job_id=meta.plate_job_id)
+                              plate_job_id=meta.plate_job_id,
+                              robot=None if self.robot is None else self.robot.status_msg())

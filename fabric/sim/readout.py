@@ -55,6 +55,18 @@ class Readout:
         Tp = inv_T(work_T) @ T
         return Pose(np.array(smp.q_rad, dtype=float), Tp[:3, 3].copy(), quat_from_R(Tp[:3, :3]), T[:3, 3].copy())
 
+    def commanded_q(self, t_sim_s: np.ndarray) -> np.ndarray | None:
+        """The commanded joints at simulated times ``t_sim_s``: the running leg's (held at its cut), or at rest;
+        None while the next leg is queued but not timed yet (it is at the next step)."""
+        legs = self.state.legs
+        if legs and not legs[0].placed:
+            return None
+        leg = legs[0] if legs else None
+        if leg is None:
+            return np.tile(np.asarray(self.state.rest_q_rad, dtype=float), (len(t_sim_s), 1))
+        tau = np.clip(t_sim_s - leg.t0, 0.0, leg.t_cut)
+        return np.asarray(leg.timeline.sample_many(tau).q_rad, dtype=float)
+
     def _rest_pose(self, work_T: np.ndarray) -> Pose:
         """The pose of the robot standing still, computed once while it stands (telemetry asks every tick)."""
         q, T = np.asarray(self.state.rest_q_rad, dtype=float), np.asarray(self.state.rest_T, dtype=float)

@@ -18,6 +18,7 @@ The twin is composed of small collaborators around one state object:
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from typing import Any
@@ -29,6 +30,7 @@ from fabric.motion.thermal import Thermal
 from fabric.motion.validate import validate_program
 from fabric.robot.frames import make_T, rot_x
 from fabric.robot.kinematics import ik_reason
+from fabric.robot.time_scaled import TimeScaledRobot
 from fabric.schemas.states import FREE_STATION_STATES, IN_PRINT_STATES, Station
 from fabric.sim import manual
 from fabric.sim.builder import LegBuilder
@@ -159,6 +161,28 @@ class Twin:
         """Elapsed, expected total and remaining simulated time of the job (paused: if resumed now)."""
         return self.readout.time_info()
 
+    def commanded_q(self, t_sim_s: np.ndarray) -> np.ndarray | None:
+        """The commanded joints (M, nq) at simulated times ``t_sim_s`` (M,) from now on: the running leg's,
+        held at its end past it (the next leg is timed when it starts); the pose at rest when nothing runs;
+        None when a leg was queued since the last step and is not timed yet."""
+        return self.readout.commanded_q(np.asarray(t_sim_s, dtype=float))
+
+    def time_for_robot(self, r: float) -> None:
+        """Time every motion from now on for a real robot's controller: joint moves ``1/r`` as long on the same
+        path (joint limits scaled by r, r**2, r**3: :class:`~fabric.robot.time_scaled.TimeScaledRobot`), linear
+        moves within ``r**2`` of the TCP acceleration (the programmed speeds stay, as far as the joints allow)."""
+        self.builder.robot = TimeScaledRobot(self.robot, r) if r < 1.0 else self.robot
+        self.builder.config = dataclasses.replace(self.config, accel_mm_s2=self.config.accel_mm_s2 * r * r)
+
+    def stand_at(self, q_rad: np.ndarray) -> None:
+        """The robot stands at ``q_rad`` (a real robot's measured joints when the station connects to it):
+        the twin at rest takes that pose, so every move it plans next starts where the robot is."""
+        if self.moving:
+            raise StateError("the robot is moving: it stands nowhere yet", state=self.state, command="stand_at")
+        q = np.asarray(q_rad, dtype=float).reshape(-1)
+        self.s.rest_q_rad, self.s.rest_T = q.copy(), np.asarray(self.robot.fk(q[None]))[0]
+        self.readout.forget()
+
     # ------------------------------------------------------------------ commands
 
     def _refuse(self, command: str, allowed: tuple[Station, ...]) -> None:
@@ -281,10 +305,10 @@ class Twin:
             raise StateError("no program loaded", state=self.s.state, command="start")
         return self.moves.restart_move(self.restart_point(from_layer))
 
-    def pause(self) -> None:
+    def pause(self, reason: str = "paused by operator") -> None:
         """Controlled stop, extruder off, retract, lift; ``paused`` event once the robot is clear."""
         self._refuse("pause", (Station.PRINTING,))
-        self.s.state, self.s.reason = Station.PAUSED, "paused by operator"
+        self.s.state, self.s.reason = Station.PAUSED, reason
         self._command(lambda: self.moves.halt("paused"))
 
     def resume(self) -> None:

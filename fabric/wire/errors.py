@@ -22,6 +22,8 @@ class that matches it)::
     ├── PermissionDenied             "forbidden"       the caller's role may not do this
     ├── StoreError                   "store"           a database file is damaged, or newer than this release
     ├── DiskFull                     "disk_full"       a service's disk has no room for the work
+    ├── RobotError                   "robot"           the robot controller is not there, busy, speaks another
+    │                                                  version, or stopped in error
     └── InternalError                "internal"        unexpected failure (bug)
 
 Every error carries ``details``: a dict of plain values that a caller can act
@@ -49,6 +51,8 @@ may rely on, by class (others may be present)::
                        problem: str (what SQLite or its quick_check found), and for
                        "newer" and "migration" table: str, version: int
     DiskFull           service: str, path: str, free_mb: float, need_mb: float (MiB)
+    RobotError         robot: str (the address, ``franka:HOST``), reason: str (one of ROBOT_REASONS); for
+                       "version" server_version: int | None, library_version: int | None
 """
 from __future__ import annotations
 
@@ -59,7 +63,7 @@ __all__ = [
     "MeshError", "ProfileError", "ConfigError", "PlacementError", "UnreachableError",
     "CollisionError", "StateError", "NotFound", "SlicerError", "ServiceUnavailable",
     "PermissionDenied", "StoreError", "InternalError", "error_from_code", "UNREACHABLE_REASONS",
-    "ColdExtrusionError", "COLD_EXTRUSION_REASONS", "ERROR_CLASSES",
+    "ColdExtrusionError", "COLD_EXTRUSION_REASONS", "ERROR_CLASSES", "RobotError", "ROBOT_REASONS", "DiskFull",
 ]
 
 UNREACHABLE_REASONS = ("out of reach", "joint limit", "singular", "joint jump", "off the plate", "below the plate")
@@ -72,6 +76,11 @@ COLD_EXTRUSION_REASONS = ("set below the minimum", "not heated")
 """Why a program would extrude cold (``ColdExtrusionError.details['reason']``): the nozzle's set point is
 below the material's minimum extrusion temperature, or it is not but nothing waits (M109) for the nozzle
 to get there (``fabric.motion.cold``)."""
+
+ROBOT_REASONS = ("unreachable", "busy", "version", "fault", "lost", "refused")
+"""Why the robot controller could not be used (``RobotError.details['reason']``): nothing answers at its
+address; it answers but another client holds it; it speaks a server version the library does not; it
+stopped in error (a reflex, a limit); the connection was lost while it was driven; it refused a command."""
 
 
 class FabricError(Exception):
@@ -192,6 +201,14 @@ class DiskFull(FabricError):
     doing it (``ENOSPC``): nothing was half-written that counts; free space, then ask again."""
 
     code = "disk_full"
+
+
+class RobotError(FabricError):
+    """The robot controller the station drives is not there, is held by another client, speaks another
+    version, stopped in error or lost its connection (``details['reason']``, one of ROBOT_REASONS).
+    The message is one line that says what to do."""
+
+    code = "robot"
 
 
 class InternalError(FabricError):

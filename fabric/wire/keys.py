@@ -34,6 +34,7 @@ TOPICS: dict[tuple[str, str], type[Any]] = {
     ("station", "state"): s.StationState,
     ("station", "temps"): s.Temps,
     ("station", "events"): s.Event,
+    ("station", "deviation"): s.Deviation,
     ("slicer", "progress"): s.JobStatus,
     ("planner", "progress"): s.JobStatus,
     ("supervisor", "jobs"): s.JobRecord,
