@@ -11,7 +11,8 @@ import pytest
 from fabric.drivers.reference import Reference
 from fabric.robot.cell import Cell
 from fabric.wire.errors import RobotError
-from tests.support.franky_sim import FrankySim, free_loopback, need_franky
+
+from support.franky_sim import FrankySim, free_loopback, need_franky
 
 pytestmark = pytest.mark.slow
 
