@@ -48,6 +48,8 @@ def _status_text(st) -> str:
     info = st.station_cell
     head = f"cell {st.cell}" + (f": {info.name}, {len(info.joint_names)} joints ({info.ik_family} IK)" if info else "")
     lines = [head] + [_service_line(i) for i in st.services]
+    if st.robot is not None:
+        lines.append(st.robot.line())
     job = st.job
     if job is not None:
         lines.append(f"job {job.job_id} {job.filename}: {job.state} {job.stage}".rstrip())
@@ -87,6 +89,7 @@ def cmd_status(c: Client, a: argparse.Namespace) -> int:
             st.job_error = str(exc)
     if alive.get("station") and st.station_cell is None:
         st.station_cell = c.station_cell(timeout=a.timeout)
+        st.robot = c.station_robot(timeout=a.timeout)
     if not any(alive.values()):
         cells = c.cells(timeout=a.timeout)
         others = ", ".join(cells) if cells else "none"

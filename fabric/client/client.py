@@ -308,6 +308,13 @@ class Client:
         except FabricError:
             return None
 
+    def station_robot(self, timeout: float = 2.0) -> s.RobotStatus | None:
+        """The robot the station drives, or None (the twin alone, or no station answers: for ``status``)."""
+        try:
+            return self.call("station", "state", timeout=timeout).robot
+        except FabricError:
+            return None
+
     def home(self) -> s.Ack: return self.call("station", "home")
     def jog(self, dx_mm: float = 0.0, dy_mm: float = 0.0, dz_mm: float = 0.0, speed_mm_s: float = 20.0) -> s.Ack:
         """A straight move of the nozzle by hand (plate frame), certified against the part first."""

@@ -9,7 +9,7 @@ from fabric.schemas import states as st
 from fabric.schemas.base import f, schema
 from fabric.schemas.common import ErrorReply
 from fabric.schemas.ids import FILE_ID_OR_NONE, UPLOAD_ID_OR_NONE
-from fabric.schemas.station import CellInfo
+from fabric.schemas.station import CellInfo, RobotStatus
 from fabric.schemas.upload import MAX_GCODE_BYTES, MAX_MODEL_BYTES, MAX_SUBMIT_BYTES
 from fabric.wire.errors import COLD_EXTRUSION_REASONS, UNREACHABLE_REASONS, ValidationError
 
@@ -460,7 +460,7 @@ class JobMove:
     position: int = f(default=0, ge=0, le=100000)   # its place among the waiting jobs (0 = next)
 
 
-@schema("supervisor.Status", version=3)
+@schema("supervisor.Status", version=4)
 class FabricStatus:
     """The cell at a glance: every service (alive, healthy) and the current job."""
     cell: str                                   # the cell's name
@@ -468,6 +468,7 @@ class FabricStatus:
     job: JobRecord | None = None                # the job on the station, else the latest job (nil: none)
     job_error: str = ""                         # why the latest job could not be read (then ``job`` is nil)
     station_cell: CellInfo | None = None        # the cell model the station runs (nil: no station answered)
+    robot: RobotStatus | None = None            # the robot the station drives (nil: the twin alone, or no station)
 
 
 @schema("supervisor.JobSubmit", version=7)

@@ -73,6 +73,24 @@ class RobotStatus:
     deviation_max_mm: float = 0.0      # the largest while laying beads in the current run (reset when one starts)
     bound_mm: float = 0.5              # a print pauses when the deviation exceeds this (the cell's bound)
 
+    def line(self) -> str:
+        """The robot in one line (``fabric-cli status``, the console's banner)."""
+        if not self.connected:
+            return f"robot {self.address}: NOT CONNECTED: {self.fault or 'not yet'} (recover connects again)"
+        said = [f"mode {self.mode}" if self.mode else "",
+                f"server version {self.server_version}" if self.server_version else "",
+                "following the twin" if self.following else "NOT FOLLOWING",
+                f"off its path {self.deviation_mm:.2f} mm (beads at most {self.deviation_max_mm:.2f} of "
+                f"{self.bound_mm:g})"]
+        errors = f"; ERRORS: {', '.join(self.errors)}" if self.errors else ""
+        fault = f"; FAULT: {self.fault}" if self.fault else ""
+        return f"robot {self.address}: connected, " + ", ".join(x for x in said if x) + errors + fault
+
+    @property
+    def ok(self) -> bool:
+        """Connected, following, no error, no fault."""
+        return self.connected and self.following and not self.errors and not self.fault
+
 
 @schema("station.Deviation")
 class Deviation:

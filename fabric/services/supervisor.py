@@ -200,7 +200,8 @@ class SupervisorService(Service):
                                        health=h.state if h else "", reasons=list(h.reasons) if h else []))
         current = self._on_station() or self.store.latest()
         return s.FabricStatus(cell=self.keys.cell, services=infos, job=current,
-                              station_cell=self.client.station_cell() if now["station"] else None)
+                              station_cell=self.client.station_cell() if now["station"] else None,
+                              robot=self.client.station_robot() if now["station"] else None)
 
     def on_submit(self, req: s.JobSubmit) -> s.JobAccepted:
         """Queue a print job. ``source`` not given is taken from the file name (``s.pipeline.source_of``), here

@@ -52,6 +52,9 @@ class StateBanner(Static):
         text = Text(f" {word} ", style=f"{style} bold")
         if why:
             text.append(f" {why}")
+        robot = getattr(st, "robot", None)
+        if robot is not None:                   # the robot the station drives: how it is, first when it is not
+            text.append(f"  {robot.line()}", style="green" if robot.ok else "bold red")
         if down:
             text.append(f"  services down: {', '.join(down)}", style="bold red")
         text.no_wrap, text.overflow = True, "ellipsis"
