@@ -42,13 +42,21 @@ def _cell_file(tmp: Path) -> Path:
     return out
 
 
-def _part(tmp: Path) -> Path:
+def _part(tmp: Path, settings) -> Path:
+    """A small part's G-code, sliced by the cell's slicer, without its wait for the bed (the bed heats on while it
+    prints; waiting for it is a minute and a half of real time per print that says nothing about the robot)."""
     import trimesh
     box = trimesh.creation.box((8.0, 8.0, 0.6))
     box.apply_translation((0.0, 0.0, 0.3))
-    out = tmp / "small.stl"
-    box.export(out)
-    return out
+    stl, gcode = tmp / "small.stl", tmp / "small.gcode"
+    box.export(stl)
+    r = subprocess.run([sys.executable, "-m", "fabric.cli.main", "slice", str(stl), "-o", str(gcode),
+                        *settings.to_args()], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    lines = gcode.read_text().splitlines()
+    assert any(line.startswith("M190") for line in lines) and any(line.startswith("M109") for line in lines)
+    gcode.write_text("\n".join(line for line in lines if not line.startswith("M190")) + "\n")
+    return gcode
 
 
 @pytest.fixture(scope="module")
@@ -105,6 +113,14 @@ def test_the_station_prints_on_the_robot_through_pause_a_lost_robot_and_recover(
         assert st.robot.address == f"franka:{sim.host}" and st.robot.server_version == 10
         with pytest.raises(StateError, match="real time"):
             client.call("station", "start", s.StartRequest(rtf=0.0))
+        with pytest.raises(StateError, match="touch probe"):
+            client.call("station", "calibrate")
+        ready = client.call("station", "ready", timeout=10.0)
+        robot_check = next(c for c in ready.checks if c.name == "robot connected, no error")
+        assert robot_check.ok and "following the twin" in robot_check.detail, robot_check
+        status = subprocess.run([sys.executable, "-m", "fabric.cli.main", "status", *cell.client_settings.to_args()],
+                                capture_output=True, text=True, timeout=60)
+        assert f"robot franka:{sim.host}: connected, mode " in status.stdout, status.stdout
 
         client.call("station", "home")
         st = _wait(client, lambda st: st.reason == "at home", 30.0, 0.2)
@@ -113,7 +129,8 @@ def test_the_station_prints_on_the_robot_through_pause_a_lost_robot_and_recover(
                            atol=2e-3), pos.q_deg
 
         args = cell.client_settings.to_args()
-        r = subprocess.run([sys.executable, "-m", "fabric.cli.main", "job", "submit", str(_part(tmp)), "--start",
+        part = _part(tmp, cell.client_settings)
+        r = subprocess.run([sys.executable, "-m", "fabric.cli.main", "job", "submit", str(part), "--start",
                             *args], capture_output=True, text=True, timeout=120)
         assert r.returncode == 0, r.stderr
         job_id = r.stdout.split()[1]
@@ -160,7 +177,8 @@ def test_a_station_killed_mid_print_leaves_the_robot_stopped_and_the_job_interru
     with Client.connect(cell.client_settings) as client:
         client.clear_plate()
         args = cell.client_settings.to_args()
-        r = subprocess.run([sys.executable, "-m", "fabric.cli.main", "job", "submit", str(_part(tmp)), "--start",
+        part = _part(tmp, cell.client_settings)
+        r = subprocess.run([sys.executable, "-m", "fabric.cli.main", "job", "submit", str(part), "--start",
                             *args], capture_output=True, text=True, timeout=120)
         assert r.returncode == 0, r.stderr
         job_id = r.stdout.split()[1]

@@ -30,13 +30,14 @@ class ReadyFacts:
     state: Station                             # the twin's state
     reason: str = ""                           # why it is in that state (the fault's reason)
     plate: str = ""                            # what is on the plate ("" when it is clear)
+    robot: s.RobotStatus | None = None         # the robot the station drives (None: the twin alone)
 
 
 def ready_report(facts: ReadyFacts) -> s.ReadyReport:
     """Services alive, program planned and collision-free, robot at a known pose, plate clear, no fault; the
     nozzle temperature is said (never a blocker)."""
     checks = [_services(facts), _program(facts), _collisions(facts), _pose(facts), _plate(facts),
-              _temperature(facts), _fault(facts)]
+              _temperature(facts), _fault(facts)] + ([_robot(facts.robot)] if facts.robot is not None else [])
     return s.ReadyReport(ready=all(c.ok for c in checks), checks=checks)
 
 
@@ -100,6 +101,12 @@ def _temperature(facts: ReadyFacts) -> s.Check:
     if abs(facts.nozzle_c - need_c) <= TEMP_TOLERANCE_C:
         return s.Check(name=name, ok=True, detail=detail)
     return s.Check(name=name, ok=True, detail=detail + ": the program sets it and waits for it before printing")
+
+
+def _robot(robot: s.RobotStatus) -> s.Check:
+    """The robot the station drives: connected, following the twin, no error, no fault (its brakes are open:
+    it follows; a robot with its brakes closed or its user stop pressed reports an error or does not follow)."""
+    return s.Check(name="robot connected, no error", ok=robot.ok, detail=robot.line())
 
 
 def _fault(facts: ReadyFacts) -> s.Check:

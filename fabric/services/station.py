@@ -538,6 +538,10 @@ class StationService(Service):
 
     def on_calibrate(self, _: s.Empty) -> s.CalibrationReport:
         def act() -> tuple[Any, Any, Any]:
+            if self.robot is not None:
+                raise StateError(f"calibrate refused: it probes the plate with a touch probe, and robot "
+                                 f"{self.robot.address} has none configured", state=self.twin.state,
+                                 command="calibrate")
             if self.twin.state.in_print:
                 raise StateError("cannot calibrate during a print", state=self.twin.state, command="calibrate")
             self.plate.refuse_probing()
@@ -580,7 +584,8 @@ class StationService(Service):
                               nozzle_c=float(self.twin.temps().nozzle_c),
                               print_temp_c=print_temp_c(program) if program is not None else None,
                               state=self.twin.state, reason=self.twin.reason,
-                              plate=self.plate.text() if self.meta.plate_occupied else "")
+                              plate=self.plate.text() if self.meta.plate_occupied else "",
+                              robot=None if self.robot is None else self.robot.status_msg())
         return self.commands.read(read)
 
     def _time_msg(self) -> s.TimeInfo:
