@@ -32,6 +32,9 @@ FAST_TIMEOUT_S = 30.0                      # the slowest fast test takes 3 s on 
 def pytest_addoption(parser) -> None:
     parser.addoption("--fast", action="store_true",
                      help="run only the fast tier: no real Zenoh session, no fabric process (support/tiers.py)")
+    parser.addoption("--alone", action="store_true",
+                     help="run only the tests marked alone (they need the machine to themselves: tools/test runs "
+                          "them after the rest; a run with workers leaves them out)")
 
 
 def pytest_configure(config) -> None:
@@ -60,6 +63,12 @@ def pytest_collection_modifyitems(config, items) -> None:
     """Mark the fast tier; with ``--fast``, deselect the rest, and give each fast test FAST_TIMEOUT_S at most (its
     own timeout marker set aside: a fast test that hangs costs the tier that much, not two minutes)."""
     fast = config.getoption("fast")
+    alone_only = config.getoption("alone")
+    with_workers = bool(getattr(config.option, "numprocesses", None)) or hasattr(config, "workerinput")
+    if alone_only or with_workers:            # a robot simulated at 1 kHz in real time needs the cores to itself
+        keep = [item for item in items if bool(item.get_closest_marker("alone")) == alone_only]
+        config.hook.pytest_deselected(items=[item for item in items if item not in keep])
+        items[:] = keep
     slow = [item for item in items if slow_reasons(item)]
     slow_ids = {id(item) for item in slow}
     for item in items:

@@ -3,6 +3,7 @@ and each way a connection fails (a wrong host, a robot held by another client, a
 robot gone while driven): one typed RobotError each, within the driver's deadline."""
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
@@ -12,7 +13,7 @@ from fabric.drivers.reference import Reference
 from fabric.robot.cell import Cell
 from fabric.wire.errors import RobotError
 
-from support.franky_sim import FrankySim, free_loopback, need_franky
+from support.franky_sim import FrankySim, favour, free_loopback, need_franky
 
 pytestmark = pytest.mark.slow
 
@@ -20,6 +21,7 @@ pytestmark = pytest.mark.slow
 @pytest.fixture(scope="module")
 def sim(tmp_path_factory):
     need_franky()
+    favour(os.getpid())                   # this process drives the arm: its streaming thread keeps its period
     with FrankySim(tmp_path_factory.mktemp("sim") / "franky-sim.log") as running:
         yield running
 

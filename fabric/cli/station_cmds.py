@@ -84,7 +84,7 @@ def cmd_status(c: Client, a: argparse.Namespace) -> int:
     if alive.get("supervisor"):
         try:
             sup = c.status()                # it asks the station for its cell too
-            st.job, st.station_cell = sup.job, sup.station_cell
+            st.job, st.station_cell, st.robot = sup.job, sup.station_cell, sup.robot
         except FabricError as exc:  # the supervisor may be mid-shutdown: liveliness already answered
             st.job_error = str(exc)
     if alive.get("station") and st.station_cell is None:
