@@ -15,7 +15,7 @@ from fabric.wire.errors import RobotError
 
 from support.franky_sim import FrankySim, favour, free_loopback, need_franky
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.alone]     # franky-sim's 1 kHz loop needs the cores (conftest)
 
 
 @pytest.fixture(scope="module")
