@@ -58,9 +58,19 @@ def _go_home(ctl, ref: Reference, cell: Cell, q_from: np.ndarray, duration_s: fl
     w = (1 - np.cos(np.pi * t / duration_s)) / 2
     q = q_from + w[:, None] * (np.asarray(cell.home_q_rad) - q_from)
     ref.put(time.monotonic() + 0.05 + t, q)
-    time.sleep(duration_s + 0.5)
+    time.sleep(duration_s + 0.5)                   # the move's own duration on the arm, then it settles
     ctl.tracking()
     return q[-1]
+
+
+def _following_at_home(host: str, cell: Cell):
+    """A connected controller following a reference, the arm brought home: (controller, reference, home)."""
+    ctl = _controller(host)
+    info = ctl.connect()
+    ref = Reference(7)
+    ref.hold(info.q_rad, time.monotonic())
+    ctl.follow(ref)
+    return ctl, ref, _go_home(ctl, ref, cell, info.q_rad)
 
 
 def test_connect_reports_the_robot_and_its_server_version(sim):
@@ -76,17 +86,12 @@ def test_connect_reports_the_robot_and_its_server_version(sim):
 
 
 def test_it_follows_a_timed_line_and_stops_where_told(sim, fr3):
-    ctl = _controller(sim.host)
+    ctl, ref, home = _following_at_home(sim.host, fr3)
     try:
-        info = ctl.connect()
-        ref = Reference(7)
-        ref.hold(info.q_rad, time.monotonic())
-        ctl.follow(ref)
-        home = _go_home(ctl, ref, fr3, info.q_rad)
         t, q = _line(fr3, home, 40.0, 20.0)
         t0 = time.monotonic() + 0.05
         ref.put(t0 + t, q)
-        time.sleep(t[-1] + 0.6)
+        time.sleep(t[-1] + 0.6)                    # the line takes its time on the arm (real time), then settles
         tr = ctl.tracking()
         assert len(tr) > 0.6 * (t[-1] / 0.002)            # the stream ran at its period, give or take a loaded host
         r = fr3.robot
@@ -104,17 +109,12 @@ def test_it_follows_a_timed_line_and_stops_where_told(sim, fr3):
 
 
 def test_a_dry_reference_holds_the_robot_at_its_last_sample(sim, fr3):
-    ctl = _controller(sim.host)
+    ctl, ref, home = _following_at_home(sim.host, fr3)
     try:
-        info = ctl.connect()
-        ref = Reference(7)
-        ref.hold(info.q_rad, time.monotonic())
-        ctl.follow(ref)
-        home = _go_home(ctl, ref, fr3, info.q_rad)
         t, q = _line(fr3, home, 60.0, 30.0)
         half = len(t) // 2
         ref.put(time.monotonic() + 0.05 + t[:half], q[:half])      # the station stops feeding halfway
-        time.sleep(t[-1] + 0.5)
+        time.sleep(t[-1] + 0.5)                    # as long as the whole line would have taken
         meas = fr3.robot.tcp_xyz_mm(np.asarray(ctl.status().q_rad)[None])[0]
         assert np.linalg.norm(meas - fr3.robot.tcp_xyz_mm(q[half - 1:half])[0]) < 0.5
     finally:

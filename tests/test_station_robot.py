@@ -23,7 +23,7 @@ from fabric.cli.up import CellProcesses
 from fabric.client import Client
 from fabric.wire.errors import RobotError, StateError
 
-from support.franky_sim import FrankySim, favour, need_franky
+from support.franky_sim import FrankySim, at_rest_s, favour, need_franky
 from support.loopback import make_settings
 
 pytestmark = [pytest.mark.timeout(900), pytest.mark.slow, pytest.mark.alone]
@@ -94,20 +94,6 @@ def _wait(client: Client, what, timeout_s: float, step_s: float = 0.05) -> s.Sta
         time.sleep(step_s)
 
 
-def _at_rest(client: Client, timeout_s: float) -> float:
-    """When the measured joints stopped moving (within 0.01 deg over 0.2 s)."""
-    t0 = time.monotonic()
-    seen: list[tuple[float, np.ndarray]] = []
-    while time.monotonic() - t0 < timeout_s:
-        now = time.monotonic()
-        seen.append((now, np.array(client.call("station", "position").q_deg)))
-        old = [q for t, q in seen if now - t >= 0.2]
-        if old and np.abs(seen[-1][1] - old[-1]).max() < 0.01:
-            return next(t for t, q in seen if np.abs(q - seen[-1][1]).max() < 0.01)
-        time.sleep(0.02)
-    raise AssertionError(f"the arm did not come to rest within {timeout_s} s")
-
-
 def test_the_station_prints_on_the_robot_through_pause_a_lost_robot_and_recover(robot_cell):
     cell, sim, tmp = robot_cell
     with Client.connect(cell.client_settings) as client:
@@ -127,7 +113,8 @@ def test_the_station_prints_on_the_robot_through_pause_a_lost_robot_and_recover(
 
         client.call("station", "home")
         st = _wait(client, lambda st: st.reason == "at home", 30.0, 0.2)
-        _at_rest(client, 10.0)                                   # the arm trails the twin by a few ms
+        position = lambda: client.call("station", "position").q_deg          # noqa: E731 - the measured joints
+        at_rest_s(position, 10.0)                                # the arm trails the twin by a few ms
         pos = client.call("station", "position")             # the measured joints: the robot is home
         assert np.allclose(np.radians(pos.q_deg), [0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi / 4],
                            atol=2e-3), pos.q_deg
@@ -144,13 +131,14 @@ def test_the_station_prints_on_the_robot_through_pause_a_lost_robot_and_recover(
         client.call("station", "pause")
         t0 = time.monotonic()
         _wait(client, lambda st: st.state == "paused", 5.0)
-        paused_s = _at_rest(client, 10.0) - t0             # decelerated on the path, retracted, lifted
+        paused_s = at_rest_s(position, 10.0) - t0             # decelerated on the path, retracted, lifted
         client.call("station", "resume", s.StartRequest())
         _wait(client, lambda st: st.state == "printing" and st.reason == "resumed", 10.0)
         sample = deviation.get(timeout=5.0)
         assert isinstance(sample, s.Deviation) and sample.bound_mm == BOUND_MM
 
-        time.sleep(2.0)                                        # printing again, then the link to the robot is gone
+        resumed_mm3 = _state(client).deposited_mm3          # printing again, then the link to the robot is gone
+        _wait(client, lambda st: st.deposited_mm3 > resumed_mm3 + 1.0, 60.0)
         sim.proc.send_signal(signal.SIGSTOP)                   # (the controller frozen: its arm stands where it is)
         t_kill = time.monotonic()
         st = _wait(client, lambda st: st.state == "interrupted", 5.0, 0.02)

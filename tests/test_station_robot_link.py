@@ -3,9 +3,13 @@ across the commanded path and its run figures, and what a tick tells the station
 path, stop an arm that runs away, interrupt on a fault), with a controller that reports given steps."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
+import fabric
+from fabric.drivers.address import ENV_VAR, parse_robot, robot_address
 from fabric.drivers.controller import ControllerInfo, ControllerStatus, Tracking
 from fabric.drivers.deviation import DeviationStats, path_deviation_mm
 from fabric.drivers.reference import Reference
@@ -13,7 +17,7 @@ from fabric.robot.cell import Cell
 from fabric.schemas.states import Station
 from fabric.services.station_robot import STATUS_EVERY, RobotLink
 from fabric.sim.twin import Twin
-from fabric.wire.errors import RobotError
+from fabric.wire.errors import ConfigError, RobotError
 
 
 def test_the_reference_interpolates_holds_when_dry_and_replaces_what_was_ahead():
@@ -134,3 +138,45 @@ def test_a_motion_is_refused_while_the_robot_is_not_ready(link):
     ctl.fault = "the connection to the robot was lost"
     with pytest.raises(RobotError, match="home refused: robot franka:stub: the connection to the robot was lost"):
         lk.gate("home")
+
+
+@pytest.mark.parametrize("text, why", [
+    ("franka", "KIND:HOST"), ("franka:", "KIND:HOST"), ("franka: 10.0.0.2 x", "KIND:HOST"),
+    ("ur:10.0.0.2", "unknown robot kind 'ur'"),
+])
+def test_a_robot_address_that_is_none_is_a_typed_error_naming_where(text, why):
+    with pytest.raises(ConfigError, match=why) as err:
+        parse_robot(text, "--robot")
+    assert err.value.details["field"] == "--robot" and err.value.details["value"] == text
+
+
+def test_the_robot_comes_from_the_option_then_the_cell_file_then_the_environment(monkeypatch):
+    monkeypatch.setenv(ENV_VAR, "franka:10.0.0.3")
+    assert str(robot_address("franka:10.0.0.1", "franka:10.0.0.2")) == "franka:10.0.0.1"
+    assert str(robot_address(None, "franka:10.0.0.2")) == "franka:10.0.0.2"
+    assert str(robot_address(None, "")) == "franka:10.0.0.3"
+    assert robot_address("twin", "franka:10.0.0.2") is None                 # the twin alone, said on the line
+    monkeypatch.setenv(ENV_VAR, "franka")
+    with pytest.raises(ConfigError, match=ENV_VAR):
+        robot_address(None, "")
+
+
+def test_a_cell_files_robot_keys_are_checked_when_it_is_read():
+    text = (Path(fabric.__file__).parent / "cells" / "fr3.toml").read_text()
+    for key, value, why in (("controller", '"franka"', "robot.controller"),
+                            ("deviation_bound_mm", "0", "deviation_bound_mm")):
+        bad = text.replace('brand = "franka"', f'brand = "franka"\n{key} = {value}', 1)
+        with pytest.raises(ConfigError, match=why):
+            Cell.from_toml_text(bad, source="bad.toml")
+    good = text.replace('brand = "franka"', 'brand = "franka"\ncontroller = "franka:10.0.0.2"\n'
+                                            'deviation_bound_mm = 1.5', 1)
+    cell = Cell.from_toml_text(good, source="good.toml")
+    assert (cell.controller, cell.deviation_bound_mm) == ("franka:10.0.0.2", 1.5)
+    assert cell.fingerprint() == Cell.builtin("fr3").fingerprint()           # where the robot is: not the cell
+
+
+def test_up_with_a_bad_robot_says_so_in_one_line_and_starts_nothing(capsys):
+    from fabric.cli.main import main
+    assert main(["up", "--robot", "franka", "--cell-config", "fr3"]) != 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--robot" in err and "KIND:HOST" in err, err

@@ -12,11 +12,13 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-__all__ = ["FrankySim", "need_franky", "free_loopback", "favour"]
+__all__ = ["FrankySim", "need_franky", "free_loopback", "favour", "at_rest_s"]
 
 READY_TEXT = "Connect to the server using"
 START_TIMEOUT_S = 60.0
@@ -32,6 +34,21 @@ def favour(pid: int, niceness: int = -10) -> None:
             os.setpriority(os.PRIO_PROCESS, tid, niceness)
         except (PermissionError, OSError):
             pass
+
+
+def at_rest_s(position_deg: Callable[[], list[float]], timeout_s: float) -> float:
+    """When the arm came to rest (monotonic s): its joints, as ``position_deg()`` reads them (a station's
+    ``position``), within 0.01 deg over 0.2 s. AssertionError if it does not within ``timeout_s``."""
+    t0 = time.monotonic()
+    seen: list[tuple[float, np.ndarray]] = []
+    while time.monotonic() - t0 < timeout_s:
+        now = time.monotonic()
+        seen.append((now, np.array(position_deg())))
+        old = [q for t, q in seen if now - t >= 0.2]
+        if old and np.abs(seen[-1][1] - old[-1]).max() < 0.01:
+            return next(t for t, q in seen if np.abs(q - seen[-1][1]).max() < 0.01)
+        time.sleep(0.01)                         # polling the pose, bounded by the deadline
+    raise AssertionError(f"the arm did not come to rest within {timeout_s} s")
 
 
 def need_franky() -> None:
@@ -102,7 +119,7 @@ class FrankySim:
                 return self
             if self.proc.poll() is not None:
                 raise RuntimeError(f"franky-sim exited with {self.proc.returncode}: {self.log.read_text()[-2000:]}")
-            time.sleep(0.1)
+            time.sleep(0.1)                      # polling its log, bounded by the deadline
         self.kill()
         raise RuntimeError(f"franky-sim did not start within {START_TIMEOUT_S:g} s: {self.log.read_text()[-2000:]}")
 

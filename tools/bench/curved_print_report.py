@@ -78,7 +78,8 @@ def report(rows: list[dict], meta: dict[str, object]) -> str:
             printed = (f"{pr['state']} | {_f(pr.get('deposited_mm3'), '{:.0f}')} / "
                        f"{_f(pr.get('planned_mm3'), '{:.0f}')} | {pr.get('beads', '-')} | "
                        f"{_f(pr.get('max_bead_tilt_deg'), '{:.1f}')}") if layers == "curved" else "- | - | - | -"
-            lines.append(f"| {r['shape']} | {layers} | {plan.get('targets') or '-'} | {reach} | {_unreachable(plan)} ({_by_joint(plan)}) "
+            unreachable = f"{_unreachable(plan)} ({_by_joint(plan)})"
+            lines.append(f"| {r['shape']} | {layers} | {plan.get('targets') or '-'} | {reach} | {unreachable} "
                          f"| {_f(plan.get('elapsed_s'), '{:.1f}')} | {_verdict(c)} | {c.get('segments') or '-'} "
                          f"| {_f(c.get('certify_s'), '{:.1f}')} | {_f(c['check_s'], '{:.1f}')} | {printed} |")
     return "\n".join(lines) + "\n"

@@ -25,8 +25,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
@@ -40,7 +38,7 @@ from fabric.client import Client  # noqa: E402
 from fabric.samples import samples  # noqa: E402
 from fabric.wire.config import SessionSettings  # noqa: E402
 
-from support.franky_sim import FrankySim  # noqa: E402
+from support.franky_sim import FrankySim, at_rest_s  # noqa: E402
 
 DOCS = ROOT / "docs" / "bench"
 WINDOW_S = 60.0
@@ -65,19 +63,6 @@ def cli(settings: SessionSettings, *args: str) -> tuple[int, str, float]:
     r = subprocess.run([sys.executable, "-m", "fabric.cli.main", *args, *settings.to_args()], capture_output=True,
                        text=True, timeout=300)
     return r.returncode, r.stdout + r.stderr, time.perf_counter() - t0
-
-
-def at_rest_s(client: Client, timeout_s: float = 20.0) -> float:
-    seen: list[tuple[float, np.ndarray]] = []
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout_s:
-        now = time.monotonic()
-        seen.append((now, np.array(client.call("station", "position").q_deg)))
-        old = [q for t, q in seen if now - t >= 0.2]
-        if old and np.abs(seen[-1][1] - old[-1]).max() < 0.01:
-            return next(t for t, q in seen if np.abs(q - seen[-1][1]).max() < 0.01)
-        time.sleep(0.01)
-    return float("nan")
 
 
 def run(tmp: Path, robot: str | None) -> dict[str, object]:
@@ -110,7 +95,8 @@ def run(tmp: Path, robot: str | None) -> dict[str, object]:
             code, text, out["pause_cli_s"] = cli(cs, "pause")
             assert code == 0, text
             if robot:
-                out["pause_to_rest_s"] = at_rest_s(client) - t_pause
+                out["pause_to_rest_s"] = at_rest_s(lambda: client.call("station", "position").q_deg,
+                                                   20.0) - t_pause
                 last = client.subscribe("station", "deviation").get(timeout=5.0)    # the run's figures now
                 assert isinstance(last, s.Deviation)
                 out.update(p50_mm=last.p50_mm, p99_mm=last.p99_mm, max_mm=last.max_mm, steps=last.steps,
@@ -129,8 +115,8 @@ def report(rows: list[dict], meta: dict[str, object]) -> str:
         f"on cell fr3 (bound {BOUND_MM:g} mm) through the five service processes; {WINDOW_S:g} s of printing after "
         "the first bead, then `fabric-cli pause`. franky-sim 1.0.4 runs MuJoCo at 1 kHz in real time on the same "
         "machine (a real FR3 has its own controller).", "",
-        "| station | layer reached | mm3 deposited at the window's end | station CPU (cores) | pause CLI s | pause to rest s "
-        "| deviation p50 / p99 / max mm (beads) | control steps |",
+        "| station | layer reached | mm3 deposited at the window's end | station CPU (cores) | pause CLI s "
+        "| pause to rest s | deviation p50 / p99 / max mm (beads) | control steps |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
