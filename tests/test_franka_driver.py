@@ -52,8 +52,9 @@ def _line(cell: Cell, q_start: np.ndarray, length_mm: float, speed_mm_s: float, 
     return t, q
 
 
-def _go_home(ctl, ref: Reference, cell: Cell, q_from: np.ndarray, duration_s: float = 2.0) -> np.ndarray:
-    """A smooth joint move (cosine blend) from where the robot stands to the cell's home, followed to rest."""
+def _go_home(ctl, ref: Reference, cell: Cell, q_from: np.ndarray, duration_s: float = 4.0) -> np.ndarray:
+    """A smooth joint move (cosine blend) from where the robot stands to the cell's home, followed to rest. Slow:
+    a 2 s move ran away in one of several runs (the station times its own joint moves for the arm: station_robot)."""
     t = np.arange(0.0, duration_s, 0.004)
     w = (1 - np.cos(np.pi * t / duration_s)) / 2
     q = q_from + w[:, None] * (np.asarray(cell.home_q_rad) - q_from)
